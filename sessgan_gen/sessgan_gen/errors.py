@@ -1,0 +1,24 @@
+"""Errors raised by the sessgan_gen core."""
+
+
+class SessganGenError(Exception):
+    """Base class of every error raised by sessgan_gen."""
+
+
+class UnknownScenarioError(SessganGenError, KeyError):
+    """A scenario name that is not in the registry."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ''
+
+
+class MapFormatError(SessganGenError, ValueError):
+    """A token map, PGM or YAML file that cannot be read or is malformed."""
+
+
+class InvalidEnvironmentError(SessganGenError, ValueError):
+    """An environment (occupancy grid, resolution, start, goal) that cannot be simulated."""
+
+
+class CheckpointError(SessganGenError):
+    """A missing, corrupt or incompatible generator checkpoint."""

@@ -1,0 +1,147 @@
+"""The scenario registry: tokens, encodings, geometry and defaults of each use case.
+
+A scenario ties a token alphabet (what a cell of the example map can be) to the
+robot under test and to the physical size of a cell. Everything that differs
+between the factory, the race track and the drone area lives here, so the rest
+of the code looks a scenario up instead of branching on its name.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sessgan_gen.errors import UnknownScenarioError
+
+# Common occupancy encoding (nav_msgs/OccupancyGrid values), shared by all scenarios.
+FREE = 0
+LOW_OBSTACLE = 50
+BLOCKED = 100
+OCCUPANCY_VALUES = (FREE, LOW_OBSTACLE, BLOCKED)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One use case of the paper.
+
+    Token maps are integer arrays whose values index ``tokens``.
+    """
+
+    name: str
+    tokens: tuple[str, ...]
+    """One character per token, e.g. ('G', 'W'); index = token id."""
+    token_names: tuple[str, ...]
+    """Human-readable name of each token."""
+    occupancy: tuple[int, ...]
+    """OccupancyGrid value of each token (FREE, LOW_OBSTACLE or BLOCKED)."""
+    hierarchy: tuple[int, ...]
+    """Token ids from lowest to highest priority: when downsampling, the highest
+    token present in a cell's neighbourhood wins (keeps thin walls and tracks)."""
+    traversable: tuple[int, ...]
+    """Token ids the robot may occupy (feasibility, start and goal)."""
+    default_size: tuple[int, int]
+    """(height, width) in cells of the example map and of default samples."""
+    cell_size: float
+    """Metres per cell."""
+    robot: str
+    """Default robot model name in sessgan_sim's robot registry."""
+    robot_radius: float
+    """Radius of the robot's footprint in metres (used to inflate walls)."""
+    controller: str
+    """Default built-in controller executable in sessgan_controllers."""
+    time_limit: float
+    """Default episode length limit in sim seconds."""
+    proximity_distance: float
+    """Clearance in metres below which time counts as proximity time."""
+    dummy_agents: int
+    """Default number of moving dummy agents."""
+
+    @property
+    def num_tokens(self) -> int:
+        return len(self.tokens)
+
+    def token_id(self, char: str) -> int:
+        """Return the id of token character ``char``."""
+        try:
+            return self.tokens.index(char)
+        except ValueError as err:
+            raise UnknownScenarioError(
+                f'token {char!r} is not one of scenario {self.name!r} tokens {self.tokens}'
+            ) from err
+
+
+SCENARIOS: dict[str, Scenario] = {}
+
+
+def register_scenario(scenario: Scenario) -> Scenario:
+    """Add a scenario to the registry (users may register their own)."""
+    if len(scenario.tokens) != len(scenario.occupancy) or len(scenario.tokens) != len(
+        scenario.token_names
+    ):
+        raise ValueError(f'scenario {scenario.name!r}: tokens, names and occupancy differ in length')
+    if sorted(scenario.hierarchy) != list(range(len(scenario.tokens))):
+        raise ValueError(f'scenario {scenario.name!r}: hierarchy must list every token once')
+    SCENARIOS[scenario.name] = scenario
+    return scenario
+
+
+def get_scenario(name: str) -> Scenario:
+    """Look a scenario up by name; the error lists the known names."""
+    try:
+        return SCENARIOS[name]
+    except KeyError as err:
+        raise UnknownScenarioError(
+            f'unknown scenario {name!r}; known scenarios: {", ".join(sorted(SCENARIOS))}'
+        ) from err
+
+
+register_scenario(Scenario(
+    name='factory',
+    tokens=('G', 'W'),
+    token_names=('ground', 'wall'),
+    occupancy=(FREE, BLOCKED),
+    hierarchy=(0, 1),
+    traversable=(0,),
+    default_size=(32, 32),
+    cell_size=0.5,
+    robot='diff_drive',
+    robot_radius=0.2,
+    controller='nearness_diagram',
+    time_limit=60.0,
+    proximity_distance=0.25,
+    dummy_agents=2,
+))
+
+register_scenario(Scenario(
+    name='racetrack',
+    tokens=('T', 'O'),
+    token_names=('track', 'out_of_bounds'),
+    occupancy=(FREE, BLOCKED),
+    # The track is the thin structure: it must survive downsampling.
+    hierarchy=(1, 0),
+    traversable=(0,),
+    default_size=(128, 128),
+    cell_size=1.0,
+    robot='car',
+    robot_radius=0.6,
+    controller='race_controller',
+    time_limit=120.0,
+    proximity_distance=0.5,
+    dummy_agents=0,
+))
+
+register_scenario(Scenario(
+    name='drone',
+    tokens=('G', 'W', 'O'),
+    token_names=('ground', 'wall', 'low_obstacle'),
+    occupancy=(FREE, BLOCKED, LOW_OBSTACLE),
+    hierarchy=(0, 2, 1),
+    traversable=(0, 2),
+    default_size=(32, 32),
+    cell_size=0.5,
+    robot='flyer',
+    robot_radius=0.2,
+    controller='velocity_projection',
+    time_limit=60.0,
+    proximity_distance=0.25,
+    dummy_agents=2,
+))

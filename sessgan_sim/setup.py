@@ -1,0 +1,24 @@
+from setuptools import find_packages, setup
+
+package_name = 'sessgan_sim'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='SESS-GAN developers',
+    maintainer_email='sessgan@example.org',
+    description='SESS-GAN simulator worker: pybullet world builder, robots, sensors, episode metrics and the simulator node.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'simulator = sessgan_sim.simulator_node:main',
+        ],
+    },
+)

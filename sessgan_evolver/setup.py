@@ -20,7 +20,6 @@ setup(
         'console_scripts': [
             'campaign = sessgan_evolver.campaign_cli:main',
             'replay = sessgan_evolver.replay_cli:main',
-            'evolver = sessgan_evolver.evolver_node:main',
         ],
     },
 )

@@ -1,0 +1,87 @@
+"""Start the processes of a campaign (generator, simulator workers, controllers) and stop them.
+
+Each child runs in its own process group with its output in a log file, so a campaign can stop
+everything it started (and their children) on exit, on Ctrl-C and on SIGTERM, and a user can read
+why a worker died.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class ChildProcess:
+    name: str
+    command: list[str]
+    process: subprocess.Popen
+    log_path: Path
+
+    @property
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def log_tail(self, characters: int = 2000) -> str:
+        try:
+            return self.log_path.read_text(errors='replace')[-characters:]
+        except OSError:
+            return ''
+
+
+class ProcessSupervisor:
+    """Owns child processes; ``stop_all`` (also run by ``with``) ends every one of them."""
+
+    def __init__(self, log_directory: Path, env: dict[str, str] | None = None) -> None:
+        self.log_directory = Path(log_directory)
+        self.log_directory.mkdir(parents=True, exist_ok=True)
+        self.env = dict(os.environ if env is None else env)
+        self.children: list[ChildProcess] = []
+
+    def start(self, name: str, command: list[str]) -> ChildProcess:
+        log_path = self.log_directory / f'{name}.log'
+        with open(log_path, 'ab') as log_file:
+            process = subprocess.Popen(
+                command, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                env=self.env, start_new_session=True)
+        child = ChildProcess(name, command, process, log_path)
+        self.children.append(child)
+        return child
+
+    def dead_children(self) -> list[ChildProcess]:
+        return [child for child in self.children if not child.alive]
+
+    def stop_all(self, grace_seconds: float = 5.0) -> None:
+        """SIGINT to every process group, then SIGKILL to those still alive after the grace."""
+        for child in reversed(self.children):
+            _signal_group(child.process.pid, signal.SIGINT)
+        deadline = time.monotonic() + grace_seconds
+        for child in reversed(self.children):
+            try:
+                child.process.wait(timeout=max(0.05, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+            # The leader may be gone while its children live on: kill the group regardless.
+            _signal_group(child.process.pid, signal.SIGKILL)
+            try:
+                child.process.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                pass
+        self.children.clear()
+
+    def __enter__(self) -> ProcessSupervisor:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.stop_all()
+
+
+def _signal_group(pid: int, sig: int) -> None:
+    try:
+        os.killpg(pid, sig)
+    except (ProcessLookupError, PermissionError):
+        pass

@@ -1,0 +1,108 @@
+"""Sample Environments (maps with start, goal and feasibility) from generator checkpoints.
+
+The generator node is a thin wrapper around :class:`EnvironmentSampler`; the evolver sends
+population members' weights (checkpoint bytes) and a generation's shared seeds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from collections.abc import Sequence
+from pathlib import Path
+
+import torch
+
+from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
+from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
+from sessgan_gen.errors import CheckpointError, SessganGenError
+from sessgan_gen.model import GeneratorPyramid
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.scenarios import get_scenario
+
+MAX_SEEDS_PER_REQUEST = 4096
+
+
+class SamplingRequestError(SessganGenError, ValueError):
+    """A request the sampler cannot serve: absurd size, too many seeds, unknown scenario."""
+
+
+def environment_id(scenario: str, generation: int, member: int, seed: int) -> str:
+    """Stable id of a sampled environment, used for bag and file names."""
+    if generation >= 0 and member >= 0:
+        return f'{scenario}-g{generation:03d}-m{member:02d}-s{seed}'
+    return f'{scenario}-s{seed}'
+
+
+class EnvironmentSampler:
+    """Loads pyramids (cached) and turns seeds into Environments."""
+
+    def __init__(self, device: str = 'cpu', cache_size: int = 4) -> None:
+        self.device = device
+        self.cache_size = cache_size
+        self._cache: OrderedDict[str, tuple[GeneratorPyramid, dict]] = OrderedDict()
+
+    def load(self, checkpoint: str | Path | bytes | None = None,
+             scenario: str | None = None) -> tuple[GeneratorPyramid, dict]:
+        """The pyramid of a checkpoint path, checkpoint bytes, or the scenario's shipped one."""
+        if checkpoint is None or checkpoint == '' or checkpoint == b'':
+            if not scenario:
+                raise SamplingRequestError('neither a checkpoint nor a scenario was given')
+            checkpoint = default_checkpoint_path(scenario)
+        if isinstance(checkpoint, bytes):
+            key = 'bytes:' + hashlib.sha256(checkpoint).hexdigest()
+        else:
+            path = Path(checkpoint)
+            try:
+                key = f'path:{path.resolve()}:{path.stat().st_mtime_ns}'
+            except OSError as err:
+                raise CheckpointError(f'checkpoint {str(path)!r} cannot be read: {err}') from err
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        pyramid, metadata = load_checkpoint(checkpoint, device=self.device)
+        if scenario and metadata.get('scenario') and metadata['scenario'] != scenario:
+            raise CheckpointError(
+                f'checkpoint is for scenario {metadata["scenario"]!r}, not {scenario!r}')
+        self._cache[key] = (pyramid, metadata)
+        while len(self._cache) > self.cache_size:
+            self._cache.popitem(last=False)
+        return pyramid, metadata
+
+    def sample(self, seeds: Sequence[int], checkpoint: str | Path | bytes | None = None,
+               scenario: str | None = None, size: tuple[int, int] | None = None,
+               generation: int = -1, member: int = -1) -> list[Environment]:
+        """One Environment per seed; map i depends only on seeds[i] and the weights.
+
+        ``size`` is (height, width) in cells; None or zeros mean the scenario's default.
+        """
+        if scenario:
+            get_scenario(scenario)  # UnknownScenarioError names the known ones
+        if len(seeds) > MAX_SEEDS_PER_REQUEST:
+            raise SamplingRequestError(
+                f'{len(seeds)} seeds in one request; at most {MAX_SEEDS_PER_REQUEST}')
+        pyramid, metadata = self.load(checkpoint, scenario)
+        scenario_name = scenario or metadata.get('scenario')
+        spec = get_scenario(scenario_name)
+        if size is None or size == (0, 0):
+            size = spec.default_size
+        height, width = (int(v) for v in size)
+        min_side = min_sample_side(pyramid)
+        if not (min_side <= height <= MAX_CELLS_PER_SIDE and min_side <= width <= MAX_CELLS_PER_SIDE):
+            raise SamplingRequestError(
+                f'size {height}x{width} cells is outside {min_side}..{MAX_CELLS_PER_SIDE} per side '
+                f'for this {scenario_name} generator')
+        with torch.no_grad():
+            maps = pyramid.sample(seeds=[int(s) for s in seeds], size=(height, width)).numpy()
+        return [
+            make_environment(cells, spec, environment_id(spec.name, generation, member, int(seed)),
+                             seed=int(seed), generation=generation, member=member)
+            for cells, seed in zip(maps, seeds)
+        ]
+
+
+def min_sample_side(pyramid: GeneratorPyramid) -> int:
+    """Smallest side that keeps every pyramid scale at least 3 cells wide."""
+    coarsest = min(min(shape) for shape in pyramid.scale_shapes)
+    finest = min(pyramid.size)
+    return max(3, -(-3 * finest // max(1, coarsest)))

@@ -1,0 +1,99 @@
+"""sessgan_gen generator node: publishes generated environments and samples them on request.
+
+Publishes (relative names, so namespaces work):
+* ``environments`` (sessgan_interfaces/Environment): every sampled environment, with start/goal;
+* ``environment`` (nav_msgs/OccupancyGrid, reliable, transient local, depth 1): the latest map,
+  for RViz, Nav2 map consumers and the simulator's free mode.
+Serves ``generate_environments`` (sessgan_interfaces/GenerateEnvironments).
+"""
+
+from __future__ import annotations
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from nav_msgs.msg import OccupancyGrid
+from sessgan_interfaces.msg import Environment as EnvironmentMsg
+from sessgan_interfaces.srv import GenerateEnvironments
+
+from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.errors import SessganGenError
+from sessgan_gen.ros_conversion import environment_to_msg
+
+MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class GeneratorNode(Node):
+
+    def __init__(self) -> None:
+        super().__init__('sessgan_gen')
+        self.declare_parameter('scenario', 'factory')
+        self.declare_parameter('checkpoint', '')  # empty: the scenario's shipped checkpoint
+        self.declare_parameter('width', 0)        # cells; 0: the scenario's default
+        self.declare_parameter('height', 0)
+        self.declare_parameter('seed', 0)         # first seed; each publication uses the next
+        self.declare_parameter('rate', 0.0)       # Hz; 0 publishes one environment at start
+        self.declare_parameter('device', 'cpu')
+        self.sampler = EnvironmentSampler(device=self.get_parameter('device').value)
+        self.next_seed = int(self.get_parameter('seed').value)
+        self.environment_publisher = self.create_publisher(EnvironmentMsg, 'environments', 10)
+        self.map_publisher = self.create_publisher(OccupancyGrid, 'environment', MAP_QOS)
+        self.service = self.create_service(
+            GenerateEnvironments, 'generate_environments', self.on_generate)
+        rate = float(self.get_parameter('rate').value)
+        self.timer = self.create_timer(1.0 / rate if rate > 0 else 0.1, self.publish_next)
+        self.publish_once = rate <= 0
+
+    def publish_next(self) -> None:
+        if self.publish_once:
+            self.timer.cancel()
+        scenario = self.get_parameter('scenario').value
+        size = (self.get_parameter('height').value, self.get_parameter('width').value)
+        try:
+            environment = self.sampler.sample(
+                [self.next_seed], self.get_parameter('checkpoint').value, scenario, size)[0]
+        except (SessganGenError, ValueError) as err:
+            self.get_logger().error(f'cannot generate an environment: {err}')
+            self.timer.cancel()
+            return
+        self.next_seed += 1
+        msg = environment_to_msg(environment, stamp=self.get_clock().now().to_msg())
+        self.environment_publisher.publish(msg)
+        self.map_publisher.publish(msg.map)
+        self.get_logger().info(
+            f'published environment {environment.id} ({environment.width}x{environment.height} '
+            f'cells, feasible={environment.feasible})')
+
+    def on_generate(self, request, response):
+        checkpoint = bytes(request.weights) or request.checkpoint or \
+            self.get_parameter('checkpoint').value
+        scenario = request.scenario or self.get_parameter('scenario').value
+        try:
+            environments = self.sampler.sample(
+                list(request.seeds), checkpoint, scenario, (request.height, request.width),
+                generation=request.generation, member=request.member)
+        except (SessganGenError, ValueError, RuntimeError) as err:
+            response.success = False
+            response.message = str(err)
+            self.get_logger().warning(f'generate_environments refused: {err}')
+            return response
+        stamp = self.get_clock().now().to_msg()
+        response.environments = [environment_to_msg(env, stamp) for env in environments]
+        response.success = True
+        return response
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = GeneratorNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()

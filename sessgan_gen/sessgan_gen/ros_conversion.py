@@ -1,0 +1,93 @@
+"""Conversion between the core Environment and ROS messages (nodes only: imports messages)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from geometry_msgs.msg import Pose
+from nav_msgs.msg import OccupancyGrid
+from sessgan_interfaces.msg import Environment as EnvironmentMsg
+
+from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment, Pose2D
+from sessgan_gen.errors import InvalidEnvironmentError
+
+
+def pose_to_msg(pose: Pose2D) -> Pose:
+    msg = Pose()
+    msg.position.x = float(pose.x)
+    msg.position.y = float(pose.y)
+    msg.orientation.z = math.sin(pose.yaw / 2.0)
+    msg.orientation.w = math.cos(pose.yaw / 2.0)
+    return msg
+
+
+def pose_from_msg(msg: Pose) -> Pose2D:
+    q = msg.orientation
+    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return Pose2D(float(msg.position.x), float(msg.position.y), yaw)
+
+
+def occupancy_grid_msg(environment: Environment, frame_id: str = 'map', stamp=None) -> OccupancyGrid:
+    """The environment's map as a nav_msgs/OccupancyGrid (row-major, row 0 at the origin)."""
+    grid = OccupancyGrid()
+    grid.header.frame_id = frame_id
+    if stamp is not None:
+        grid.header.stamp = stamp
+    grid.info.resolution = float(environment.resolution)
+    grid.info.width = environment.width
+    grid.info.height = environment.height
+    grid.info.origin.position.x = float(environment.origin[0])
+    grid.info.origin.position.y = float(environment.origin[1])
+    grid.info.origin.orientation.w = 1.0
+    # array('b') assignment from bytes is far faster than a list of ints.
+    grid.data.frombytes(np.ascontiguousarray(environment.occupancy, dtype=np.int8).tobytes())
+    return grid
+
+
+def occupancy_from_grid_msg(grid: OccupancyGrid) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """(occupancy array, resolution, origin) of a grid; InvalidEnvironmentError if malformed."""
+    width, height = int(grid.info.width), int(grid.info.height)
+    resolution = float(grid.info.resolution)
+    if not (1 <= width <= MAX_CELLS_PER_SIDE and 1 <= height <= MAX_CELLS_PER_SIDE):
+        raise InvalidEnvironmentError(
+            f'occupancy grid of {width}x{height} cells is outside 1..{MAX_CELLS_PER_SIDE} per side')
+    if len(grid.data) != width * height:
+        raise InvalidEnvironmentError(
+            f'occupancy grid data has {len(grid.data)} cells but info says '
+            f'{width}x{height} = {width * height}')
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise InvalidEnvironmentError(
+            f'occupancy grid resolution must be a positive finite number, got {resolution}')
+    q = grid.info.origin.orientation
+    if abs(q.z) > 1e-6 or abs(q.x) > 1e-6 or abs(q.y) > 1e-6:
+        raise InvalidEnvironmentError('rotated occupancy grid origins are not supported')
+    occupancy = np.frombuffer(bytes(grid.data), dtype=np.int8).reshape(height, width).copy()
+    origin = (float(grid.info.origin.position.x), float(grid.info.origin.position.y))
+    return occupancy, resolution, origin
+
+
+def environment_to_msg(environment: Environment, stamp=None) -> EnvironmentMsg:
+    msg = EnvironmentMsg()
+    msg.id = environment.id
+    msg.scenario = environment.scenario
+    msg.seed = int(environment.seed) & 0xFFFFFFFFFFFFFFFF
+    msg.generation = int(environment.generation)
+    msg.member = int(environment.member)
+    msg.map = occupancy_grid_msg(environment, stamp=stamp)
+    msg.start = pose_to_msg(environment.start)
+    msg.goal = pose_to_msg(environment.goal)
+    msg.feasible = bool(environment.feasible)
+    return msg
+
+
+def environment_from_msg(msg: EnvironmentMsg) -> Environment:
+    """Core Environment of a message; raises InvalidEnvironmentError naming what is wrong."""
+    occupancy, resolution, origin = occupancy_from_grid_msg(msg.map)
+    environment = Environment(
+        id=msg.id, scenario=msg.scenario, occupancy=occupancy, resolution=resolution,
+        origin=origin, start=pose_from_msg(msg.start), goal=pose_from_msg(msg.goal),
+        seed=int(msg.seed), generation=int(msg.generation), member=int(msg.member),
+        feasible=bool(msg.feasible))
+    environment.validate()
+    return environment

@@ -1,0 +1,403 @@
+"""sessgan_sim simulator node: a pybullet robot that looks like a real one to its controller.
+
+Topics (relative, so ``-r __ns:=/w0`` namespaces a worker): publishes ``scan``, ``odom``, ``tf``,
+``tf_static``, ``clock``, ``map`` and ``goal_pose``; subscribes ``cmd_vel`` (Twist, or
+TwistStamped with ``use_stamped_cmd_vel``) and, in free mode, ``environment``
+(nav_msgs/OccupancyGrid). Serves the ``evaluate`` action (sessgan_interfaces/EvaluateEnvironment).
+
+Stepping modes: ``lockstep`` publishes a tick's data and waits for the controller's answer before
+advancing; ``clocked`` advances ``/clock`` at ``real_time_factor`` and uses the latest command.
+A controller silent for ``controller_timeout`` wall seconds ends the episode as
+``controller_unresponsive``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import rclpy
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import OccupancyGrid, Odometry
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import LaserScan
+from sessgan_interfaces.action import EvaluateEnvironment
+from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
+from tf2_msgs.msg import TFMessage
+
+from sessgan_gen.environment import Environment
+from sessgan_gen.errors import SessganGenError
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.ros_conversion import (environment_from_msg, occupancy_from_grid_msg,
+                                        occupancy_grid_msg)
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import occupancy_to_tokens
+from sessgan_sim import ros_messages as rm
+from sessgan_sim.bag_recording import BagRecord, write_episode_bag
+from sessgan_sim.episode import Episode, EpisodeConfig, Outcome
+from sessgan_sim.errors import SessganSimError
+
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+FAILURE_OUTCOMES = ('timeout', 'stuck')
+
+
+@dataclass
+class Recording:
+    """Every message of an episode, in order, kept as messages until a bag is wanted."""
+
+    entries: list = field(default_factory=list)
+
+    def add(self, topic: str, msgtype: str, stamp_ns: int, message) -> None:
+        self.entries.append((topic, msgtype, stamp_ns, message))
+
+    def records(self):
+        for topic, msgtype, stamp_ns, message in self.entries:
+            yield BagRecord(topic, msgtype, stamp_ns, serialize_message(message))
+
+
+class SimulatorNode(Node):
+
+    def __init__(self) -> None:
+        super().__init__('sessgan_sim')
+        self.declare_parameter('mode', 'lockstep')            # lockstep | clocked
+        self.declare_parameter('real_time_factor', 1.0)       # clocked mode: sim s per wall s
+        self.declare_parameter('controller_timeout', 2.0)     # wall s without a command
+        self.declare_parameter('controller_startup_timeout', 15.0)  # wall s for the first one
+        self.declare_parameter('use_stamped_cmd_vel', False)
+        self.declare_parameter('scenario', 'factory')         # free mode and defaults
+        self.declare_parameter('robot', '')                   # empty: the scenario's robot
+        self.declare_parameter('time_limit', 0.0)             # sim s; 0: the scenario's
+        self.declare_parameter('control_rate', 20.0)          # Hz of scan/odom/commands
+        self.declare_parameter('lidar_beams', 360)
+        self.declare_parameter('lidar_fov_deg', 360.0)
+        self.declare_parameter('lidar_range_max', 12.0)
+        self.declare_parameter('lidar_noise_std', 0.01)       # m
+        self.declare_parameter('dummy_agents', -1)            # -1: the scenario's
+        self.declare_parameter('free_mode', False)            # run an episode per `environment`
+        self.declare_parameter('seed', 0)                     # free mode episodes
+        self.declare_parameter('record_directory', '')        # free mode failure bags
+        self.declare_parameter('bag_storage', 'mcap')         # mcap | sqlite3
+
+        self.busy = threading.Lock()
+        self.callback_group = ReentrantCallbackGroup()
+        self.scan_publisher = self.create_publisher(LaserScan, 'scan', SENSOR_QOS)
+        self.odom_publisher = self.create_publisher(Odometry, 'odom', SENSOR_QOS)
+        self.tf_publisher = self.create_publisher(TFMessage, 'tf', SENSOR_QOS)
+        self.tf_static_publisher = self.create_publisher(TFMessage, 'tf_static', LATCHED_QOS)
+        self.clock_publisher = self.create_publisher(Clock, 'clock', SENSOR_QOS)
+        self.map_publisher = self.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
+        self.goal_publisher = self.create_publisher(PoseStamped, 'goal_pose', LATCHED_QOS)
+        self.topics = {name: self.resolve_topic_name(name) for name in (
+            'scan', 'odom', 'tf', 'tf_static', 'clock', 'map', 'goal_pose', 'cmd_vel')}
+
+        # Commands are received by a private node spun from the episode thread itself, so
+        # lockstep never waits on a thread hand-off of the main executor.
+        self.command_node = rclpy.create_node(
+            self.get_name() + '_cmd_vel', namespace=self.get_namespace(), context=self.context)
+        stamped = bool(self.get_parameter('use_stamped_cmd_vel').value)
+        self.command_type = TwistStamped if stamped else Twist
+        self.commands: list = []
+        self.command_node.create_subscription(
+            self.command_type, 'cmd_vel', self.commands.append, 10)
+        self.command_executor = SingleThreadedExecutor(context=self.context)
+        self.command_executor.add_node(self.command_node)
+
+        self.action_server = ActionServer(
+            self, EvaluateEnvironment, 'evaluate', execute_callback=self.execute,
+            goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=self.callback_group)
+        if self.get_parameter('free_mode').value:
+            self.free_seed = int(self.get_parameter('seed').value)
+            self.create_subscription(OccupancyGrid, 'environment', self.on_free_map, LATCHED_QOS,
+                                     callback_group=self.callback_group)
+        self.get_logger().info(
+            f'simulator ready: {self.get_parameter("mode").value} mode, action '
+            f'{self.resolve_topic_name("evaluate")}')
+
+    # ---- entry points ----------------------------------------------------------------------
+
+    def on_goal(self, goal_request) -> GoalResponse:
+        if self.busy.locked():
+            self.get_logger().warning('rejecting an evaluate goal: an episode is running')
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def execute(self, goal_handle):
+        request = goal_handle.request
+        result = EvaluateEnvironment.Result()
+        with self.busy:
+            try:
+                environment = environment_from_msg(request.environment)
+            except (SessganGenError, SessganSimError, ValueError) as err:
+                result.metrics = invalid_metrics(request.environment.id, str(err))
+                self.get_logger().warning(f'invalid environment {request.environment.id!r}: {err}')
+                goal_handle.succeed()
+                return result
+            result.metrics = self.run_episode(
+                environment, robot=request.robot, time_limit=request.time_limit,
+                seed=request.seed, record_directory=request.record_directory,
+                controller=request.controller, goal_handle=goal_handle)
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.succeed()
+        return result
+
+    def on_free_map(self, grid: OccupancyGrid) -> None:
+        scenario = self.get_parameter('scenario').value
+        try:
+            occupancy, _, _ = occupancy_from_grid_msg(grid)
+            cells = occupancy_to_tokens(occupancy, get_scenario(scenario))
+            environment = make_environment(cells, scenario, f'free-{self.free_seed}',
+                                           seed=self.free_seed)
+        except (SessganGenError, ValueError) as err:
+            self.get_logger().error(f'ignoring the map on environment: {err}')
+            return
+        if not self.busy.acquire(blocking=False):
+            self.get_logger().warning('ignoring a map on environment: an episode is running')
+            return
+        try:
+            self.free_seed += 1
+            metrics = self.run_episode(
+                environment, robot='', time_limit=0.0, seed=environment.seed,
+                record_directory=self.get_parameter('record_directory').value,
+                controller='external', goal_handle=None)
+            self.get_logger().info(
+                f'free-mode episode {environment.id}: {metrics.outcome}, '
+                f'collisions {metrics.collisions}, risk {metrics.risk_score:.3f}')
+        finally:
+            self.busy.release()
+
+    # ---- the episode loop ------------------------------------------------------------------
+
+    def episode_config(self, environment: Environment, robot: str, time_limit: float,
+                       seed: int) -> EpisodeConfig:
+        scenario = get_scenario(environment.scenario)
+        agents = int(self.get_parameter('dummy_agents').value)
+        return EpisodeConfig(
+            robot=robot or self.get_parameter('robot').value or scenario.robot,
+            control_rate_hz=float(self.get_parameter('control_rate').value),
+            time_limit=time_limit or float(self.get_parameter('time_limit').value)
+            or scenario.time_limit,
+            proximity_distance=scenario.proximity_distance,
+            lidar_beams=int(self.get_parameter('lidar_beams').value),
+            lidar_fov_deg=float(self.get_parameter('lidar_fov_deg').value),
+            lidar_range_max=float(self.get_parameter('lidar_range_max').value),
+            lidar_noise_std=float(self.get_parameter('lidar_noise_std').value),
+            dummy_agents=scenario.dummy_agents if agents < 0 else agents,
+            seed=int(seed),
+        )
+
+    def run_episode(self, environment: Environment, robot: str, time_limit: float, seed: int,
+                    record_directory: str, controller: str, goal_handle) -> EpisodeMetricsMsg:
+        wall_start = time.monotonic()
+        recording = Recording() if record_directory else None
+        try:
+            config = self.episode_config(environment, robot, time_limit, seed)
+        except (SessganSimError, SessganGenError, ValueError) as err:
+            return invalid_metrics(environment.id, str(err))
+        with Episode() as episode:
+            observation = episode.reset(environment, config)
+            if episode.done:
+                metrics = episode.metrics()
+            else:
+                self.publish_episode_start(environment, episode, observation, recording)
+                metrics = self.step_loop(episode, observation, recording, goal_handle)
+        message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
+        if recording is not None and is_failure(metrics):
+            message.bag_path = self.write_bag(
+                record_directory, environment, metrics, recording, seed, controller)
+        return message
+
+    def publish_episode_start(self, environment, episode, observation, recording) -> None:
+        stamp = rm.time_msg(observation.time)
+        self.publish(self.map_publisher, 'map', 'nav_msgs/msg/OccupancyGrid',
+                     occupancy_grid_msg(environment, stamp=stamp), observation.time, recording)
+        self.publish(self.tf_static_publisher, 'tf_static', 'tf2_msgs/msg/TFMessage',
+                     rm.static_tf_msg(stamp, episode.robot.base_height, episode.robot.scan_height),
+                     observation.time, recording)
+        goal = environment.goal
+        self.publish(self.goal_publisher, 'goal_pose', 'geometry_msgs/msg/PoseStamped',
+                     rm.goal_msg(stamp, goal.x, goal.y, goal.yaw), observation.time, recording)
+
+    def publish(self, publisher, topic: str, msgtype: str, message, sim_time: float,
+                recording: Recording | None) -> None:
+        publisher.publish(message)
+        if recording is not None:
+            recording.add(self.topics[topic], msgtype, int(round(sim_time * 1e9)), message)
+
+    def publish_tick(self, episode, observation, recording) -> None:
+        stamp = rm.time_msg(observation.time)
+        t = observation.time
+        self.publish(self.clock_publisher, 'clock', 'rosgraph_msgs/msg/Clock', rm.clock_msg(stamp),
+                     t, recording)
+        odom = rm.odom_msg(stamp, *observation.pose, *observation.velocity)
+        self.publish(self.odom_publisher, 'odom', 'nav_msgs/msg/Odometry', odom, t, recording)
+        self.publish(self.tf_publisher, 'tf', 'tf2_msgs/msg/TFMessage',
+                     rm.dynamic_tf_msg(stamp, odom), t, recording)
+        lidar = episode.lidar
+        self.publish(self.scan_publisher, 'scan', 'sensor_msgs/msg/LaserScan', rm.scan_msg(
+            stamp, observation.ranges, lidar.angle_min, lidar.angle_increment, lidar.range_min,
+            lidar.range_max, 1.0 / episode.config.control_rate_hz), t, recording)
+
+    def drain_commands(self) -> None:
+        while True:
+            self.command_executor.spin_once(timeout_sec=0.0)
+            if not self.commands:
+                return
+            self.commands.clear()
+
+    def wait_for_command(self, deadline: float, republish) -> object | None:
+        """The next command received before the wall-clock ``deadline``, else None."""
+        next_republish = time.monotonic() + 1.0
+        while not self.commands:
+            now = time.monotonic()
+            if now >= deadline:
+                return None
+            if republish is not None and now >= next_republish:
+                republish()  # covers a controller that matched our publishers only now
+                next_republish = now + 1.0
+            self.command_executor.spin_once(timeout_sec=min(deadline, next_republish) - now)
+        return self.commands.pop(0)
+
+    def step_loop(self, episode, observation, recording, goal_handle):
+        lockstep = self.get_parameter('mode').value != 'clocked'
+        rtf = max(1e-3, float(self.get_parameter('real_time_factor').value))
+        timeout = float(self.get_parameter('controller_timeout').value)
+        startup_timeout = float(self.get_parameter('controller_startup_timeout').value)
+        dt = 1.0 / episode.config.control_rate_hz
+        feedback_every = max(1, int(round(0.25 / dt)))
+        command = None
+        last_command_wall = time.monotonic()
+        wall_origin = time.monotonic()
+        first = True
+        self.drain_commands()
+        while not episode.done:
+            if goal_handle is not None and goal_handle.is_cancel_requested:
+                episode.abort(Outcome.TIMEOUT, 'cancelled by the evaluate client')
+                break
+            self.publish_tick(episode, observation, recording)
+            if lockstep:
+                limit = startup_timeout if first else timeout
+                received = self.wait_for_command(
+                    time.monotonic() + limit,
+                    (lambda: self.publish_tick(episode, observation, None)) if first else None)
+                if received is None:
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                                  f'no cmd_vel within {limit:.1f} s wall time')
+                    break
+                command = received
+            else:
+                tick_deadline = wall_origin + (observation.time + dt) / rtf
+                while time.monotonic() < tick_deadline:
+                    self.command_executor.spin_once(
+                        timeout_sec=max(0.0, tick_deadline - time.monotonic()))
+                if self.commands:
+                    command = self.commands[-1]
+                    self.commands.clear()
+                    last_command_wall = time.monotonic()
+                limit = startup_timeout if command is None else timeout
+                if time.monotonic() - last_command_wall > limit:
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                                  f'no cmd_vel within {limit:.1f} s wall time')
+                    break
+            first = False
+            values = rm.twist_values(command) if command is not None else (0.0, 0.0, 0.0)
+            if recording is not None and command is not None:
+                recording.add(self.topics['cmd_vel'], 'geometry_msgs/msg/' +
+                              self.command_type.__name__, int(round(observation.time * 1e9)),
+                              command)
+            observation = episode.step(values).observation
+            if goal_handle is not None and episode.ticks % feedback_every == 0:
+                feedback = EvaluateEnvironment.Feedback()
+                feedback.sim_time = observation.time
+                feedback.collisions = episode.collisions
+                feedback.distance_to_goal = episode.distance_to_goal
+                goal_handle.publish_feedback(feedback)
+        if not episode.done:
+            pass
+        # The final state, so subscribers and bags see where the robot ended.
+        self.publish_tick(episode, observation, recording)
+        return episode.metrics()
+
+    def write_bag(self, record_directory, environment, metrics, recording, seed,
+                  controller) -> str:
+        directory = Path(record_directory) / environment.id
+        metadata = {
+            'environment_id': environment.id, 'scenario': environment.scenario,
+            'seed': environment.seed, 'episode_seed': int(seed),
+            'generation': environment.generation, 'member': environment.member,
+            'controller': controller, 'metrics': metrics.as_dict(),
+            'start': [environment.start.x, environment.start.y, environment.start.yaw],
+            'goal': [environment.goal.x, environment.goal.y, environment.goal.yaw],
+            'feasible': environment.feasible, 'namespace': self.get_namespace(),
+        }
+        try:
+            path = write_episode_bag(
+                directory, recording.records(), metadata, environment.occupancy,
+                environment.resolution, environment.origin,
+                storage=self.get_parameter('bag_storage').value, overwrite=True)
+        except (SessganSimError, OSError, ValueError) as err:
+            self.get_logger().error(f'cannot write the failure bag {directory}: {err}')
+            return ''
+        self.get_logger().info(f'failure bag written: {path}')
+        return str(path)
+
+
+def is_failure(metrics) -> bool:
+    """A collision, or a timeout/stuck in a map the robot could have crossed."""
+    return metrics.collisions > 0 or (metrics.feasible and metrics.outcome in FAILURE_OUTCOMES)
+
+
+def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetricsMsg:
+    msg = EpisodeMetricsMsg()
+    msg.environment_id = environment_id
+    msg.outcome = str(metrics.outcome)
+    msg.detail = metrics.detail
+    msg.collisions = int(metrics.collisions)
+    msg.proximity_time = float(metrics.proximity_time)
+    msg.simulation_time = float(metrics.simulation_time)
+    msg.risk_score = float(metrics.risk_score)
+    msg.feasible = bool(metrics.feasible)
+    msg.min_clearance = float(metrics.min_clearance)
+    msg.distance_travelled = float(metrics.distance_travelled)
+    msg.final_distance_to_goal = float(metrics.final_distance_to_goal)
+    msg.ticks = int(metrics.ticks)
+    msg.wall_time = float(wall_time)
+    return msg
+
+
+def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
+    msg = EpisodeMetricsMsg()
+    msg.environment_id = environment_id
+    msg.outcome = EpisodeMetricsMsg.OUTCOME_INVALID_ENVIRONMENT
+    msg.detail = detail
+    return msg
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = None
+    executor = MultiThreadedExecutor(num_threads=2)
+    try:
+        node = SimulatorNode()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.command_node.destroy_node()
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -1,0 +1,17 @@
+"""Shared fixtures: ROS isolation for the whole run and real node processes for graph tests."""
+
+from __future__ import annotations
+
+import os
+import random
+
+import pytest
+
+# Every test run keeps DDS traffic on this machine, in a domain of its own, so parallel runs
+# (and other ROS users of the machine) never see each other. Child processes inherit this.
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+if not os.environ.get('ROS_DOMAIN_ID'):
+    os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randrange(10, 100))
+os.environ.setdefault('PYTHONUNBUFFERED', '1')
+
+pytest_plugins = ['tests.ros_processes']

@@ -1,0 +1,73 @@
+"""The generator node, started with `ros2 run`, seen from another process over DDS."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.ros_processes import spin_until
+
+pytestmark = pytest.mark.graph
+
+
+def start_generator(node_processes, namespace: str, *parameters: str):
+    command = ['ros2', 'run', 'sessgan_gen', 'generator', '--ros-args', '-r', f'__ns:={namespace}']
+    for parameter in parameters:
+        command += ['-p', parameter]
+    return node_processes.start(command, name=f'generator{namespace.replace("/", "_")}')
+
+
+def test_generator_map_is_transient_local(node_processes, ros_node):
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    generator = start_generator(node_processes, '/gen_a', 'scenario:=factory', 'seed:=7')
+    generator.wait_for_output(r'published environment factory-s7', timeout=60)
+
+    # Subscribing only now proves the map is kept for late joiners (transient local).
+    received = []
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    ros_node.create_subscription(OccupancyGrid, '/gen_a/environment', received.append, qos)
+    assert spin_until(ros_node, lambda: received, timeout=20), 'no map received'
+    grid = received[0]
+    assert (grid.info.width, grid.info.height) == (32, 32)
+    assert grid.info.resolution == pytest.approx(0.5)
+    assert set(grid.data) <= {0, 100}
+    assert grid.header.frame_id == 'map'
+
+
+def call_service(ros_node, client, request, timeout=60.0):
+    assert client.wait_for_service(timeout_sec=30), 'generate_environments not available'
+    future = client.call_async(request)
+    assert spin_until(ros_node, future.done, timeout=timeout), 'service call timed out'
+    return future.result()
+
+
+def test_generate_environments_service(node_processes, ros_node):
+    from sessgan_interfaces.srv import GenerateEnvironments
+
+    generator = start_generator(node_processes, '/gen_b', 'scenario:=drone')
+    client = ros_node.create_client(GenerateEnvironments, '/gen_b/generate_environments')
+
+    request = GenerateEnvironments.Request(scenario='drone', seeds=[3, 4, 5], generation=2, member=1)
+    response = call_service(ros_node, client, request)
+    assert response.success, response.message
+    assert [env.seed for env in response.environments] == [3, 4, 5]
+    assert all(env.scenario == 'drone' and env.generation == 2 for env in response.environments)
+    assert set(response.environments[0].map.data) <= {0, 50, 100}
+
+    # Bad requests get a clear refusal and the node keeps serving.
+    bad = call_service(ros_node, client, GenerateEnvironments.Request(scenario='moon', seeds=[1]))
+    assert not bad.success and 'moon' in bad.message
+    corrupt = call_service(ros_node, client, GenerateEnvironments.Request(
+        scenario='drone', weights=list(b'not a checkpoint'), seeds=[1]))
+    assert not corrupt.success and 'checkpoint' in corrupt.message.lower()
+    huge = call_service(ros_node, client, GenerateEnvironments.Request(
+        scenario='drone', seeds=[1], width=100000, height=100000))
+    assert not huge.success and '100000' in huge.message
+
+    again = call_service(ros_node, client, GenerateEnvironments.Request(seeds=[3]))
+    assert again.success
+    assert list(again.environments[0].map.data) == list(response.environments[0].map.data), \
+        'the same seed must give the same map'
+    assert generator.process.poll() is None

@@ -13,6 +13,7 @@ A controller silent for ``controller_timeout`` wall seconds ends the episode as
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -41,9 +42,11 @@ from sessgan_gen.ros_conversion import (environment_from_msg, occupancy_from_gri
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_sim import ros_messages as rm
-from sessgan_sim.bag_recording import BagRecord, write_episode_bag
-from sessgan_sim.episode import Episode, EpisodeConfig, Outcome
+from sessgan_sim.bag_recording import BagRecord, BagWriteError, write_episode_bag
+from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import SessganSimError
+from sessgan_sim.metrics import Outcome
+from sessgan_sim.sensors import LidarConfig
 
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -81,7 +84,7 @@ class SimulatorNode(Node):
         self.declare_parameter('control_rate', 20.0)          # Hz of scan/odom/commands
         self.declare_parameter('lidar_beams', 360)
         self.declare_parameter('lidar_fov_deg', 360.0)
-        self.declare_parameter('lidar_range_max', 12.0)
+        self.declare_parameter('lidar_range_max', 10.0)
         self.declare_parameter('lidar_noise_std', 0.01)       # m
         self.declare_parameter('dummy_agents', -1)            # -1: the scenario's
         self.declare_parameter('free_mode', False)            # run an episode per `environment`
@@ -181,34 +184,37 @@ class SimulatorNode(Node):
 
     # ---- the episode loop ------------------------------------------------------------------
 
-    def episode_config(self, environment: Environment, robot: str, time_limit: float,
-                       seed: int) -> EpisodeConfig:
-        scenario = get_scenario(environment.scenario)
-        agents = int(self.get_parameter('dummy_agents').value)
-        return EpisodeConfig(
-            robot=robot or self.get_parameter('robot').value or scenario.robot,
-            control_rate_hz=float(self.get_parameter('control_rate').value),
-            time_limit=time_limit or float(self.get_parameter('time_limit').value)
-            or scenario.time_limit,
-            proximity_distance=scenario.proximity_distance,
-            lidar_beams=int(self.get_parameter('lidar_beams').value),
-            lidar_fov_deg=float(self.get_parameter('lidar_fov_deg').value),
-            lidar_range_max=float(self.get_parameter('lidar_range_max').value),
-            lidar_noise_std=float(self.get_parameter('lidar_noise_std').value),
-            dummy_agents=scenario.dummy_agents if agents < 0 else agents,
+    def episode_config(self, robot: str, time_limit: float, seed: int) -> EpisodeConfig:
+        """Parameters and goal fields as a core config; None fields take scenario defaults."""
+        param = self.get_parameter
+        rate = float(param('control_rate').value)
+        agents = int(param('dummy_agents').value)
+        config = EpisodeConfig(
+            robot=robot or param('robot').value or None,
+            control_rate_hz=rate,
+            time_limit=time_limit or float(param('time_limit').value) or None,
+            lidar=LidarConfig(
+                beams=int(param('lidar_beams').value),
+                field_of_view=math.radians(float(param('lidar_fov_deg').value)),
+                range_max=float(param('lidar_range_max').value),
+                noise_std=float(param('lidar_noise_std').value), rate_hz=rate),
+            dummy_agents=None if agents < 0 else agents,
             seed=int(seed),
         )
+        config.validate()
+        return config
 
     def run_episode(self, environment: Environment, robot: str, time_limit: float, seed: int,
                     record_directory: str, controller: str, goal_handle) -> EpisodeMetricsMsg:
         wall_start = time.monotonic()
         recording = Recording() if record_directory else None
         try:
-            config = self.episode_config(environment, robot, time_limit, seed)
-        except (SessganSimError, SessganGenError, ValueError) as err:
+            config = self.episode_config(robot, time_limit, seed)
+        except (SessganSimError, ValueError) as err:
             return invalid_metrics(environment.id, str(err))
         with Episode() as episode:
             observation = episode.reset(environment, config)
+            config = episode.config  # resolved: scenario defaults filled in
             if episode.done:
                 metrics = episode.metrics()
             else:
@@ -217,7 +223,7 @@ class SimulatorNode(Node):
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
         if recording is not None and is_failure(metrics):
             message.bag_path = self.write_bag(
-                record_directory, environment, metrics, recording, seed, controller)
+                record_directory, environment, config, metrics, recording, seed, controller)
         return message
 
     def publish_episode_start(self, environment, episode, observation, recording) -> None:
@@ -225,11 +231,19 @@ class SimulatorNode(Node):
         self.publish(self.map_publisher, 'map', 'nav_msgs/msg/OccupancyGrid',
                      occupancy_grid_msg(environment, stamp=stamp), observation.time, recording)
         self.publish(self.tf_static_publisher, 'tf_static', 'tf2_msgs/msg/TFMessage',
-                     rm.static_tf_msg(stamp, episode.robot.base_height, episode.robot.scan_height),
+                     rm.static_tf_msg(stamp, episode.robot.ride_height, episode.robot.sensor_height),
                      observation.time, recording)
         goal = environment.goal
         self.publish(self.goal_publisher, 'goal_pose', 'geometry_msgs/msg/PoseStamped',
                      rm.goal_msg(stamp, goal.x, goal.y, goal.yaw), observation.time, recording)
+
+    def republish_start(self, episode, observation) -> None:
+        """Resend the goal and first tick to a controller that matched only now (its volatile
+        goal_pose reader missed the first goal), without recording them twice."""
+        goal = episode.environment.goal
+        self.goal_publisher.publish(
+            rm.goal_msg(rm.time_msg(observation.time), goal.x, goal.y, goal.yaw))
+        self.publish_tick(episode, observation, None)
 
     def publish(self, publisher, topic: str, msgtype: str, message, sim_time: float,
                 recording: Recording | None) -> None:
@@ -242,14 +256,15 @@ class SimulatorNode(Node):
         t = observation.time
         self.publish(self.clock_publisher, 'clock', 'rosgraph_msgs/msg/Clock', rm.clock_msg(stamp),
                      t, recording)
-        odom = rm.odom_msg(stamp, *observation.pose, *observation.velocity)
+        pose = observation.pose
+        odom = rm.odom_msg(stamp, pose.x, pose.y, pose.yaw, *observation.twist)
         self.publish(self.odom_publisher, 'odom', 'nav_msgs/msg/Odometry', odom, t, recording)
         self.publish(self.tf_publisher, 'tf', 'tf2_msgs/msg/TFMessage',
                      rm.dynamic_tf_msg(stamp, odom), t, recording)
-        lidar = episode.lidar
+        lidar = observation.lidar
         self.publish(self.scan_publisher, 'scan', 'sensor_msgs/msg/LaserScan', rm.scan_msg(
-            stamp, observation.ranges, lidar.angle_min, lidar.angle_increment, lidar.range_min,
-            lidar.range_max, 1.0 / episode.config.control_rate_hz), t, recording)
+            stamp, observation.scan, lidar.angle_min, lidar.angle_increment, lidar.range_min,
+            lidar.range_max, lidar.scan_time), t, recording)
 
     def drain_commands(self) -> None:
         while True:
@@ -282,6 +297,7 @@ class SimulatorNode(Node):
         last_command_wall = time.monotonic()
         wall_origin = time.monotonic()
         first = True
+        ticks = 0
         self.drain_commands()
         while not episode.done:
             if goal_handle is not None and goal_handle.is_cancel_requested:
@@ -292,7 +308,7 @@ class SimulatorNode(Node):
                 limit = startup_timeout if first else timeout
                 received = self.wait_for_command(
                     time.monotonic() + limit,
-                    (lambda: self.publish_tick(episode, observation, None)) if first else None)
+                    (lambda: self.republish_start(episode, observation)) if first else None)
                 if received is None:
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
                                   f'no cmd_vel within {limit:.1f} s wall time')
@@ -319,26 +335,27 @@ class SimulatorNode(Node):
                               self.command_type.__name__, int(round(observation.time * 1e9)),
                               command)
             observation = episode.step(values).observation
-            if goal_handle is not None and episode.ticks % feedback_every == 0:
+            ticks += 1
+            if goal_handle is not None and ticks % feedback_every == 0:
+                so_far = episode.metrics()
                 feedback = EvaluateEnvironment.Feedback()
                 feedback.sim_time = observation.time
-                feedback.collisions = episode.collisions
-                feedback.distance_to_goal = episode.distance_to_goal
+                feedback.collisions = so_far.collisions
+                feedback.distance_to_goal = so_far.final_distance_to_goal
                 goal_handle.publish_feedback(feedback)
-        if not episode.done:
-            pass
         # The final state, so subscribers and bags see where the robot ended.
         self.publish_tick(episode, observation, recording)
         return episode.metrics()
 
-    def write_bag(self, record_directory, environment, metrics, recording, seed,
+    def write_bag(self, record_directory, environment, config, metrics, recording, seed,
                   controller) -> str:
         directory = Path(record_directory) / environment.id
         metadata = {
             'environment_id': environment.id, 'scenario': environment.scenario,
             'seed': environment.seed, 'episode_seed': int(seed),
             'generation': environment.generation, 'member': environment.member,
-            'controller': controller, 'metrics': metrics.as_dict(),
+            'controller': controller, 'metrics': metrics.to_dict(),
+            'robot': config.robot, 'time_limit': config.time_limit,
             'start': [environment.start.x, environment.start.y, environment.start.yaw],
             'goal': [environment.goal.x, environment.goal.y, environment.goal.yaw],
             'feasible': environment.feasible, 'namespace': self.get_namespace(),
@@ -348,7 +365,7 @@ class SimulatorNode(Node):
                 directory, recording.records(), metadata, environment.occupancy,
                 environment.resolution, environment.origin,
                 storage=self.get_parameter('bag_storage').value, overwrite=True)
-        except (SessganSimError, OSError, ValueError) as err:
+        except (BagWriteError, OSError, ValueError) as err:
             self.get_logger().error(f'cannot write the failure bag {directory}: {err}')
             return ''
         self.get_logger().info(f'failure bag written: {path}')
@@ -363,7 +380,7 @@ def is_failure(metrics) -> bool:
 def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetricsMsg:
     msg = EpisodeMetricsMsg()
     msg.environment_id = environment_id
-    msg.outcome = str(metrics.outcome)
+    msg.outcome = metrics.outcome.value if metrics.outcome else ''
     msg.detail = metrics.detail
     msg.collisions = int(metrics.collisions)
     msg.proximity_time = float(metrics.proximity_time)

@@ -1,0 +1,416 @@
+"""map_server maps (PGM image + YAML) in and out, as Nav2's map_server reads them.
+
+Reading follows nav2_map_server's ``loadMapYaml``/``loadMapFromFile``: for each
+pixel, shade = value / maxval, occ = shade if ``negate`` else 1 - shade;
+
+* ``trinary`` (default): occ > occupied_thresh -> 100, occ < free_thresh -> 0,
+  otherwise unknown -1;
+* ``scale``: as trinary, but values in between become
+  rint((occ - free_thresh) / (occupied_thresh - free_thresh) * 100);
+* ``raw``: round(shade * 255) when it is 0..100, otherwise -1.
+
+Image rows are stored top row first; the returned arrays are in OccupancyGrid
+order (row 0 = lowest y). Only PGM images (P5 binary or P2 ASCII, 8 or 16 bit)
+are supported. ``image``, ``resolution`` and ``origin`` are required; a missing
+``negate`` reads as 0, missing thresholds as map_saver's defaults (0.65, 0.25).
+
+Writing produces a P5 PGM and a YAML that Nav2's map_server loads: free 0 ->
+254 (white, as map_saver writes free space), blocked 100 -> 0 (black). A grid
+holding values strictly between 0 and 100 (our low obstacles, 50) is written
+in ``scale`` mode with each value v as the grey that map_server's scale mode
+reads back as exactly v (50 -> 140, a mid grey), so Nav2, RViz and this module
+all load a low obstacle as 50 rather than as unknown. Otherwise the YAML says
+``trinary`` and unknown -1 is written as mid grey 127, which reads back as unknown. Both files are
+written atomically (temporary file, then os.replace).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import yaml
+
+from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
+from sessgan_gen.errors import MapFormatError
+from sessgan_gen.scenarios import BLOCKED, FREE
+from sessgan_gen.token_map import (
+    UNKNOWN, ScenarioLike, TokenMap, atomic_write_bytes, check_cells, occupancy_to_tokens,
+    resolve_scenario, tokens_to_occupancy,
+)
+
+DEFAULT_OCCUPIED_THRESH = 0.65
+DEFAULT_FREE_THRESH = 0.25
+MAP_MODES = ('trinary', 'scale', 'raw')
+FREE_PIXEL = 254
+OCCUPIED_PIXEL = 0
+UNKNOWN_PIXEL = 127
+"""Mid grey: occ 0.502 lies between the thresholds we write, so it reads back as unknown
+(map_saver's 205 would read as free under its own default free_thresh 0.25)."""
+MAX_IMAGE_SIDE = 1 << 16
+"""Images larger than this per side are rejected (a corrupt header, not a map)."""
+
+
+class MapServerMap(NamedTuple):
+    """An occupancy grid read from a map_server YAML."""
+
+    occupancy: np.ndarray
+    """int8 array (height, width), OccupancyGrid order and values (-1, 0..100)."""
+    resolution: float
+    """Metres per cell."""
+    origin: tuple[float, float, float]
+    """Pose (x m, y m, yaw rad) of the lower-left corner of cell (0, 0)."""
+
+
+class MapMetadata(NamedTuple):
+    """The keys of a map_server YAML, validated."""
+
+    image: Path
+    resolution: float
+    origin: tuple[float, float, float]
+    negate: bool
+    occupied_thresh: float
+    free_thresh: float
+    mode: str
+
+
+# --- PGM ----------------------------------------------------------------------------------------
+
+
+def _pgm_header(data: bytes, source: str) -> tuple[str, list[int], int]:
+    """Return (magic, [width, height, maxval], offset just after the header's last number)."""
+    magic = data[:2].decode('latin-1')
+    if magic not in ('P5', 'P2'):
+        raise MapFormatError(
+            f'{source}: not a PGM image (magic {data[:2]!r}; expected b"P5" or b"P2")')
+    numbers: list[int] = []
+    pos = 2
+    size = len(data)
+    while len(numbers) < 3:
+        while pos < size and data[pos:pos + 1].isspace():
+            pos += 1
+        if pos < size and data[pos:pos + 1] == b'#':
+            while pos < size and data[pos:pos + 1] not in (b'\n', b'\r'):
+                pos += 1
+            continue
+        start = pos
+        while pos < size and data[pos:pos + 1].isdigit():
+            pos += 1
+        if start == pos:
+            what = ('width', 'height', 'maxval')[len(numbers)]
+            found = 'end of file' if pos >= size else repr(data[pos:pos + 1])
+            raise MapFormatError(
+                f'{source}: truncated or malformed PGM header: expected the {what}, '
+                f'found {found} at byte {pos}')
+        numbers.append(int(data[start:pos]))
+    return magic, numbers, pos
+
+
+def read_pgm(path: str | os.PathLike) -> tuple[np.ndarray, int]:
+    """Read a PGM (P5 or P2) image: (uint16 array (height, width), top row first; maxval)."""
+    source = str(path)
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError as err:
+        raise MapFormatError(f'map image {source!r} does not exist') from err
+    except OSError as err:
+        raise MapFormatError(f'cannot read map image {source!r}: {err}') from err
+    magic, (width, height, maxval), pos = _pgm_header(data, source)
+    if not (1 <= width <= MAX_IMAGE_SIDE and 1 <= height <= MAX_IMAGE_SIDE):
+        raise MapFormatError(
+            f'{source}: PGM size {width}x{height} is outside 1..{MAX_IMAGE_SIDE} per side')
+    if not 1 <= maxval <= 65535:
+        raise MapFormatError(f'{source}: PGM maxval {maxval} is outside 1..65535')
+    count = width * height
+    if magic == 'P5':
+        # Exactly one whitespace byte separates the header from the raster.
+        if pos >= len(data) or not data[pos:pos + 1].isspace():
+            raise MapFormatError(f'{source}: truncated PGM: no pixel data after the header')
+        pos += 1
+        sample = np.dtype('u1') if maxval < 256 else np.dtype('>u2')
+        need = count * sample.itemsize
+        have = len(data) - pos
+        if have < need:
+            raise MapFormatError(
+                f'{source}: truncated PGM: {width}x{height} pixels need {need} bytes of data, '
+                f'found {have}')
+        pixels = np.frombuffer(data, dtype=sample, count=count, offset=pos).astype(np.uint16)
+    else:
+        text = data[pos:].decode('latin-1')
+        tokens = ' '.join(line.split('#', 1)[0] for line in text.splitlines()).split()
+        if len(tokens) < count:
+            raise MapFormatError(
+                f'{source}: truncated PGM: {width}x{height} pixels expected, found {len(tokens)}')
+        try:
+            pixels = np.array([int(token) for token in tokens[:count]], dtype=np.int64)
+        except ValueError as err:
+            raise MapFormatError(
+                f'{source}: PGM P2 pixel data holds a non-integer: {err}') from err
+        if pixels.min() < 0:
+            raise MapFormatError(f'{source}: PGM P2 pixel data holds a negative value')
+    if int(pixels.max()) > maxval:
+        raise MapFormatError(
+            f'{source}: a pixel value {int(pixels.max())} exceeds the PGM maxval {maxval}')
+    return pixels.reshape(height, width).astype(np.uint16), maxval
+
+
+def encode_pgm(pixels: np.ndarray) -> bytes:
+    """Encode an 8-bit (height, width) array, top row first, as a binary P5 PGM."""
+    array = np.asarray(pixels, dtype=np.uint8)
+    header = f'P5\n# written by sessgan_gen\n{array.shape[1]} {array.shape[0]}\n255\n'
+    return header.encode('ascii') + np.ascontiguousarray(array).tobytes()
+
+
+# --- YAML ---------------------------------------------------------------------------------------
+
+
+def _number(document: dict, key: str, source: str, default: float | None = None) -> float:
+    if key not in document:
+        if default is None:
+            raise MapFormatError(f'{source}: required key {key!r} is missing')
+        return default
+    value = document[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise MapFormatError(f'{source}: {key!r} must be a finite number, got {value!r}')
+    return float(value)
+
+
+def read_map_yaml(yaml_path: str | os.PathLike) -> MapMetadata:
+    """Read and validate a map_server YAML; the image path is resolved against its folder."""
+    path = Path(yaml_path).expanduser()
+    source = str(path)
+    try:
+        text = path.read_text(encoding='utf-8')
+    except FileNotFoundError as err:
+        raise MapFormatError(f'map YAML {source!r} does not exist') from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise MapFormatError(f'cannot read map YAML {source!r}: {err}') from err
+    try:
+        document: Any = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise MapFormatError(f'{source}: invalid YAML: {err}') from err
+    if not isinstance(document, dict):
+        raise MapFormatError(
+            f'{source}: expected a mapping of map_server keys (image, resolution, origin, ...), '
+            f'got {type(document).__name__}')
+
+    image = document.get('image')
+    if image is None:
+        raise MapFormatError(f"{source}: required key 'image' is missing")
+    if not isinstance(image, str) or not image.strip():
+        raise MapFormatError(f"{source}: 'image' must be a non-empty file name, got {image!r}")
+    image_path = Path(image).expanduser()
+    if not image_path.is_absolute():
+        image_path = path.parent / image_path
+
+    resolution = _number(document, 'resolution', source)
+    if resolution <= 0:
+        raise MapFormatError(
+            f"{source}: 'resolution' must be a positive number of metres per cell, "
+            f'got {resolution}')
+
+    if 'origin' not in document:
+        raise MapFormatError(f"{source}: required key 'origin' is missing")
+    origin = document['origin']
+    if (not isinstance(origin, (list, tuple)) or len(origin) not in (2, 3)
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for v in origin)):
+        raise MapFormatError(
+            f"{source}: 'origin' must be a list [x, y, yaw] of finite numbers, got {origin!r}")
+    origin3 = (float(origin[0]), float(origin[1]), float(origin[2]) if len(origin) == 3 else 0.0)
+
+    negate_value = document.get('negate', 0)
+    if isinstance(negate_value, bool) or negate_value in (0, 1):
+        negate = bool(negate_value)
+    else:
+        raise MapFormatError(f"{source}: 'negate' must be 0, 1, true or false, "
+                             f'got {negate_value!r}')
+
+    occupied = _number(document, 'occupied_thresh', source, DEFAULT_OCCUPIED_THRESH)
+    free = _number(document, 'free_thresh', source, DEFAULT_FREE_THRESH)
+    if not (0.0 <= free < occupied <= 1.0):
+        raise MapFormatError(
+            f'{source}: thresholds must satisfy 0 <= free_thresh < occupied_thresh <= 1, '
+            f'got free_thresh {free}, occupied_thresh {occupied}')
+
+    mode = document.get('mode', 'trinary')
+    if not isinstance(mode, str) or mode.lower() not in MAP_MODES:
+        raise MapFormatError(f"{source}: 'mode' must be one of {MAP_MODES}, got {mode!r}")
+    return MapMetadata(image_path, resolution, origin3, negate, occupied, free, mode.lower())
+
+
+def pixels_to_occupancy(pixels: np.ndarray, maxval: int, metadata: MapMetadata) -> np.ndarray:
+    """Apply map_server's thresholding; ``pixels`` top row first, result in OccupancyGrid order."""
+    shade = pixels.astype(np.float64) / float(maxval)
+    occ = shade if metadata.negate else 1.0 - shade
+    if metadata.mode == 'raw':
+        percent = np.round(shade * 255.0)
+        grid = np.where((percent >= 0) & (percent <= 100), percent, UNKNOWN)
+    else:
+        grid = np.full(shade.shape, UNKNOWN, dtype=np.float64)
+        if metadata.mode == 'scale':
+            grid = np.rint((occ - metadata.free_thresh)
+                           / (metadata.occupied_thresh - metadata.free_thresh) * 100.0)
+        grid = np.where(occ > metadata.occupied_thresh, BLOCKED, grid)
+        grid = np.where(occ < metadata.free_thresh, FREE, grid)
+    return np.ascontiguousarray(grid.astype(np.int8)[::-1])
+
+
+def read_map_server(yaml_path: str | os.PathLike) -> MapServerMap:
+    """Read a map_server map: (occupancy int8 in OccupancyGrid order, resolution, origin)."""
+    metadata = read_map_yaml(yaml_path)
+    if metadata.image.suffix.lower() not in ('.pgm', ''):
+        raise MapFormatError(
+            f'{yaml_path}: image {str(metadata.image)!r} is not a PGM; only PGM (P5/P2) images '
+            'are supported (convert it, e.g. with `convert map.png map.pgm`)')
+    pixels, maxval = read_pgm(metadata.image)
+    return MapServerMap(pixels_to_occupancy(pixels, maxval, metadata), metadata.resolution,
+                        metadata.origin)
+
+
+# --- writing -----------------------------------------------------------------------------------
+
+
+def occupancy_to_pixels(occupancy: np.ndarray, occupied_thresh: float = DEFAULT_OCCUPIED_THRESH,
+                        free_thresh: float = DEFAULT_FREE_THRESH) -> tuple[np.ndarray, str]:
+    """8-bit pixels (top row first) and the map mode that reads them back unchanged."""
+    grid = np.asarray(occupancy)
+    if grid.ndim != 2 or grid.size == 0:
+        raise MapFormatError(f'occupancy grid must be a non-empty 2-D array, got {grid.shape}')
+    if not np.issubdtype(grid.dtype, np.integer):
+        raise MapFormatError(f'occupancy grid must hold integers, got dtype {grid.dtype}')
+    values = grid.astype(np.int64)
+    bad = (values < UNKNOWN) | (values > BLOCKED)
+    if bad.any():
+        row, col = (int(v) for v in np.argwhere(bad)[0])
+        raise MapFormatError(f'occupancy cell (row {row}, col {col}) holds {values[row, col]}; '
+                             'OccupancyGrid values are -1 or 0..100')
+    between = (values > FREE) & (values < BLOCKED)
+    unknown = values == UNKNOWN
+    if between.any() and unknown.any():
+        raise MapFormatError(
+            'occupancy grid mixes unknown (-1) cells and values between 0 and 100: a PGM '
+            'without an alpha channel cannot represent both')
+    pixels = np.full(values.shape, FREE_PIXEL, dtype=np.uint8)
+    pixels[values == BLOCKED] = OCCUPIED_PIXEL
+    if between.any():
+        mode = 'scale'
+        # The grey that scale mode maps back to v: occ = free + v/100 * (occupied - free).
+        occ = free_thresh + values / 100.0 * (occupied_thresh - free_thresh)
+        grey = np.rint(255.0 * (1.0 - occ)).astype(np.int64)
+        pixels[between] = grey[between].astype(np.uint8)
+    else:
+        mode = 'trinary'
+        pixels[unknown] = UNKNOWN_PIXEL
+    return np.ascontiguousarray(pixels[::-1]), mode
+
+
+def _format_float(value: float) -> str:
+    return repr(float(value))
+
+
+def write_map_server(yaml_path: str | os.PathLike, occupancy: np.ndarray, resolution: float,
+                     origin: Sequence[float] = (0.0, 0.0, 0.0)) -> Path:
+    """Write ``<yaml_path>`` and the P5 PGM ``<stem>.pgm`` beside it; return the image path.
+
+    ``occupancy`` is in OccupancyGrid order (row 0 = lowest y), ``resolution`` in
+    metres per cell, ``origin`` (x m, y m[, yaw rad]) of the corner of cell (0, 0).
+    """
+    path = Path(yaml_path)
+    if not (isinstance(resolution, (int, float)) and math.isfinite(resolution)
+            and resolution > 0):
+        raise MapFormatError(f'{path}: resolution must be a positive finite number of metres '
+                             f'per cell, got {resolution!r}')
+    if len(origin) not in (2, 3) or not all(math.isfinite(float(v)) for v in origin):
+        raise MapFormatError(f'{path}: origin must be (x, y[, yaw]) finite numbers, '
+                             f'got {tuple(origin)!r}')
+    origin3 = (float(origin[0]), float(origin[1]), float(origin[2]) if len(origin) == 3 else 0.0)
+    pixels, mode = occupancy_to_pixels(occupancy)
+    image_path = path.with_suffix('.pgm')
+    if image_path == path:
+        raise MapFormatError(f'{path}: the YAML file must not end in .pgm')
+    text = '\n'.join([
+        f'image: {image_path.name}',
+        f'mode: {mode}',
+        f'resolution: {_format_float(resolution)}',
+        f'origin: [{", ".join(_format_float(v) for v in origin3)}]',
+        'negate: 0',
+        f'occupied_thresh: {DEFAULT_OCCUPIED_THRESH}',
+        f'free_thresh: {DEFAULT_FREE_THRESH}',
+    ]) + '\n'
+    try:
+        atomic_write_bytes(image_path, encode_pgm(pixels))
+        atomic_write_bytes(path, text.encode('utf-8'))
+    except OSError as err:
+        raise MapFormatError(f'cannot write map {str(path)!r}: {err}') from err
+    return image_path
+
+
+def export_environment(yaml_path: str | os.PathLike, environment: Environment) -> Path:
+    """Write an Environment's occupancy grid as a map_server map; return the image path."""
+    return write_map_server(yaml_path, environment.occupancy, environment.resolution,
+                            (environment.origin[0], environment.origin[1], 0.0))
+
+
+def export_token_map(yaml_path: str | os.PathLike, token_map: TokenMap) -> Path:
+    """Write a token map as a map_server map at its scenario's cell size, origin (0, 0)."""
+    spec = resolve_scenario(token_map.scenario)
+    return write_map_server(yaml_path, tokens_to_occupancy(token_map.cells, spec),
+                            spec.cell_size)
+
+
+# --- import for training ------------------------------------------------------------------------
+
+
+def _cover_ranges(source: int, target: int) -> list[tuple[int, int]]:
+    """For each of ``target`` output cells, the input range [start, stop) it overlaps."""
+    return [((index * source) // target, -((-(index + 1) * source) // target))
+            for index in range(target)]
+
+
+def resample_tokens(cells: np.ndarray, scenario: ScenarioLike,
+                    size: tuple[int, int]) -> np.ndarray:
+    """Token-aware resampling to ``size`` (height, width).
+
+    Each output cell covers a rectangle of the input; it takes the token that
+    ranks highest in the scenario's hierarchy among the input cells that
+    rectangle overlaps (even partly), so thin walls and tracks survive.
+    """
+    spec = resolve_scenario(scenario)
+    array = check_cells(cells, spec)
+    height, width = (int(v) for v in size)
+    if not (1 <= height <= MAX_CELLS_PER_SIDE and 1 <= width <= MAX_CELLS_PER_SIDE):
+        raise MapFormatError(
+            f'target size {height}x{width} (height x width) is outside 1..{MAX_CELLS_PER_SIDE} '
+            'cells per side')
+    if (height, width) == array.shape:
+        return array.copy()
+    rank = np.empty(spec.num_tokens, dtype=np.int64)
+    rank[list(spec.hierarchy)] = np.arange(spec.num_tokens)
+    ranked = rank[array]
+    rows = np.stack([ranked[start:stop].max(axis=0)
+                     for start, stop in _cover_ranges(array.shape[0], height)])
+    pooled = np.stack([rows[:, start:stop].max(axis=1)
+                       for start, stop in _cover_ranges(array.shape[1], width)], axis=1)
+    return np.asarray(spec.hierarchy, dtype=np.int64)[pooled]
+
+
+def import_map_server(yaml_path: str | os.PathLike, scenario: ScenarioLike,
+                      size: tuple[int, int] | None = None) -> TokenMap:
+    """Turn a map_server map into a token map of ``scenario`` for training.
+
+    Thresholding as map_server does, then occupancy to tokens (unknown -1 counts
+    as blocked; values between 0 and 100 are low obstacles for the drone and
+    blocked otherwise, see :func:`occupancy_to_tokens`), then token-aware
+    resampling to ``size`` (height, width) cells; None keeps the image's grid.
+    """
+    spec = resolve_scenario(scenario)
+    loaded = read_map_server(yaml_path)
+    cells = occupancy_to_tokens(loaded.occupancy, spec)
+    if size is not None:
+        cells = resample_tokens(cells, spec, size)
+    return TokenMap(scenario=spec.name, cells=cells)

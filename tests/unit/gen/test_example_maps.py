@@ -1,0 +1,66 @@
+"""The shipped example maps: shape, feasibility and the features the scenarios need."""
+
+import numpy as np
+import pytest
+
+from sessgan_gen.navigation import (
+    footprint_free_mask, inflate, make_environment, plan_route, reachable_regions,
+    shortest_path_in_free,
+)
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map
+
+pytestmark = pytest.mark.unit
+
+SCENARIO_NAMES = ('factory', 'racetrack', 'drone')
+
+
+@pytest.mark.parametrize('name', SCENARIO_NAMES)
+def test_example_is_feasible_with_a_long_route(name):
+    token_map = load_example_map(name)
+    environment = make_environment(token_map.cells, name, f'{name}-example')
+    environment.validate()
+    assert environment.feasible
+    height, width = token_map.cells.shape
+    # The route runs corner to corner at least (in cells, 4-connected).
+    assert environment.extra['path_length_m'] >= 1.5 * max(height, width) * environment.resolution
+    # The whole free space of the example is one region for its robot.
+    regions = reachable_regions(footprint_free_mask(token_map.cells, name))
+    assert max(regions.sizes) >= 0.95 * sum(regions.sizes)
+
+
+def test_racetrack_is_a_closed_circuit_with_the_goal_half_a_lap_away():
+    cells = load_example_map('racetrack').cells
+    free = footprint_free_mask(cells, 'racetrack')
+    route = plan_route(cells, 'racetrack')
+    blocked_once = free.copy()
+    for cell in route.path[1:-1]:
+        blocked_once[cell] = False
+    other_way = shortest_path_in_free(blocked_once, route.start, route.goal)
+    assert other_way, 'the track must be a loop: a second way round from start to goal'
+    ratio = (len(route.path) - 1) / (len(other_way) - 1)
+    assert 0.7 < ratio <= 1.0
+    # 3 to 7 cells wide: every track cell lies within 4 cells of out-of-bounds.
+    track = cells == 0
+    assert not inflate(track, 4.0).any()
+    assert 0.1 < track.mean() < 0.35
+
+
+def test_factory_has_narrow_passages():
+    cells = load_example_map('factory').cells
+    free = cells == 0
+    # A one-cell gap: a free cell with walls on both sides (left/right or above/below).
+    walls = ~np.pad(free, 1, constant_values=False)
+    horizontal = walls[1:-1, :-2] & walls[1:-1, 2:]
+    vertical = walls[:-2, 1:-1] & walls[2:, 1:-1]
+    assert (free & (horizontal | vertical)).sum() >= 3
+
+
+def test_drone_has_a_section_only_the_drone_reaches():
+    cells = load_example_map('drone').cells
+    spec = get_scenario('drone')
+    flyer = reachable_regions(footprint_free_mask(cells, 'drone'))
+    on_ground = inflate(cells == 0, spec.robot_radius / spec.cell_size)
+    walker = reachable_regions(on_ground)
+    assert max(flyer.sizes) > max(walker.sizes) + 10
+    assert (cells == 2).sum() >= 40 and (cells == 1).sum() >= 150

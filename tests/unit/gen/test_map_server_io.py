@@ -1,0 +1,247 @@
+"""Tests of map_server PGM + YAML import and export."""
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.errors import MapFormatError
+from sessgan_gen.map_server_io import (
+    export_environment, export_token_map, import_map_server, read_map_server, read_pgm,
+    resample_tokens, write_map_server,
+)
+from sessgan_gen.token_map import TokenMap
+
+pytestmark = pytest.mark.unit
+
+
+def write_pgm_p5(path, pixels, maxval=255):
+    pixels = np.asarray(pixels)
+    header = f'P5\n# a comment\n{pixels.shape[1]} {pixels.shape[0]}\n{maxval}\n'.encode()
+    dtype = np.uint8 if maxval < 256 else np.dtype('>u2')
+    path.write_bytes(header + pixels.astype(dtype).tobytes())
+
+
+def write_yaml(path, **keys):
+    document = {'image': 'map.pgm', 'resolution': 0.05, 'origin': [-1.0, -2.0, 0.5],
+                'negate': 0, 'occupied_thresh': 0.65, 'free_thresh': 0.196}
+    document.update(keys)
+    document = {key: value for key, value in document.items() if value is not None}
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+def test_round_trip_keeps_values_resolution_and_origin(tmp_path):
+    occupancy = np.array([[0, 50, 100], [100, 0, 0]], dtype=np.int8)
+    image = write_map_server(tmp_path / 'm.yaml', occupancy, 0.5, (1.5, -2.0, 0.25))
+    assert image == tmp_path / 'm.pgm'
+    loaded = read_map_server(tmp_path / 'm.yaml')
+    np.testing.assert_array_equal(loaded.occupancy, occupancy)
+    assert loaded.occupancy.dtype == np.int8
+    assert loaded.resolution == 0.5
+    assert loaded.origin == (1.5, -2.0, 0.25)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['m.pgm', 'm.yaml']
+
+
+def test_written_pixels_and_yaml_follow_map_server(tmp_path):
+    occupancy = np.array([[0, 50], [100, 0]], dtype=np.int8)
+    write_map_server(tmp_path / 'm.yaml', occupancy, 0.5)
+    pixels, maxval = read_pgm(tmp_path / 'm.pgm')
+    assert maxval == 255
+    # Image rows are top first: OccupancyGrid row 1 is the image's first row.
+    assert pixels.tolist() == [[0, 254], [254, 140]]
+    document = yaml.safe_load((tmp_path / 'm.yaml').read_text())
+    assert document == {'image': 'm.pgm', 'mode': 'scale', 'resolution': 0.5,
+                        'origin': [0.0, 0.0, 0.0], 'negate': 0,
+                        'occupied_thresh': 0.65, 'free_thresh': 0.25}
+    # What Nav2's scale mode computes for the grey of a low obstacle.
+    occ = 1.0 - 140 / 255.0
+    assert round((occ - 0.25) / (0.65 - 0.25) * 100.0) == 50
+
+
+def test_maps_without_low_obstacles_are_trinary_and_unknown_is_grey(tmp_path):
+    occupancy = np.array([[0, -1, 100]], dtype=np.int8)
+    write_map_server(tmp_path / 'm.yaml', occupancy, 1.0)
+    assert yaml.safe_load((tmp_path / 'm.yaml').read_text())['mode'] == 'trinary'
+    assert read_pgm(tmp_path / 'm.pgm')[0].tolist() == [[254, 127, 0]]
+    np.testing.assert_array_equal(read_map_server(tmp_path / 'm.yaml').occupancy, occupancy)
+
+
+def test_every_intermediate_value_survives_scale_mode(tmp_path):
+    values = np.arange(0, 101, dtype=np.int8).reshape(1, -1)
+    write_map_server(tmp_path / 'm.yaml', values, 0.1)
+    np.testing.assert_array_equal(read_map_server(tmp_path / 'm.yaml').occupancy, values)
+
+
+def test_trinary_thresholds_and_row_order(tmp_path):
+    # 255 white: occ 0, free; 0 and 50 dark: occ 1 and 0.80, occupied; 205: occ 0.19608,
+    # just above free_thresh 0.196, unknown.
+    write_pgm_p5(tmp_path / 'map.pgm', [[255, 0], [205, 50]])
+    write_yaml(tmp_path / 'map.yaml')
+    loaded = read_map_server(tmp_path / 'map.yaml')
+    assert loaded.occupancy.tolist() == [[-1, 100], [0, 100]]
+    assert loaded.resolution == 0.05
+    assert loaded.origin == (-1.0, -2.0, 0.5)
+
+
+def test_negate_inverts_the_shade(tmp_path):
+    write_pgm_p5(tmp_path / 'map.pgm', [[255, 0]])
+    write_yaml(tmp_path / 'map.yaml', negate=1)
+    assert read_map_server(tmp_path / 'map.yaml').occupancy.tolist() == [[100, 0]]
+    write_yaml(tmp_path / 'map.yaml', negate=True)
+    assert read_map_server(tmp_path / 'map.yaml').occupancy.tolist() == [[100, 0]]
+
+
+def test_scale_and_raw_modes(tmp_path):
+    write_pgm_p5(tmp_path / 'map.pgm', [[255, 0, 128, 30, 200]])
+    write_yaml(tmp_path / 'map.yaml', mode='scale', free_thresh=0.25, occupied_thresh=0.65)
+    expected_mid = round((1 - 128 / 255 - 0.25) / 0.4 * 100)
+    assert read_map_server(tmp_path / 'map.yaml').occupancy.tolist() == [
+        [0, 100, expected_mid, 100, 0]]
+    write_yaml(tmp_path / 'map.yaml', mode='raw')
+    assert read_map_server(tmp_path / 'map.yaml').occupancy.tolist() == [[-1, 0, -1, 30, -1]]
+
+
+def test_optional_keys_default_and_two_element_origin(tmp_path):
+    write_pgm_p5(tmp_path / 'map.pgm', [[254, 0]])
+    write_yaml(tmp_path / 'map.yaml', negate=None, occupied_thresh=None, free_thresh=None,
+               origin=[3, 4])
+    loaded = read_map_server(tmp_path / 'map.yaml')
+    assert loaded.occupancy.tolist() == [[0, 100]]
+    assert loaded.origin == (3.0, 4.0, 0.0)
+
+
+def test_p2_and_16_bit_and_absolute_image_path(tmp_path):
+    folder = tmp_path / 'images'
+    folder.mkdir()
+    (folder / 'ascii.pgm').write_text('P2\n# comment\n3 1\n15\n15 0 # trailing\n 7\n')
+    write_yaml(tmp_path / 'map.yaml', image=str(folder / 'ascii.pgm'), mode='trinary')
+    assert read_map_server(tmp_path / 'map.yaml').occupancy.tolist() == [[0, 100, -1]]
+    write_pgm_p5(tmp_path / 'map.pgm', [[65535, 0]], maxval=65535)
+    write_yaml(tmp_path / 'deep.yaml')
+    assert read_map_server(tmp_path / 'deep.yaml').occupancy.tolist() == [[0, 100]]
+
+
+@pytest.mark.parametrize('keys, message', [
+    ({'image': None}, "required key 'image' is missing"),
+    ({'resolution': None}, "required key 'resolution' is missing"),
+    ({'origin': None}, "required key 'origin' is missing"),
+    ({'resolution': -0.05}, "'resolution' must be a positive number"),
+    ({'resolution': 0}, "'resolution' must be a positive number"),
+    ({'resolution': 'fine'}, "'resolution' must be a finite number"),
+    ({'origin': [1.0]}, "'origin' must be a list"),
+    ({'origin': 'zero'}, "'origin' must be a list"),
+    ({'negate': 2}, "'negate' must be 0, 1"),
+    ({'free_thresh': 0.7}, 'free_thresh < occupied_thresh'),
+    ({'mode': 'fancy'}, "'mode' must be one of"),
+    ({'image': 'map.png'}, 'only PGM'),
+    ({'image': 'other.pgm'}, 'does not exist'),
+])
+def test_malformed_yaml_is_reported(tmp_path, keys, message):
+    write_pgm_p5(tmp_path / 'map.pgm', [[255]])
+    write_yaml(tmp_path / 'map.yaml', **keys)
+    with pytest.raises(MapFormatError, match=message):
+        read_map_server(tmp_path / 'map.yaml')
+
+
+def test_unreadable_yaml_documents(tmp_path):
+    with pytest.raises(MapFormatError, match='does not exist'):
+        read_map_server(tmp_path / 'nothing.yaml')
+    (tmp_path / 'a.yaml').write_text('image: [unclosed\n')
+    with pytest.raises(MapFormatError, match='invalid YAML'):
+        read_map_server(tmp_path / 'a.yaml')
+    (tmp_path / 'b.yaml').write_text('- just\n- a list\n')
+    with pytest.raises(MapFormatError, match='expected a mapping'):
+        read_map_server(tmp_path / 'b.yaml')
+
+
+@pytest.mark.parametrize('content, message', [
+    (b'P6\n1 1\n255\n\x00\x00\x00', 'not a PGM image'),
+    (b'GIF89a', 'not a PGM image'),
+    (b'P5\n4 4\n255\n' + bytes(10), 'need 16 bytes of data, found 10'),
+    (b'P5\n4 4\n255', 'no pixel data'),
+    (b'P5\n4', 'expected the height, found end of file'),
+    (b'P5\nfour 4\n255\n', "expected the width, found b'f'"),
+    (b'P5\n0 4\n255\n', 'outside 1..'),
+    (b'P5\n1 1\n0\n\x00', 'maxval 0'),
+    (b'P2\n2 2\n255\n1 2 3\n', 'found 3'),
+    (b'P2\n2 1\n10\n1 20\n', 'exceeds the PGM maxval 10'),
+])
+def test_malformed_pgm_is_reported(tmp_path, content, message):
+    (tmp_path / 'map.pgm').write_bytes(content)
+    write_yaml(tmp_path / 'map.yaml')
+    with pytest.raises(MapFormatError, match=message):
+        read_map_server(tmp_path / 'map.yaml')
+
+
+def test_write_rejects_bad_input(tmp_path):
+    good = np.zeros((2, 2), dtype=np.int8)
+    with pytest.raises(MapFormatError, match='resolution'):
+        write_map_server(tmp_path / 'm.yaml', good, -1.0)
+    with pytest.raises(MapFormatError, match='origin'):
+        write_map_server(tmp_path / 'm.yaml', good, 1.0, (math.nan, 0.0))
+    with pytest.raises(MapFormatError, match='holds 120'):
+        write_map_server(tmp_path / 'm.yaml', np.array([[0, 120]]), 1.0)
+    with pytest.raises(MapFormatError, match='cannot represent both'):
+        write_map_server(tmp_path / 'm.yaml', np.array([[-1, 50]]), 1.0)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_resample_keeps_thin_structures_by_hierarchy():
+    cells = np.zeros((8, 8), dtype=np.int64)
+    cells[:, 3] = 1  # a one-cell wall
+    down = resample_tokens(cells, 'factory', (4, 4))
+    assert down.tolist() == [[0, 1, 0, 0]] * 4
+    # Racetrack: the track (0) outranks out-of-bounds (1), so a thin track survives.
+    track = np.ones((6, 6), dtype=np.int64)
+    track[2, :] = 0
+    assert resample_tokens(track, 'racetrack', (3, 3)).tolist() == [[1, 1, 1], [0, 0, 0],
+                                                                     [1, 1, 1]]
+    # Drone hierarchy G < O < W.
+    drone = np.array([[0, 2], [2, 1]])
+    assert resample_tokens(drone, 'drone', (1, 1)).tolist() == [[1]]
+    assert resample_tokens(drone[:1], 'drone', (1, 1)).tolist() == [[2]]
+    # Non-integer ratios: a cell overlapping two inputs sees both.
+    assert resample_tokens(np.array([[0, 0, 1]]), 'factory', (1, 2)).tolist() == [[0, 1]]
+    up = resample_tokens(np.array([[0, 1]]), 'factory', (2, 4))
+    assert up.tolist() == [[0, 0, 1, 1]] * 2
+    with pytest.raises(MapFormatError, match='outside'):
+        resample_tokens(cells, 'factory', (0, 4))
+
+
+def test_import_thresholds_then_resamples(tmp_path):
+    pixels = np.full((8, 8), 254)
+    pixels[0, :] = 0       # wall along the top of the image
+    pixels[5, 5] = 205     # unknown -> blocked
+    write_pgm_p5(tmp_path / 'map.pgm', pixels)
+    write_yaml(tmp_path / 'map.yaml')
+    full = import_map_server(tmp_path / 'map.yaml', 'factory')
+    assert full.scenario == 'factory'
+    assert full.cells.shape == (8, 8)
+    assert full.cells[7].tolist() == [1] * 8  # the image's top row is the grid's last row
+    assert full.cells[2, 5] == 1
+    small = import_map_server(tmp_path / 'map.yaml', 'factory', size=(4, 4))
+    assert small.cells.tolist() == [[0, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 0], [1, 1, 1, 1]]
+
+
+def test_import_drone_low_obstacles(tmp_path):
+    occupancy = np.array([[0, 50, 100]], dtype=np.int8)
+    write_map_server(tmp_path / 'm.yaml', occupancy, 0.5)
+    assert import_map_server(tmp_path / 'm.yaml', 'drone').cells.tolist() == [[0, 2, 1]]
+    assert import_map_server(tmp_path / 'm.yaml', 'factory').cells.tolist() == [[0, 1, 1]]
+
+
+def test_export_environment_and_token_map(tmp_path):
+    occupancy = np.array([[0, 100], [50, 0]], dtype=np.int8)
+    environment = Environment('e1', 'drone', occupancy, 0.5, Pose2D(0.25, 0.25),
+                              Pose2D(0.75, 0.75), origin=(2.0, 3.0))
+    export_environment(tmp_path / 'env.yaml', environment)
+    loaded = read_map_server(tmp_path / 'env.yaml')
+    np.testing.assert_array_equal(loaded.occupancy, occupancy)
+    assert loaded.origin == (2.0, 3.0, 0.0)
+    export_token_map(tmp_path / 'tm.yaml', TokenMap('racetrack', np.array([[0, 1]])))
+    loaded = read_map_server(tmp_path / 'tm.yaml')
+    assert loaded.occupancy.tolist() == [[0, 100]]
+    assert loaded.resolution == 1.0

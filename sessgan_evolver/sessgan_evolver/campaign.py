@@ -1,0 +1,304 @@
+"""The SESS-GAN campaign loop, independent of ROS: sample, simulate, score, evolve, record.
+
+The loop talks to the outside world through an :class:`Evaluator` (the campaign node provides
+one over the generator service and the simulator workers' ``evaluate`` actions), so the loop
+itself is plain Python: it owns the genetic algorithm, the run directory and the report.
+
+Order of one generation (what makes ``--resume`` exact, see run_store): checkpoint g ->
+sample every member's K maps from seeds shared by the generation -> run every episode ->
+episode and member rows -> tell -> generation row -> checkpoint g+1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
+from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.fitness import (FitnessConfig, generation_summary, map_diversity,
+                                     member_fitness, tpkl_reference_from)
+from sessgan_evolver.genome import Genome
+from sessgan_evolver.operators import OperatorConfig
+from sessgan_evolver.report import report_generations, write_report
+from sessgan_evolver.run_store import RunStore
+from sessgan_evolver.seeding import SeedStream, shared_seeds
+from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
+from sessgan_gen.environment import Environment
+from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
+from sessgan_gen.progress import ProgressPrinter, format_duration
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+
+SOFTWARE_VERSION = '0.1.0'
+
+
+class CampaignError(SessganEvolverError):
+    """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""
+
+
+@dataclass(frozen=True)
+class CampaignConfig:
+    """What a campaign does; the CLI fills it from its arguments (defaults in brackets)."""
+
+    scenario: str = 'factory'
+    """[factory] Scenario: factory, racetrack or drone."""
+    generations: int = 30
+    """[30] Generations to evaluate (generation 0 is the mutated pre-trained generator)."""
+    population: int = 12
+    """[12] Members (generator copies) per generation."""
+    maps_per_member: int = 3
+    """[3] K: maps each member samples from the generation's shared seeds."""
+    workers: int = 2
+    """[2] Simulator workers (/w0, /w1, ...) to start, each with its own controller."""
+    seed: int = 0
+    """[0] The campaign seed; every random choice derives from it."""
+    checkpoint: str = ''
+    """[scenario's shipped] Pre-trained generator checkpoint to evolve."""
+    controller: str = ''
+    """[scenario's] Built-in controller to test (ignored with --external)."""
+    time_limit: float = 0.0
+    """[scenario's] Episode time limit in sim seconds."""
+    episode_timeout: float = 0.0
+    """[max(30, 2 x time limit)] Wall seconds before an episode is retried elsewhere."""
+    bag_storage: str = 'mcap'
+    """[mcap] Failure bag storage: mcap or sqlite3."""
+    record_failures: bool = True
+    """[True] Write every failure episode as a bag under bags/<run>/."""
+    elite_count: int = 1
+    """[1] Members kept unchanged each generation."""
+    tournament_size: int = 3
+    """[3] Tournament size of parent selection."""
+    crossover_probability: float = 0.5
+    """[0.5] Probability that a child has two parents."""
+    mutation_scale: float = 0.02
+    """[0.02] Gaussian mutation sigma relative to each tensor's spread."""
+    mutation_probability: float = 0.5
+    """[0.5] Probability that a tensor is mutated."""
+    fitness: FitnessConfig = field(default_factory=FitnessConfig)
+
+    def validate(self) -> None:
+        get_scenario(self.scenario)
+        for name in ('generations', 'population', 'maps_per_member', 'workers'):
+            if getattr(self, name) < 1:
+                raise CampaignError(f'{name} must be >= 1, got {getattr(self, name)}')
+        if self.bag_storage not in ('mcap', 'sqlite3'):
+            raise CampaignError(f'bag storage must be mcap or sqlite3, got {self.bag_storage!r}')
+        self.algorithm_config().validate()
+        self.fitness.validate()
+
+    def algorithm_config(self) -> GeneticAlgorithmConfig:
+        operators = dataclasses.replace(
+            OperatorConfig(), mutation_scale=self.mutation_scale,
+            mutation_probability=self.mutation_probability)
+        return GeneticAlgorithmConfig(
+            population_size=self.population, elite_count=min(self.elite_count, self.population),
+            tournament_size=min(self.tournament_size, self.population),
+            crossover_probability=self.crossover_probability, seed=self.seed,
+            operators=operators)
+
+    def resolved_time_limit(self) -> float:
+        return self.time_limit or get_scenario(self.scenario).time_limit
+
+    def resolved_episode_timeout(self) -> float:
+        return self.episode_timeout or max(30.0, 2.0 * self.resolved_time_limit())
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class EpisodeJob:
+    """One episode to run: a member's k-th map of a generation."""
+
+    generation: int
+    member: int
+    index: int
+    environment: Environment
+    seed: int
+    """Simulator seed (sensor noise, dummy agents), shared by the generation's members."""
+
+    @property
+    def key(self) -> tuple[int, int]:
+        return (self.member, self.index)
+
+
+class Evaluator(Protocol):
+    """How the loop reaches the generator and the simulators."""
+
+    def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
+               member: int) -> list[Environment]:
+        """Environments of a member's weights (checkpoint bytes), one per seed."""
+
+    def evaluate(self, jobs: Sequence[EpisodeJob],
+                 on_result: Callable[[EpisodeJob, dict], None]) -> None:
+        """Run every job (in parallel where possible), calling ``on_result(job, metrics)``
+        as each finishes; metrics is a dict of EpisodeMetrics fields."""
+
+
+@dataclass
+class CampaignResult:
+    run_dir: Path
+    bags_dir: Path
+    report_path: Path
+    generations: list[dict]
+    wall_time: float
+
+
+class Campaign:
+    """One run: ``runs/<run>/`` and ``bags/<run>/``, resumable."""
+
+    def __init__(self, config: CampaignConfig, run_name: str, runs_root: Path, bags_root: Path,
+                 log: Callable[[str], None] = print) -> None:
+        config.validate()
+        self.config = config
+        self.store = RunStore(runs_root, run_name)
+        self.bags_dir = Path(bags_root).resolve() / run_name
+        self.log = log
+        scenario = get_scenario(config.scenario)
+        self.scenario = scenario
+        self.example = load_example_map(scenario.name).cells
+        checkpoint = config.checkpoint or str(default_checkpoint_path(scenario.name))
+        self.pyramid, self.metadata = load_checkpoint(checkpoint, scenario=scenario.name)
+        self.template = {k: v.clone() for k, v in self.pyramid.state_dict().items()}
+
+    def weights_of(self, genome: Genome) -> bytes:
+        """Checkpoint bytes of a member: the pre-trained pyramid with the genome's tensors."""
+        self.pyramid.load_state_dict(genome.to_state_dict(self.template))
+        return checkpoint_bytes(self.pyramid, self.metadata)
+
+    def start(self, resume: bool) -> tuple[GeneticAlgorithm, float | None]:
+        """The algorithm to continue with and the TPKL reference (None before generation 0)."""
+        self.store.write_config(self.config.to_dict(), self.config.seed, SOFTWARE_VERSION)
+        point = self.store.resume() if resume else None
+        if resume and point is None:
+            self.log(f'nothing to resume in {self.store.run_dir}: starting at generation 0')
+        if point is not None:
+            self.log(f'resuming {self.store.run_dir} at generation {point.generation}')
+            algorithm = GeneticAlgorithm.from_state_dict(point.checkpoint['algorithm'])
+            return algorithm, point.checkpoint['extra'].get('tpkl_reference')
+        if self.store.latest_checkpoint() is not None:
+            raise CampaignError(
+                f'run {self.store.run_name!r} exists already: pass --resume to continue it, '
+                f'or choose another --run name')
+        initial = Genome.from_state_dict(self.template)
+        return GeneticAlgorithm(self.config.algorithm_config(), initial), None
+
+    def run(self, evaluator: Evaluator, resume: bool = False) -> CampaignResult:
+        config = self.config
+        wall_start = time.monotonic()
+        algorithm, tpkl_reference = self.start(resume)
+        sample_generations = set(report_generations(config.generations - 1))
+        progress = ProgressPrinter()
+        last_tokens: list[list[np.ndarray]] = []
+        while algorithm.generation < config.generations:
+            generation = algorithm.generation
+            self.store.save_checkpoint(generation, algorithm.state_dict(),
+                                       {'tpkl_reference': tpkl_reference})
+            genomes = algorithm.ask()
+            map_seeds = shared_seeds(config.seed, generation, config.maps_per_member)
+            sim_seeds = shared_seeds(config.seed, generation, config.maps_per_member,
+                                     SeedStream.SIMULATION)
+            jobs, token_maps = [], []
+            for member, genome in enumerate(genomes):
+                environments = evaluator.sample(self.weights_of(genome), map_seeds,
+                                                generation, member)
+                token_maps.append([occupancy_to_tokens(env.occupancy, self.scenario)
+                                   for env in environments])
+                jobs += [EpisodeJob(generation, member, k, env, sim_seeds[k])
+                         for k, env in enumerate(environments)]
+            tpkls = [tile_pattern_kl(self.example, maps) for maps in token_maps]
+            if tpkl_reference is None:
+                tpkl_reference = tpkl_reference_from(tpkls)
+            if generation in sample_generations:
+                self.save_sample_maps(generation, token_maps)
+
+            results: dict[tuple[int, int], dict] = {}
+            progress.start(f'generation {generation}/{config.generations - 1}', len(jobs))
+
+            def on_result(job: EpisodeJob, metrics: dict) -> None:
+                results[job.key] = metrics
+                progress.update(len(results), f'collisions so far '
+                                f'{sum(m["collisions"] for m in results.values())}')
+
+            evaluator.evaluate(jobs, on_result)
+            missing = [job.key for job in jobs if job.key not in results]
+            if missing:
+                raise CampaignError(f'generation {generation}: no result for episodes {missing}')
+
+            fitnesses = []
+            for member in range(len(genomes)):
+                episodes = [results[(member, k)] for k in range(config.maps_per_member)]
+                for job in jobs[member * config.maps_per_member:(member + 1) *
+                                config.maps_per_member]:
+                    self.store.append_episode({
+                        'generation': generation, 'member': member, 'map': job.index,
+                        'environment_id': job.environment.id, 'map_seed': job.environment.seed,
+                        'sim_seed': job.seed, **results[job.key]})
+                breakdown = member_fitness(
+                    episodes, tpkls[member], tpkl_reference,
+                    map_diversity(token_maps[member]), config.fitness)
+                self.store.append_member({'generation': generation, 'member': member,
+                                          **breakdown.as_row()})
+                fitnesses.append(breakdown)
+            algorithm.tell([b.fitness for b in fitnesses])
+            summary = generation_summary(generation, fitnesses)
+            self.store.append_generation(summary)
+            elapsed = time.monotonic() - wall_start
+            done = generation + 1
+            self.log(
+                f'generation {generation}: mean risk {fmt(summary["mean_risk_score"])}, '
+                f'collisions {fmt(summary["mean_collisions"])}, feasible '
+                f'{summary["feasible_fraction"]:.0%}, TPKL {fmt(summary["mean_tpkl"])}, best '
+                f'fitness {summary["best_fitness"]:.3f} | elapsed {format_duration(elapsed)}')
+            if done < config.generations:
+                self.store.save_checkpoint(done, algorithm.state_dict(),
+                                           {'tpkl_reference': tpkl_reference})
+            last_tokens = token_maps
+        report_path = self.write_report(last_tokens)
+        return CampaignResult(self.store.run_dir, self.bags_dir, report_path,
+                              self.store.read_rows('generation'),
+                              time.monotonic() - wall_start)
+
+    # -- report ---------------------------------------------------------------------------
+
+    def sample_maps_path(self, generation: int) -> Path:
+        return self.store.run_dir / 'sample_maps' / f'generation_{generation:04d}.npy'
+
+    def save_sample_maps(self, generation: int, token_maps: list[list[np.ndarray]]) -> None:
+        path = self.sample_maps_path(generation)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # The first map of up to four members: enough for the report's figure.
+        np.save(path, np.stack([maps[0] for maps in token_maps[:4]]))
+
+    def write_report(self, last_population: list[list[np.ndarray]]) -> Path:
+        maps_by_generation = {}
+        for generation in report_generations(self.config.generations - 1):
+            path = self.sample_maps_path(generation)
+            if path.exists():
+                maps_by_generation[generation] = list(np.load(path))
+        tpkl_table, uniqueness_table = {}, {}
+        for member, maps in enumerate(last_population):
+            per_k = tile_pattern_kl_per_k(self.example, maps)
+            tpkl_table[f'member {member}'] = {
+                **{f'k={k}': v for k, v in per_k.items()}, 'mean': float(np.mean(list(per_k.values())))}
+        pooled = [m for maps in last_population for m in maps]
+        if pooled:
+            unique = uniqueness(pooled)
+            uniqueness_table['last population'] = {
+                **{f'{s}x{s}': v for s, v in unique.items()}, 'mean': float(np.mean(list(unique.values())))}
+        notes = [f'Failure bags: `{self.bags_dir}` (replay one with '
+                 '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+        return write_report(self.store.run_dir, maps_by_generation, tpkl_table, uniqueness_table,
+                            title=f'SESS-GAN campaign {self.store.run_name} ({self.config.scenario})',
+                            token_names=self.scenario.token_names, notes=notes)
+
+
+def fmt(value: float | None) -> str:
+    return 'n/a' if value is None else f'{value:.3f}'

@@ -1,0 +1,74 @@
+"""A controller written the way any user would: rclpy and standard messages only.
+
+It imports nothing from SESS-GAN, proving that any stack plugs into the simulator through the
+topic contract (scan, odom, goal_pose in; cmd_vel out). Policy: turn toward the goal, drive
+forward when facing it, slow down near obstacles ahead. ``--nan`` sends NaN velocities instead
+(a broken controller), ``--silent`` never answers.
+"""
+
+import math
+import sys
+
+import rclpy
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import LaserScan
+
+
+class GoToGoal(Node):
+
+    def __init__(self, behaviour: str) -> None:
+        super().__init__('external_controller')
+        self.behaviour = behaviour
+        self.goal = None
+        self.pose = None
+        self.cmd_publisher = self.create_publisher(Twist, 'cmd_vel', 10)
+        self.create_subscription(PoseStamped, 'goal_pose', self.on_goal, 10)
+        self.create_subscription(Odometry, 'odom', self.on_odom, 10)
+        self.create_subscription(LaserScan, 'scan', self.on_scan, 10)
+
+    def on_goal(self, msg: PoseStamped) -> None:
+        self.goal = (msg.pose.position.x, msg.pose.position.y)
+
+    def on_odom(self, msg: Odometry) -> None:
+        q = msg.pose.pose.orientation
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        self.pose = (msg.pose.pose.position.x, msg.pose.pose.position.y, yaw)
+
+    def on_scan(self, msg: LaserScan) -> None:
+        if self.behaviour == 'silent':
+            return
+        cmd = Twist()
+        if self.behaviour == 'nan':
+            cmd.linear.x = float('nan')
+            cmd.angular.z = float('inf')
+        elif self.goal is not None and self.pose is not None:
+            x, y, yaw = self.pose
+            heading = math.atan2(self.goal[1] - y, self.goal[0] - x)
+            error = math.atan2(math.sin(heading - yaw), math.cos(heading - yaw))
+            ahead = [r for i, r in enumerate(msg.ranges)
+                     if abs(msg.angle_min + i * msg.angle_increment) < 0.3 and math.isfinite(r)]
+            clearance = min(ahead, default=msg.range_max)
+            cmd.angular.z = max(-1.5, min(1.5, 2.0 * error))
+            if abs(error) < 0.5:
+                cmd.linear.x = max(0.0, min(0.4, 0.5 * (clearance - 0.3)))
+        self.cmd_publisher.publish(cmd)
+
+
+def main() -> None:
+    behaviour = 'nan' if '--nan' in sys.argv else 'silent' if '--silent' in sys.argv else 'go'
+    rclpy.init(args=sys.argv)
+    node = GoToGoal(behaviour)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,157 @@
+"""The simulator worker and controllers as separate processes, driven through `evaluate`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.ros_processes import spin_until
+
+pytestmark = pytest.mark.graph
+
+EXTERNAL_CONTROLLER = Path(__file__).with_name('external_controller.py')
+OUTCOMES = {'goal_reached', 'collision_limit', 'timeout', 'stuck', 'controller_unresponsive',
+            'invalid_environment'}
+
+
+def room(size: int = 16) -> np.ndarray:
+    """A factory token map: an empty room with a wall around it."""
+    cells = np.zeros((size, size), dtype=np.int64)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 1
+    return cells
+
+
+def start_simulator(node_processes, namespace: str, *parameters: str):
+    command = ['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args', '-r',
+               f'__ns:={namespace}']
+    for parameter in parameters:
+        command += ['-p', parameter]
+    process = node_processes.start(command, name=f'simulator{namespace.replace("/", "_")}')
+    process.wait_for_output('simulator ready', timeout=60)
+    return process
+
+
+def start_controller(node_processes, namespace: str, name: str):
+    return node_processes.start(
+        ['ros2', 'run', 'sessgan_controllers', name, '--ros-args', '-r', f'__ns:={namespace}',
+         '-p', 'use_sim_time:=true'], name=f'{name}{namespace.replace("/", "_")}')
+
+
+def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0, seed: int = 1,
+             timeout: float = 120.0, record_directory: str = ''):
+    from rclpy.action import ActionClient
+    from sessgan_interfaces.action import EvaluateEnvironment
+
+    client = ActionClient(ros_node, EvaluateEnvironment, f'{namespace}/evaluate')
+    assert client.wait_for_server(timeout_sec=30), f'no action server at {namespace}/evaluate'
+    goal = EvaluateEnvironment.Goal(environment=environment_msg, time_limit=time_limit, seed=seed,
+                                    record_directory=record_directory, controller='test')
+    feedback = []
+    send = client.send_goal_async(goal, feedback_callback=feedback.append)
+    assert spin_until(ros_node, send.done, timeout=30), 'goal not answered'
+    handle = send.result()
+    assert handle.accepted
+    result = handle.get_result_async()
+    assert spin_until(ros_node, result.done, timeout=timeout), 'no result in time'
+    client.destroy()
+    return result.result().result.metrics, feedback
+
+
+def environment_msg(cells, scenario: str, env_id: str):
+    from sessgan_gen.navigation import make_environment
+    from sessgan_gen.ros_conversion import environment_to_msg
+
+    return environment_to_msg(make_environment(cells, scenario, env_id))
+
+
+def test_external_controller_drives_robot_to_goal(node_processes, ros_node):
+    start_simulator(node_processes, '/ext', 'dummy_agents:=0')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
+                          '__ns:=/ext', '-p', 'use_sim_time:=true'], name='external')
+    metrics, feedback = evaluate(ros_node, '/ext', environment_msg(room(), 'factory', 'room'),
+                                 time_limit=60.0)
+    assert metrics.outcome == 'goal_reached', metrics.detail
+    assert metrics.collisions == 0
+    assert metrics.simulation_time > 1.0
+    assert feedback, 'the action gave no feedback'
+
+
+def test_bad_input_gets_clear_results_and_node_keeps_serving(node_processes, ros_node, tmp_path):
+    start_simulator(node_processes, '/bad', 'dummy_agents:=0', 'controller_startup_timeout:=2.0',
+                    'controller_timeout:=1.0')
+    good = environment_msg(room(), 'factory', 'room')
+
+    mismatched = environment_msg(room(), 'factory', 'mismatch')
+    mismatched.map.info.width = 99
+    metrics, _ = evaluate(ros_node, '/bad', mismatched)
+    assert metrics.outcome == 'invalid_environment' and '99' in metrics.detail
+
+    bad_resolution = environment_msg(room(), 'factory', 'resolution')
+    bad_resolution.map.info.resolution = float('nan')
+    metrics, _ = evaluate(ros_node, '/bad', bad_resolution)
+    assert metrics.outcome == 'invalid_environment' and 'resolution' in metrics.detail
+
+    in_wall = environment_msg(room(), 'factory', 'start-in-wall')
+    in_wall.start.position.x = in_wall.start.position.y = 0.25  # the corner wall cell
+    metrics, _ = evaluate(ros_node, '/bad', in_wall)
+    assert metrics.outcome == 'invalid_environment', metrics.detail
+
+    unknown = environment_msg(room(), 'factory', 'moon')
+    unknown.scenario = 'moon'
+    metrics, _ = evaluate(ros_node, '/bad', unknown)
+    assert metrics.outcome == 'invalid_environment' and 'moon' in metrics.detail
+
+    # No controller at all: the episode ends, it never hangs.
+    metrics, _ = evaluate(ros_node, '/bad', good, timeout=30)
+    assert metrics.outcome == 'controller_unresponsive', metrics.detail
+
+    # A controller spewing NaN: its commands become stops and are counted.
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--nan', '--ros-args', '-r',
+                          '__ns:=/bad'], name='nan_controller')
+    assert spin_until(ros_node, lambda: ros_node.count_publishers('/bad/cmd_vel') > 0, 30)
+    metrics, _ = evaluate(ros_node, '/bad', good, time_limit=3.0)
+    assert metrics.outcome in ('timeout', 'stuck'), metrics.detail
+    assert 'NaN' in metrics.detail
+    assert metrics.distance_travelled < 0.05
+
+
+@pytest.mark.parametrize('scenario, controller', [
+    ('factory', 'nearness_diagram'),
+    ('drone', 'velocity_projection'),
+    ('racetrack', 'race_controller'),
+])
+def test_builtin_controller_reaches_goal_on_example_map(node_processes, ros_node, scenario,
+                                                        controller):
+    from sessgan_gen.token_map import load_example_map
+
+    namespace = f'/ex_{scenario}'
+    start_simulator(node_processes, namespace)
+    start_controller(node_processes, namespace, controller)
+    metrics, _ = evaluate(ros_node, namespace, environment_msg(
+        load_example_map(scenario).cells, scenario, f'{scenario}-example'), timeout=300)
+    assert metrics.outcome == 'goal_reached', (metrics.outcome, metrics.detail)
+    assert metrics.feasible
+
+
+def test_narrow_dogleg_makes_nearness_diagram_collide(node_processes, ros_node, tmp_path):
+    from sessgan_evolver.bag_reading import read_episode_bag
+
+    from tests.graph.maps import narrow_dogleg
+
+    start_simulator(node_processes, '/dogleg', 'dummy_agents:=0')
+    start_controller(node_processes, '/dogleg', 'nearness_diagram')
+    metrics, _ = evaluate(ros_node, '/dogleg', environment_msg(narrow_dogleg(), 'factory',
+                                                               'dogleg'),
+                          record_directory=str(tmp_path / 'bags'), timeout=300)
+    assert metrics.feasible
+    assert metrics.collisions > 0, (metrics.outcome, metrics.detail)
+    assert 0 < metrics.risk_score < metrics.collisions
+    bag = read_episode_bag(metrics.bag_path)
+    assert bag.episode['metrics']['collisions'] == metrics.collisions
+    recorded = {topic.topic.rsplit('/', 1)[-1] for topic in bag.topics}
+    assert {'map', 'goal_pose', 'scan', 'odom', 'tf', 'tf_static', 'clock', 'cmd_vel'} <= recorded
+    counts = {t.topic.rsplit('/', 1)[-1]: t.message_count for t in bag.topics}
+    assert counts['cmd_vel'] == metrics.ticks, 'every command of the episode is recorded'

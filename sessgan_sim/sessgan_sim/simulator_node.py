@@ -93,6 +93,7 @@ class SimulatorNode(Node):
         self.declare_parameter('bag_storage', 'mcap')         # mcap | sqlite3
 
         self.busy = threading.Lock()
+        self.episode = Episode().open()  # one pybullet world, rebuilt for every episode
         self.callback_group = ReentrantCallbackGroup()
         self.scan_publisher = self.create_publisher(LaserScan, 'scan', SENSOR_QOS)
         self.odom_publisher = self.create_publisher(Odometry, 'odom', SENSOR_QOS)
@@ -212,19 +213,34 @@ class SimulatorNode(Node):
             config = self.episode_config(robot, time_limit, seed)
         except (SessganSimError, ValueError) as err:
             return invalid_metrics(environment.id, str(err))
-        with Episode() as episode:
-            observation = episode.reset(environment, config)
-            config = episode.config  # resolved: scenario defaults filled in
-            if episode.done:
-                metrics = episode.metrics()
-            else:
-                self.publish_episode_start(environment, episode, observation, recording)
-                metrics = self.step_loop(episode, observation, recording, goal_handle)
+        episode = self.episode
+        observation = episode.reset(environment, config)
+        config = episode.config  # resolved: scenario defaults filled in
+        if episode.done:
+            metrics = episode.metrics()
+        else:
+            self.publish_episode_start(environment, episode, observation, recording)
+            loop_start = time.monotonic()
+            metrics = self.step_loop(episode, observation, recording, goal_handle)
+            self.log_timing(environment.id, metrics, episode.profile,
+                            time.monotonic() - loop_start)
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
         if recording is not None and is_failure(metrics):
             message.bag_path = self.write_bag(
                 record_directory, environment, config, metrics, recording, seed, controller)
         return message
+
+    def log_timing(self, environment_id: str, metrics, profile, loop_seconds: float) -> None:
+        """One line per episode: where the wall time of a tick goes (benchmarks parse it)."""
+        ticks = max(1, profile.ticks)
+        per_tick = {'physics': profile.physics / ticks, 'sensors': profile.sensors / ticks,
+                    'metrics': profile.metrics / ticks}
+        per_tick['messaging'] = max(0.0, loop_seconds / ticks - sum(per_tick.values()))
+        factor = metrics.simulation_time / loop_seconds if loop_seconds > 0 else 0.0
+        self.get_logger().info(
+            f'episode {environment_id}: {metrics.outcome.value} after {metrics.simulation_time:.2f}'
+            f' sim s in {loop_seconds:.2f} wall s (x{factor:.1f} real time); per tick ms: ' +
+            ' '.join(f'{name}={value * 1e3:.3f}' for name, value in per_tick.items()))
 
     def publish_episode_start(self, environment, episode, observation, recording) -> None:
         stamp = rm.time_msg(observation.time)
@@ -415,6 +431,7 @@ def main(args=None) -> None:
         pass
     finally:
         if node is not None:
+            node.episode.close()
             node.command_node.destroy_node()
             node.destroy_node()
         rclpy.try_shutdown()

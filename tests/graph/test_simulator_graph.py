@@ -13,6 +13,7 @@ from tests.ros_processes import spin_until
 pytestmark = pytest.mark.graph
 
 EXTERNAL_CONTROLLER = Path(__file__).with_name('external_controller.py')
+DOG_LEG_MAP = Path(__file__).parents[1] / 'data' / 'narrow_dog_leg.txt'
 OUTCOMES = {'goal_reached', 'collision_limit', 'timeout', 'stuck', 'controller_unresponsive',
             'invalid_environment'}
 
@@ -138,13 +139,12 @@ def test_builtin_controller_reaches_goal_on_example_map(node_processes, ros_node
 
 def test_narrow_dogleg_makes_nearness_diagram_collide(node_processes, ros_node, tmp_path):
     from sessgan_evolver.bag_reading import read_episode_bag
-
-    from tests.graph.maps import narrow_dogleg
+    from sessgan_gen.token_map import read_token_map
 
     start_simulator(node_processes, '/dogleg', 'dummy_agents:=0')
     start_controller(node_processes, '/dogleg', 'nearness_diagram')
-    metrics, _ = evaluate(ros_node, '/dogleg', environment_msg(narrow_dogleg(), 'factory',
-                                                               'dogleg'),
+    metrics, _ = evaluate(ros_node, '/dogleg', environment_msg(
+        read_token_map(DOG_LEG_MAP, 'factory').cells, 'factory', 'dogleg'),
                           record_directory=str(tmp_path / 'bags'), timeout=300)
     assert metrics.feasible
     assert metrics.collisions > 0, (metrics.outcome, metrics.detail)

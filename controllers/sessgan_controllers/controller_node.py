@@ -1,0 +1,221 @@
+"""The node shared by the built-in controllers: the robot-under-test topic contract.
+
+Subscribes ``scan`` (sensor_msgs/LaserScan), ``odom`` (nav_msgs/Odometry) and
+``goal_pose`` (geometry_msgs/PoseStamped); publishes ``cmd_vel``
+(geometry_msgs/Twist, or TwistStamped with ``use_stamped_cmd_vel``). Topic
+names are relative, so a namespace (``-r __ns:=/w0``) moves them all.
+
+One command is published per received scan, computed from that scan and the
+latest odometry: a lockstep simulator that publishes a tick's odom, then its
+scan, and waits for ``cmd_vel`` gets exactly one answer per tick. Without a
+goal, odometry, or once the goal is reached, the command is zero. Every
+message on ``goal_pose`` is a new goal (as for Nav2's bt_navigator), even at
+the same position: a new episode may reuse a goal.
+
+The goal is read in its own frame; the simulator's map->odom transform is
+the identity (perfect localisation), so map and odom coordinates agree.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from typing import Any
+
+import rclpy
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+)
+from sensor_msgs.msg import LaserScan
+
+from sessgan_controllers.messages import (
+    goal_from_pose, scan_from_msg, state_from_odom, twist_from_command,
+    twist_stamped_from_command,
+)
+from sessgan_controllers.registry import ControllerSpec, get_controller
+from sessgan_controllers.types import STOP, Goal, RobotState, VelocityCommand, config_help
+
+GOAL_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1,
+    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+"""Matches reliable publishers, volatile or transient-local (a latched goal from a
+transient-local publisher that started earlier is not replayed to a volatile reader)."""
+
+CMD_VEL_QOS_DEPTH = 10
+SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                        reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _nanoseconds(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class ControllerNode(Node):
+    """A controller core wrapped in the topic contract; one subclass per controller."""
+
+    controller_name = ''
+    """Registry name of the controller; set by each subclass."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        spec = get_controller(self.controller_name)
+        super().__init__(spec.name, **kwargs)
+        self._spec: ControllerSpec = spec
+        self._config = self._declare_config(spec.config_type)
+        self._controller = spec.make(self._config)
+        self._stamped = bool(self.declare_parameter(
+            'use_stamped_cmd_vel', False, ParameterDescriptor(
+                description='Publish geometry_msgs/TwistStamped on cmd_vel instead of Twist.',
+                read_only=True)).value)
+        self._base_frame = str(self.declare_parameter(
+            'base_frame_id', 'base_footprint', ParameterDescriptor(
+                description='frame_id of TwistStamped commands.', read_only=True)).value)
+        self._state: RobotState | None = None
+        self._odom_stamp: int | None = None
+        self._waiting_scan: tuple[int, LaserScan] | None = None
+        self._goal: Goal | None = None
+        self._goal_reached = False
+        self._warned_no_odom = False
+        self._warned_frames: set[str] = set()
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._cmd_vel = self.create_publisher(
+            TwistStamped if self._stamped else Twist, 'cmd_vel', CMD_VEL_QOS_DEPTH)
+        # Reliable: in lockstep a lost scan would stall the simulator until its timeout.
+        self.create_subscription(LaserScan, 'scan', self._on_scan, SENSOR_QOS)
+        self.create_subscription(Odometry, 'odom', self._on_odom, SENSOR_QOS)
+        self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, GOAL_QOS)
+
+    # ----------------------------------------------------------------------------------------
+    # Parameters: one per config field, validated as a whole before they are applied.
+
+    def _declare_config(self, config_type: type) -> Any:
+        help_texts = config_help(config_type)
+        values = {}
+        for item in dataclasses.fields(config_type):
+            default = item.default
+            parameter = self.declare_parameter(
+                item.name, default, ParameterDescriptor(description=help_texts[item.name]))
+            values[item.name] = parameter.value
+        config = config_type(**values)
+        config.validate()
+        return config
+
+    def _config_with(self, parameters: list[Parameter]) -> Any:
+        names = {item.name for item in dataclasses.fields(self._spec.config_type)}
+        changes = {p.name: p.value for p in parameters if p.name in names}
+        if not changes:
+            return None
+        return dataclasses.replace(self._config, **changes)
+
+    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        try:
+            config = self._config_with(parameters)
+            if config is not None:
+                config.validate()
+        except (TypeError, ValueError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        config = self._config_with(parameters)
+        if config is not None:
+            self._config = config
+            self._controller = self._spec.make(config)
+            self.get_logger().info(f'Parameters updated: {config}')
+
+    # ----------------------------------------------------------------------------------------
+    # Topics
+
+    def _on_odom(self, msg: Odometry) -> None:
+        self._state = state_from_odom(msg)
+        self._odom_stamp = _nanoseconds(msg.header.stamp)
+        if self._waiting_scan is not None and self._odom_stamp >= self._waiting_scan[0]:
+            self._answer(self._waiting_scan[1])
+
+    def _on_scan(self, msg: LaserScan) -> None:
+        # Answer a scan with the odometry of the same tick: the executor may hand us the scan
+        # before the odom published just ahead of it, and a stale pose would make the
+        # command (and so the whole episode) depend on callback order.
+        stamp = _nanoseconds(msg.header.stamp)
+        if self._odom_stamp is not None and self._odom_stamp < stamp and \
+                self._waiting_scan is None:
+            self._waiting_scan = (stamp, msg)
+            return
+        self._answer(msg)
+
+    def _on_goal(self, msg: PoseStamped) -> None:
+        goal = goal_from_pose(msg)
+        if not (math.isfinite(goal.x) and math.isfinite(goal.y)):
+            self.get_logger().warning(f'Ignoring a goal that is not finite: ({goal.x}, {goal.y})')
+            return
+        frame = msg.header.frame_id
+        if frame not in ('', 'map', 'odom') and frame not in self._warned_frames:
+            self._warned_frames.add(frame)
+            self.get_logger().warning(
+                f'Goal in frame {frame!r}: read as map coordinates (map = odom here)')
+        self._goal = goal
+        self._goal_reached = False
+        self._controller.reset()
+        self.get_logger().info(
+            f'New goal ({goal.x:.2f}, {goal.y:.2f}) in frame {msg.header.frame_id!r}')
+
+    def _answer(self, msg: LaserScan) -> None:
+        self._waiting_scan = None
+        command = self._command_for(msg)
+        if self._stamped:
+            frame = self._base_frame
+            self._cmd_vel.publish(twist_stamped_from_command(command, msg.header.stamp, frame))
+        else:
+            self._cmd_vel.publish(twist_from_command(command))
+
+    def _command_for(self, msg: LaserScan) -> VelocityCommand:
+        if self._goal is None or self._goal_reached:
+            return STOP
+        if self._state is None:
+            if not self._warned_no_odom:
+                self.get_logger().warning('Scan received before any odometry: standing still')
+                self._warned_no_odom = True
+            return STOP
+        if self._controller.goal_reached(self._state, self._goal):
+            self._goal_reached = True
+            self.get_logger().info(
+                f'Goal reached at ({self._state.x:.2f}, {self._state.y:.2f})')
+            return STOP
+        command = self._controller.compute_command(scan_from_msg(msg), self._state, self._goal)
+        if not command.is_finite():
+            self.get_logger().error(
+                f'Controller produced a non-finite command {command}; stopping')
+            return STOP
+        return command
+
+
+def run(node_type: type[ControllerNode], args: list[str] | None = None) -> None:
+    """Spin ``node_type`` until shutdown, with Jazzy's shutdown idiom.
+
+    Unusable parameters end the process with a one-line error and exit status 1.
+    """
+    rclpy.init(args=args)
+    node = None
+    failure = ''
+    try:
+        node = node_type()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as err:
+        failure = f'cannot start {node_type.controller_name}: {err}'
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if failure:
+        rclpy.logging.get_logger(node_type.controller_name).fatal(failure)
+        sys.exit(1)

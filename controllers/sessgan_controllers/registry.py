@@ -1,0 +1,83 @@
+"""Registry of the built-in controllers: name -> config type and controller class.
+
+Nodes, in-process episode runners (tests, benchmarks, the evolver's quick checks)
+and users look a controller up here instead of importing a module by name.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+from sessgan_controllers.errors import UnknownControllerError
+from sessgan_controllers.nearness_diagram import (
+    NearnessDiagramConfig, NearnessDiagramController,
+)
+from sessgan_controllers.race_controller import RaceController, RaceControllerConfig
+from sessgan_controllers.types import Controller
+from sessgan_controllers.velocity_projection import (
+    VelocityProjectionConfig, VelocityProjectionController,
+)
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """One registered controller."""
+
+    name: str
+    """Also the ``ros2 run sessgan_controllers`` executable and the node's default name."""
+    config_type: type
+    """Dataclass whose fields are the controller's ROS parameters."""
+    factory: Callable[[Any], Controller]
+    """Builds the controller from a config instance."""
+    robot: str
+    """Robot model of sessgan_sim it is written for."""
+    description: str
+
+    def make(self, config: Any = None, **overrides: Any) -> Controller:
+        """A new controller from ``config`` (default config if None) with ``overrides``."""
+        base = config if config is not None else self.config_type()
+        return self.factory(replace(base, **overrides) if overrides else base)
+
+
+CONTROLLERS: dict[str, ControllerSpec] = {}
+
+
+def register_controller(spec: ControllerSpec) -> ControllerSpec:
+    """Add a controller to the registry (users may register their own)."""
+    CONTROLLERS[spec.name] = spec
+    return spec
+
+
+def get_controller(name: str) -> ControllerSpec:
+    """Look a controller up by name; the error lists the known names."""
+    try:
+        return CONTROLLERS[name]
+    except KeyError as err:
+        raise UnknownControllerError(
+            f'unknown controller {name!r}; known controllers: {", ".join(sorted(CONTROLLERS))}'
+        ) from err
+
+
+register_controller(ControllerSpec(
+    name='nearness_diagram',
+    config_type=NearnessDiagramConfig,
+    factory=NearnessDiagramController,
+    robot='diff_drive',
+    description='Nearness-Diagram navigation (Minguez & Montano 2004) for the ground robot.',
+))
+register_controller(ControllerSpec(
+    name='velocity_projection',
+    config_type=VelocityProjectionConfig,
+    factory=VelocityProjectionController,
+    robot='flyer',
+    description='Velocity-projection avoidance with a narrow field of view for the flyer.',
+))
+register_controller(ControllerSpec(
+    name='race_controller',
+    config_type=RaceControllerConfig,
+    factory=RaceController,
+    robot='car',
+    description='Follow-the-gap track following with a reactive speed policy for the car.',
+))

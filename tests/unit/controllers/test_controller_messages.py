@@ -1,0 +1,59 @@
+"""Conversions between ROS messages and the controllers' domain types (no DDS)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+pytest.importorskip('geometry_msgs')
+
+from nav_msgs.msg import Odometry  # noqa: E402
+from sensor_msgs.msg import LaserScan  # noqa: E402
+
+from sessgan_controllers.messages import (  # noqa: E402
+    scan_from_msg, state_from_odom, twist_from_command, twist_stamped_from_command,
+    yaw_from_quaternion,
+)
+from sessgan_controllers.types import VelocityCommand  # noqa: E402
+
+pytestmark = pytest.mark.unit
+
+
+def test_odometry_to_state():
+    msg = Odometry()
+    msg.pose.pose.position.x = 1.0
+    msg.pose.pose.position.y = 2.0
+    msg.pose.pose.orientation.z = math.sin(0.25)
+    msg.pose.pose.orientation.w = math.cos(0.25)
+    msg.twist.twist.linear.x = 0.4
+    msg.twist.twist.linear.y = 0.1
+    msg.twist.twist.angular.z = -0.2
+    state = state_from_odom(msg)
+    assert (state.x, state.y, state.vx, state.vy, state.wz) == pytest.approx(
+        (1.0, 2.0, 0.4, 0.1, -0.2))
+    assert state.yaw == pytest.approx(0.5)
+    assert yaw_from_quaternion(0.0, 0.0, 1.0, 0.0) == pytest.approx(math.pi)
+
+
+def test_scan_keeps_its_geometry_and_no_returns():
+    msg = LaserScan()
+    msg.angle_min, msg.angle_increment = -math.pi, math.radians(1.0)
+    msg.range_min, msg.range_max = 0.12, 10.0
+    msg.ranges = [2.0, math.inf, float('nan'), 0.05] + [3.0] * 356
+    scan = scan_from_msg(msg)
+    assert len(scan.ranges) == 360 and scan.range_max == pytest.approx(10.0)
+    assert scan.valid()[:4].tolist() == [True, False, False, False]
+    angles, ranges = scan.points()
+    assert len(ranges) == 357 and angles[0] == pytest.approx(-math.pi)
+
+
+def test_command_to_twist_and_twist_stamped():
+    command = VelocityCommand(0.1, 0.2, 0.3)
+    twist = twist_from_command(command)
+    assert (twist.linear.x, twist.linear.y, twist.angular.z) == pytest.approx((0.1, 0.2, 0.3))
+    stamp = LaserScan().header.stamp
+    stamp.sec = 7
+    stamped = twist_stamped_from_command(command, stamp, 'base_footprint')
+    assert stamped.header.stamp.sec == 7 and stamped.header.frame_id == 'base_footprint'
+    assert stamped.twist.angular.z == pytest.approx(0.3)

@@ -1,0 +1,45 @@
+"""The controller registry and the config dataclasses that become ROS parameters."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from sessgan_controllers.errors import InvalidConfigError, UnknownControllerError
+from sessgan_controllers.registry import CONTROLLERS, get_controller
+from sessgan_controllers.types import config_help
+
+pytestmark = pytest.mark.unit
+
+
+def test_the_three_built_in_controllers_are_registered():
+    assert {name: spec.robot for name, spec in CONTROLLERS.items()} == {
+        'nearness_diagram': 'diff_drive',
+        'velocity_projection': 'flyer',
+        'race_controller': 'car',
+    }
+
+
+def test_unknown_controller_lists_the_known_ones():
+    with pytest.raises(UnknownControllerError, match='nearness_diagram'):
+        get_controller('dwa')
+
+
+@pytest.mark.parametrize('name', sorted(CONTROLLERS))
+def test_config_fields_are_documented_ros_parameters(name):
+    spec = get_controller(name)
+    for item in dataclasses.fields(spec.config_type):
+        assert type(item.default) in (float, int, bool, str), item.name
+        assert config_help(spec.config_type)[item.name], f'{item.name} has no help text'
+    spec.config_type().validate()
+
+
+@pytest.mark.parametrize('name', sorted(CONTROLLERS))
+def test_make_applies_overrides_and_validates(name):
+    spec = get_controller(name)
+    controller = spec.make(goal_tolerance=0.3)
+    assert controller.config.goal_tolerance == 0.3
+    controller.reset()
+    with pytest.raises(InvalidConfigError, match='goal_tolerance'):
+        spec.make(goal_tolerance=-1.0)

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import pytest
 
+from sessgan_evolver.process_supervisor import die_with_parent
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -72,7 +74,8 @@ class NodeProcesses:
         try:
             process = subprocess.Popen(
                 command, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                env={**self.env, **(env or {})}, cwd=cwd or REPO_ROOT, start_new_session=True)
+                env={**self.env, **(env or {})}, cwd=cwd or REPO_ROOT, start_new_session=True,
+                preexec_fn=die_with_parent)
         finally:
             log_file.close()
         node_process = NodeProcess(name, command, process, log_path)

@@ -110,11 +110,12 @@ class RosEvaluator:
     """
 
     def __init__(self, node, config: CampaignConfig, record_directory: Path, controller: str,
-                 log: Callable[[str], None]) -> None:
+                 supervisor: ProcessSupervisor, log: Callable[[str], None]) -> None:
         from rclpy.action import ActionClient
         from sessgan_interfaces.srv import GenerateEnvironments
 
         self.node = node
+        self.supervisor = supervisor
         self.config = config
         self.record_directory = record_directory
         self.controller = controller
@@ -123,6 +124,7 @@ class RosEvaluator:
         self.generator = node.create_client(GenerateEnvironments,
                                             f'{GENERATOR_NAMESPACE}/generate_environments')
         self.clients: dict[str, object] = {}
+        self.allowed: set[str] | None = None  # None: every discovered worker (--external)
         self.quarantine: dict[str, float] = {}
         self.max_attempts = 3
 
@@ -130,16 +132,45 @@ class RosEvaluator:
         import rclpy
         rclpy.spin_once(self.node, timeout_sec=seconds)
 
-    def wait_for_generator(self, timeout: float) -> None:
-        if not self.generator.wait_for_service(timeout_sec=timeout):
-            raise CampaignError(f'no generator answers at {GENERATOR_NAMESPACE}/'
-                                f'generate_environments after {timeout:.0f} s')
+    def check_children(self) -> None:
+        """Fail fast when a process this campaign started has died."""
+        for child in self.supervisor.dead_children():
+            raise CampaignError(f'{child.name} exited with status {child.process.returncode}:'
+                                f'\n{child.log_tail()}')
 
-    def discover_workers(self) -> list[str]:
+    def wait_for_generator(self, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while not self.generator.wait_for_service(timeout_sec=0.5):
+            self.check_children()
+            if time.monotonic() > deadline:
+                raise CampaignError(f'no generator answers at {GENERATOR_NAMESPACE}/'
+                                    f'generate_environments after {timeout:.0f} s')
+
+    def evaluate_servers(self) -> list[str]:
+        """Names of every ``evaluate`` action server in the graph."""
         from rclpy.action import get_action_names_and_types
 
-        for name, types in get_action_names_and_types(self.node):
-            if EVALUATE_TYPE in types and name not in self.clients:
+        return [name for name, types in get_action_names_and_types(self.node)
+                if EVALUATE_TYPE in types]
+
+    def wait_until_absent(self, names: list[str], timeout: float) -> None:
+        """Wait for workers of an earlier (killed) campaign to go away before starting ours."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            present = sorted(set(names) & set(self.evaluate_servers()))
+            if not present:
+                return
+            self.spin(0.2)
+        raise CampaignError(
+            f'{", ".join(present)} already exist in ROS_DOMAIN_ID '
+            f'{os.environ.get("ROS_DOMAIN_ID", "0")}: another campaign is running there; stop '
+            'it, use --external to share its workers, or pick another ROS_DOMAIN_ID')
+
+    def discover_workers(self) -> list[str]:
+        for name in self.evaluate_servers():
+            if self.allowed is not None and name not in self.allowed:
+                continue
+            if name not in self.clients:
                 from sessgan_interfaces.action import EvaluateEnvironment
                 self.clients[name] = self.action_client_class(
                     self.node, EvaluateEnvironment, name)
@@ -152,6 +183,7 @@ class RosEvaluator:
             ready = [n for n in self.discover_workers() if self.clients[n].server_is_ready()]
             if len(ready) >= count:
                 return
+            self.check_children()
             self.spin(0.1)
         raise CampaignError(f'only {len(ready)} of {count} simulator workers answered within '
                             f'{timeout:.0f} s')
@@ -265,10 +297,11 @@ def metrics_dict(msg) -> dict:
 def start_graph(supervisor: ProcessSupervisor, config: CampaignConfig, controller: str,
                 external: bool, mode: str, generator_running: bool) -> None:
     if not generator_running:
+        # No checkpoint parameter: the campaign sends every member's weights itself.
         supervisor.start('generator', [
             'ros2', 'run', 'sessgan_gen', 'generator', '--ros-args',
             '-r', f'__ns:={GENERATOR_NAMESPACE}', '-p', f'scenario:={config.scenario}',
-            '-p', f'checkpoint:={config.checkpoint}', '-p', 'rate:=0.0'])
+            '-p', 'rate:=0.0'])
     if external:
         return
     for worker in range(config.workers):
@@ -312,8 +345,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     node = rclpy.create_node('sessgan_evolver')
     supervisor = ProcessSupervisor(campaign.store.run_dir / 'logs')
     try:
-        evaluator = RosEvaluator(node, config, campaign.bags_dir, controller, log)
+        evaluator = RosEvaluator(node, config, campaign.bags_dir, controller, supervisor, log)
         generator_running = evaluator.generator.wait_for_service(timeout_sec=1.0)
+        if not args.external:
+            evaluator.allowed = {f'/w{i}/evaluate' for i in range(config.workers)}
+            evaluator.wait_until_absent(sorted(evaluator.allowed), timeout=15.0)
         start_graph(supervisor, config, controller, args.external, args.mode, generator_running)
         log(f'run {run_name}: {config.generations} generations x {config.population} members x '
             f'{config.maps_per_member} maps, scenario {config.scenario}, controller '
@@ -327,8 +363,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except (SessganEvolverError, SessganGenError) as err:
         log(f'error: {err}')
-        for child in supervisor.dead_children():
-            log(f'{child.name} exited with {child.process.returncode}:\n{child.log_tail()}')
         return 1
     finally:
         supervisor.stop_all()

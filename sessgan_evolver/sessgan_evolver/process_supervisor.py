@@ -47,7 +47,7 @@ class ProcessSupervisor:
         with open(log_path, 'ab') as log_file:
             process = subprocess.Popen(
                 command, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                env=self.env, start_new_session=True)
+                env=self.env, start_new_session=True, preexec_fn=die_with_parent)
         child = ChildProcess(name, command, process, log_path)
         self.children.append(child)
         return child
@@ -78,6 +78,20 @@ class ProcessSupervisor:
 
     def __exit__(self, *exc_info) -> None:
         self.stop_all()
+
+
+def die_with_parent() -> None:
+    """In a child (preexec): get SIGTERM when the parent dies, even by SIGKILL (Linux).
+
+    Without it a killed campaign would leave its workers running, and a resumed campaign
+    would find two action servers under the same namespace.
+    """
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # not Linux: Ctrl-C and normal exits still stop every child
 
 
 def _signal_group(pid: int, sig: int) -> None:

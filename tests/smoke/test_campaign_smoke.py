@@ -1,0 +1,99 @@
+"""Tiny campaigns through the real command: results, bags, replay, and resume after SIGKILL."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.ros_processes import REPO_ROOT
+
+pytestmark = pytest.mark.smoke
+
+# Small but real: two workers, three generations, each episode at most 20 sim seconds.
+TINY = ['--scenario', 'factory', '--generations', '3', '--population', '3',
+        '--maps-per-member', '1', '--workers', '2', '--time-limit', '20', '--seed', '5']
+IGNORED_COLUMNS = {'wall_time', 'bag_path'}
+
+
+def campaign(tmp_path: Path, run: str, *extra: str) -> list[str]:
+    return ['ros2', 'run', 'sessgan_evolver', 'campaign', *TINY, '--run', run,
+            '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags'), *extra]
+
+
+def episode_rows(run_dir: Path) -> list[dict]:
+    with open(run_dir / 'metrics_episodes.csv') as handle:
+        return [{k: v for k, v in row.items() if k not in IGNORED_COLUMNS}
+                for row in csv.DictReader(handle)]
+
+
+def test_campaign_resumes_after_sigkill_with_identical_results(ros_workspace, tmp_path):
+    complete = subprocess.run(campaign(tmp_path, 'straight'), capture_output=True, text=True,
+                              timeout=600)
+    assert complete.returncode == 0, complete.stderr[-3000:]
+    assert 'report:' in complete.stdout and 'failure bags:' in complete.stdout
+    straight = tmp_path / 'runs' / 'straight'
+    report = straight / 'report'
+    for name in ('report.md', 'generation_metrics.png', 'maps.png'):
+        assert (report / name).stat().st_size > 0
+
+    # Kill the second run (SIGKILL: no cleanup at all) once generation 1 is under way.
+    killed = subprocess.Popen(campaign(tmp_path, 'killed'), stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    checkpoint = tmp_path / 'runs' / 'killed' / 'checkpoints' / 'generation_0001.pt'
+    deadline = time.monotonic() + 300
+    while not checkpoint.exists():
+        assert killed.poll() is None, 'the campaign ended before it could be killed'
+        assert time.monotonic() < deadline, 'generation 1 never started'
+        time.sleep(0.2)
+    time.sleep(1.0)
+    os.killpg(killed.pid, signal.SIGKILL)
+    killed.wait(timeout=10)
+    time.sleep(1.0)  # its workers get SIGTERM from the kernel as their parent died
+
+    resumed = subprocess.run(campaign(tmp_path, 'killed', '--resume'), capture_output=True,
+                             text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert 'resuming' in resumed.stderr
+    assert episode_rows(tmp_path / 'runs' / 'killed') == episode_rows(straight)
+
+
+def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, tmp_path):
+    result = subprocess.run(campaign(tmp_path, 'bags', '--generations', '1'),
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    bags = sorted((tmp_path / 'bags' / 'bags').iterdir())
+    assert bags, 'no failure bag was written'
+    bag = bags[0]
+    assert {'episode.json', 'map.pgm', 'map.yaml', 'metadata.yaml'} <= {p.name for p in bag.iterdir()}
+    assert not list((tmp_path / 'bags' / 'bags').glob('*.tmp-*'))
+
+    replay = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag), '--rate',
+                             '50'], capture_output=True, text=True, timeout=120)
+    assert replay.returncode == 0, replay.stderr[-2000:]
+    assert 'replayed' in replay.stderr
+
+    again = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag),
+                            '--resimulate'], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stdout + again.stderr[-2000:]
+    assert 'as expected' in again.stdout
+
+    bad = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(tmp_path / 'nothing')],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and 'does not exist' in bad.stderr
+
+
+def test_campaign_rejects_bad_settings_clearly(ros_workspace, tmp_path):
+    for arguments, message in ((['--scenario', 'moon'], 'moon'),
+                               (['--population', '0'], 'population'),
+                               (['--bag-storage', 'zip'], 'storage')):
+        result = subprocess.run(
+            ['ros2', 'run', 'sessgan_evolver', 'campaign', '--runs-root', str(tmp_path),
+             *arguments], capture_output=True, text=True, timeout=60, cwd=REPO_ROOT)
+        assert result.returncode == 2, result.stderr
+        assert message in result.stderr

@@ -1,0 +1,163 @@
+"""Moving dummy agents: other robots in the factory, other flyers in the drone area.
+
+Each agent patrols back and forth along a seeded path through free space: two
+random cells of the footprint-free space (walls inflated by the agent's radius)
+joined by a 4-connected shortest path (sessgan_gen.navigation), at a constant
+speed. Agents are kinematic: static pybullet bodies moved every physics step,
+which the robot under test can hit (a contact counts as a collision) but cannot
+push. They move in the robot's plane (ground agents for ground robots, flyers at
+cruise altitude for the flyer) and are seen by its lidar. No agent starts within
+``min_start_distance`` of the robot's start.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.navigation import inflate, shortest_path_in_free
+from sessgan_sim.errors import InvalidConfigError
+from sessgan_sim.robots import Robot
+from sessgan_sim.world import CollisionGroup
+
+PATH_TRIES = 8
+"""Random destinations tried per agent before it settles for the best path found."""
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """Dummy agents' size and motion, in metres and m/s."""
+
+    speed: float = 0.5
+    radius: float = 0.2
+    height: float = 0.3
+    min_start_distance: float = 2.0
+    """No agent starts closer than this to the robot's start (centre to centre)."""
+    min_patrol_cells: int = 4
+    """Shortest patrol path sought, in cells; shorter ones are kept only when nothing longer
+    is found."""
+
+    def validate(self) -> None:
+        for name in ('speed', 'radius', 'height'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InvalidConfigError(f'agents: {name} must be > 0, got {value}')
+        if not (math.isfinite(self.min_start_distance) and self.min_start_distance >= 0):
+            raise InvalidConfigError(f'agents: min_start_distance must be >= 0 m, got '
+                                     f'{self.min_start_distance}')
+        if self.min_patrol_cells < 1:
+            raise InvalidConfigError(f'agents: min_patrol_cells must be >= 1, got '
+                                     f'{self.min_patrol_cells}')
+
+
+class PatrolPath:
+    """A polyline travelled back and forth; positions by distance travelled."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        if not len(points):
+            raise ValueError('a patrol path needs at least one point')
+        self.points = points
+        steps = np.hypot(*np.diff(points, axis=0).T) if len(points) > 1 else np.zeros(0)
+        self._cumulative = np.concatenate([[0.0], np.cumsum(steps)]).tolist()
+        self._corners: list[tuple[float, float]] = [(x, y) for x, y in points.tolist()]
+        self.length = self._cumulative[-1]
+
+    def position(self, distance: float) -> tuple[float, float]:
+        """Point reached after travelling ``distance`` metres from the first point."""
+        if self.length <= 0:
+            return self._corners[0]
+        along = distance % (2 * self.length)
+        if along > self.length:
+            along = 2 * self.length - along
+        index = min(bisect.bisect_right(self._cumulative, along), len(self._cumulative) - 1)
+        start = self._cumulative[index - 1]
+        span = self._cumulative[index] - start
+        share = (along - start) / span if span > 0 else 0.0
+        (x0, y0), (x1, y1) = self._corners[index - 1], self._corners[index]
+        return x0 + (x1 - x0) * share, y0 + (y1 - y0) * share
+
+
+class DummyAgents:
+    """The agents of one episode."""
+
+    def __init__(self, config: AgentConfig | None = None) -> None:
+        self.config = config or AgentConfig()
+        self.config.validate()
+        self.body_ids: list[int] = []
+        self.paths: list[PatrolPath] = []
+        self.positions = np.zeros((0, 2))
+        self._client = -1
+        self._height = 0.0
+        self._travelled = 0.0
+
+    def spawn(self, client: int, environment: Environment, robot: Robot, count: int,
+              rng: np.random.Generator) -> int:
+        """Create up to ``count`` agents; return how many found room."""
+        if count < 0:
+            raise InvalidConfigError(f'agents: count must be >= 0, got {count}')
+        self._client = client
+        self._height = robot.ride_height
+        self._travelled = 0.0
+        self.body_ids, self.paths = [], []
+        if count == 0:
+            self.positions = np.zeros((0, 2))
+            return 0
+        config = self.config
+        resolution = environment.resolution
+        passable = np.isin(environment.occupancy, robot.passable_values)
+        free = inflate(passable, config.radius / resolution)
+        rows, cols = np.nonzero(free)
+        centres_x = environment.origin[0] + (cols + 0.5) * resolution
+        centres_y = environment.origin[1] + (rows + 0.5) * resolution
+        start: Pose2D = environment.start
+        far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
+        spawn_cells = np.flatnonzero(far)
+        all_cells = np.arange(len(rows))
+        if not len(spawn_cells):
+            self.positions = np.zeros((0, 2))
+            return 0
+        shape = p.createCollisionShape(p.GEOM_CYLINDER, radius=config.radius,
+                                       height=config.height, physicsClientId=client)
+        for _ in range(count):
+            first = int(rng.choice(spawn_cells))
+            origin_cell = (int(rows[first]), int(cols[first]))
+            best = [origin_cell]
+            for _ in range(PATH_TRIES):
+                other = int(rng.choice(all_cells))
+                path = shortest_path_in_free(free, origin_cell, (int(rows[other]),
+                                                                 int(cols[other])))
+                if len(path) > len(best):
+                    best = path
+                if len(best) >= config.min_patrol_cells:
+                    break
+            points = np.array([environment.cell_center(row, col) for row, col in best])
+            self.paths.append(PatrolPath(points))
+            x, y = points[0]
+            body = p.createMultiBody(0.0, shape, basePosition=[x, y, self._height],
+                                     physicsClientId=client)
+            p.setCollisionFilterGroupMask(
+                body, -1, int(CollisionGroup.AGENT),
+                int(CollisionGroup.ROBOT | CollisionGroup.RAY), physicsClientId=client)
+            self.body_ids.append(body)
+        self.positions = np.array([path.position(0.0) for path in self.paths])
+        return len(self.body_ids)
+
+    def advance(self, dt: float) -> None:
+        """Move every agent ``dt`` seconds further along its patrol."""
+        if not self.body_ids:
+            return
+        self._travelled += self.config.speed * dt
+        client, height, travelled = self._client, self._height, self._travelled
+        positions = self.positions
+        for index, (body, path) in enumerate(zip(self.body_ids, self.paths, strict=True)):
+            x, y = path.position(travelled)
+            positions[index, 0] = x
+            positions[index, 1] = y
+            p.resetBasePositionAndOrientation(body, [x, y, height], [0.0, 0.0, 0.0, 1.0],
+                                              physicsClientId=client)

@@ -1,0 +1,598 @@
+"""One episode of the robot under test in one Environment, without ROS.
+
+The simulator node wraps this core: it turns parameters into an
+:class:`EpisodeConfig`, calls :meth:`Episode.reset` with each Environment,
+publishes each :class:`Observation` and feeds every received command to
+:meth:`Episode.step`, one control tick at a time::
+
+    with Episode() as episode:
+        observation = episode.reset(environment, EpisodeConfig(seed=7))
+        done = episode.done
+        while not done:
+            observation, done, outcome = episode.step(controller(observation))
+        print(episode.metrics())
+
+An episode ends on goal reached, collision limit, time limit, no progress toward
+the goal (stuck) or :meth:`Episode.abort` (e.g. a silent controller). An
+environment that cannot be simulated (invalid grid, unknown scenario or robot,
+start footprint overlapping an obstacle) ends the episode at reset with outcome
+``invalid_environment`` and a detail saying why. A command with a NaN or
+infinite component is replaced by a stop and counted; the episode goes on.
+Every random choice (lidar noise, agents) derives from ``config.seed``: the same
+seed, environment and commands give identical observations and metrics.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from time import perf_counter
+from types import TracebackType
+from typing import NamedTuple
+
+import numpy as np
+import pybullet as p
+
+from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.errors import SessganGenError
+from sessgan_gen.scenarios import Scenario, get_scenario
+from sessgan_sim.agents import AgentConfig, DummyAgents
+from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
+from sessgan_sim.metrics import EpisodeMetrics, MetricsRecorder, Outcome
+from sessgan_sim.robots import STOP, Robot, VelocityCommand, create_robot
+from sessgan_sim.sensors import (
+    ClearanceSensor,
+    Lidar,
+    LidarConfig,
+    LidarInfo,
+    Twist2D,
+    in_contact,
+    read_odometry,
+)
+from sessgan_sim.world import World, WorldLayout, WorldStyle
+
+START_OVERLAP_TOLERANCE = 1e-4
+"""m: a start footprint penetrating an obstacle deeper than this is invalid."""
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Everything an episode needs besides the Environment. None = the scenario's default.
+
+    Units: seconds, metres, hertz.
+    """
+
+    robot: str | None = None
+    """Robot model from the registry (sessgan_sim.robots); None: the scenario's robot."""
+    robot_params: Mapping[str, float] = field(default_factory=dict)
+    """Overrides of the robot model's parameters, e.g. {'max_linear_speed': 0.5}."""
+    control_rate_hz: float = 20.0
+    """Control ticks per sim second: one command per tick."""
+    physics_rate_hz: float = 100.0
+    """Physics steps per sim second, rounded to a whole number of steps per tick. 100 Hz
+    keeps a car at 12 m/s moving 12 cm per step, well inside any barrier's 1 m cell."""
+    time_limit: float | None = None
+    """Sim seconds before the episode ends with outcome timeout."""
+    proximity_distance: float | None = None
+    """Clearance below which time counts as proximity time."""
+    clearance_range: float | None = None
+    """Farthest clearance measured, at least the proximity distance: min_clearance is capped
+    here. None: the proximity distance (the cheapest query)."""
+    lidar: LidarConfig = field(default_factory=LidarConfig)
+    dummy_agents: int | None = None
+    """Number of moving dummy agents."""
+    agents: AgentConfig = field(default_factory=AgentConfig)
+    stuck_timeout: float = 10.0
+    """Sim seconds without progress toward the goal (a new minimum of the geodesic distance
+    on the grid) before the episode ends with outcome stuck; <= 0 disables it."""
+    goal_tolerance: float | None = None
+    """Distance of the robot's centre to the goal that counts as reached; None: one cell of
+    the scenario."""
+    collision_limit: int = 10
+    """Collisions that end the episode (outcome collision_limit); 0 disables it."""
+    seed: int = 0
+    """Seed of every random choice of the episode."""
+    world: WorldStyle = field(default_factory=WorldStyle)
+
+    def validate(self) -> None:
+        """Raise InvalidConfigError naming the first unusable value."""
+        for name in ('control_rate_hz', 'physics_rate_hz'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InvalidConfigError(f'episode config: {name} must be > 0, got {value!r}')
+        for name in ('time_limit', 'proximity_distance', 'goal_tolerance', 'clearance_range'):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise InvalidConfigError(f'episode config: {name} must be > 0 or None, '
+                                         f'got {value!r}')
+        if self.physics_rate_hz < self.control_rate_hz:
+            raise InvalidConfigError(
+                f'episode config: physics_rate_hz ({self.physics_rate_hz}) must be at least '
+                f'control_rate_hz ({self.control_rate_hz})')
+        if not math.isfinite(self.stuck_timeout):
+            raise InvalidConfigError(f'episode config: stuck_timeout must be finite, got '
+                                     f'{self.stuck_timeout}')
+        counts = (('collision_limit', self.collision_limit), ('seed', self.seed),
+                  ('dummy_agents', 0 if self.dummy_agents is None else self.dummy_agents))
+        for name, count in counts:
+            if not (isinstance(count, numbers.Integral) and count >= 0):
+                raise InvalidConfigError(f'episode config: {name} must be an integer >= 0, '
+                                         f'got {count!r}')
+        self.lidar.validate()
+        self.agents.validate()
+        self.world.validate()
+
+    def resolved(self, scenario: Scenario) -> EpisodeConfig:
+        """This config with every None replaced by the scenario's default."""
+        proximity = (self.proximity_distance if self.proximity_distance is not None
+                     else scenario.proximity_distance)
+        return dataclasses.replace(
+            self,
+            robot=self.robot if self.robot is not None else scenario.robot,
+            time_limit=self.time_limit if self.time_limit is not None else scenario.time_limit,
+            proximity_distance=proximity,
+            clearance_range=max(self.clearance_range or proximity, proximity),
+            dummy_agents=(self.dummy_agents if self.dummy_agents is not None
+                          else scenario.dummy_agents),
+            goal_tolerance=(self.goal_tolerance if self.goal_tolerance is not None
+                            else scenario.cell_size),
+        )
+
+    @property
+    def control_period(self) -> float:
+        """Sim seconds per control tick."""
+        return 1.0 / self.control_rate_hz
+
+    @property
+    def physics_steps_per_tick(self) -> int:
+        return max(1, round(self.physics_rate_hz / self.control_rate_hz))
+
+    @property
+    def physics_timestep(self) -> float:
+        """Sim seconds per physics step (the tick divided into whole steps)."""
+        return self.control_period / self.physics_steps_per_tick
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the robot senses after a tick (or at reset)."""
+
+    time: float
+    """Sim seconds since the episode's start."""
+    scan: np.ndarray
+    """float32 ranges in metres (read-only), REP 117 (+inf: no return)."""
+    scan_updated: bool
+    """True when the lidar took this scan at this tick (its rate may be below the control
+    rate); False repeats the previous scan."""
+    lidar: LidarInfo
+    pose: Pose2D
+    """Odometry pose in the odom (= map) frame."""
+    twist: Twist2D
+    """Body-frame velocity."""
+    goal: Pose2D
+    in_contact: bool
+
+
+class StepResult(NamedTuple):
+    observation: Observation
+    done: bool
+    outcome: Outcome | None
+
+
+@dataclass
+class TickProfile:
+    """Seconds (of the episode's clock) spent per part of the ticks of the current episode."""
+
+    ticks: int = 0
+    physics: float = 0.0
+    """Agents, robot dynamics, pybullet steps, contact checks."""
+    sensors: float = 0.0
+    """Lidar and clearance."""
+    metrics: float = 0.0
+    """Metric bookkeeping, termination checks and the Observation."""
+
+    @property
+    def total(self) -> float:
+        return self.physics + self.sensors + self.metrics
+
+
+def geodesic_field(passable: np.ndarray, goal: tuple[int, int]) -> np.ndarray:
+    """4-connected grid distance in cells from ``goal`` over ``passable`` cells (inf where
+    unreachable, everywhere when the goal cell is not passable)."""
+    mask = np.asarray(passable, dtype=bool)
+    distance = np.full(mask.shape, np.inf)
+    row, col = goal
+    if not (0 <= row < mask.shape[0] and 0 <= col < mask.shape[1]) or not mask[row, col]:
+        return distance
+    frontier = np.zeros_like(mask)
+    frontier[row, col] = True
+    reached = frontier.copy()
+    distance[row, col] = 0.0
+    step = 0
+    while frontier.any():
+        step += 1
+        grown = np.zeros_like(mask)
+        grown[1:, :] |= frontier[:-1, :]
+        grown[:-1, :] |= frontier[1:, :]
+        grown[:, 1:] |= frontier[:, :-1]
+        grown[:, :-1] |= frontier[:, 1:]
+        grown &= mask & ~reached
+        distance[grown] = step
+        reached |= grown
+        frontier = grown
+    return distance
+
+
+def _as_command(command: VelocityCommand | Sequence[float]) -> VelocityCommand:
+    if isinstance(command, VelocityCommand):
+        return command
+    vx, vy, wz = command
+    return VelocityCommand(float(vx), float(vy), float(wz))
+
+
+@dataclass
+class _Record:
+    """What every episode has after reset, valid or not."""
+
+    environment: Environment
+    config: EpisodeConfig
+    recorder: MetricsRecorder
+    lidar_info: LidarInfo
+    scan: np.ndarray
+    outcome: Outcome | None = None
+    detail: str = ''
+    ticks: int = 0
+    touching: bool = False
+
+
+@dataclass
+class _Live:
+    """The simulation of an episode whose environment could be built."""
+
+    robot: Robot
+    lidar: Lidar
+    clearance: ClearanceSensor
+    progress_field: np.ndarray
+    time_limit: float
+    proximity_distance: float
+    goal_tolerance: float
+    best_progress: float = math.inf
+    last_progress_time: float = 0.0
+    next_scan_time: float = 0.0
+
+
+class Episode:
+    """Runs episodes in a World it owns (one pybullet client), one at a time.
+
+    ``clock`` times the parts of each tick in :attr:`profile` (wall clock by default;
+    ``time.thread_time`` measures this thread's CPU time instead).
+    """
+
+    def __init__(self, clock: Callable[[], float] = perf_counter) -> None:
+        self._clock = clock
+        self._world = World()
+        self._agents = DummyAgents()
+        self._record: _Record | None = None
+        self._live: _Live | None = None
+        self.profile = TickProfile()
+
+    # --- resource handling ----------------------------------------------------------------
+
+    def open(self) -> Episode:
+        self._world.open()
+        return self
+
+    def close(self) -> None:
+        self._world.close()
+        self._record = None
+        self._live = None
+
+    def __enter__(self) -> Episode:
+        return self.open()
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()
+
+    # --- read-only state ------------------------------------------------------------------
+
+    @property
+    def done(self) -> bool:
+        return self._record is not None and self._record.outcome is not None
+
+    @property
+    def outcome(self) -> Outcome | None:
+        return self._record.outcome if self._record else None
+
+    @property
+    def time(self) -> float:
+        """Sim seconds since the episode's start."""
+        record = self._record
+        return record.ticks * record.config.control_period if record else 0.0
+
+    @property
+    def config(self) -> EpisodeConfig:
+        """The episode's config, with the scenario's defaults filled in when it is known."""
+        return self._require_record().config
+
+    @property
+    def environment(self) -> Environment:
+        return self._require_record().environment
+
+    @property
+    def robot(self) -> Robot:
+        """The robot under test (its sensor height places the base_scan frame)."""
+        return self._require_live().robot
+
+    @property
+    def layout(self) -> WorldLayout:
+        return self._world.layout
+
+    @property
+    def agents(self) -> DummyAgents:
+        return self._agents
+
+    @property
+    def lidar_info(self) -> LidarInfo:
+        return self._require_record().lidar_info
+
+    # --- the episode ----------------------------------------------------------------------
+
+    def reset(self, environment: Environment, config: EpisodeConfig | None = None) -> Observation:
+        """Start an episode in ``environment``; return the first observation.
+
+        Raises InvalidConfigError for an unusable config. An environment that cannot be
+        simulated does not raise: the episode is done at once with outcome
+        invalid_environment (see :attr:`done` and :meth:`metrics`).
+        """
+        config = config or EpisodeConfig()
+        config.validate()
+        self._world.open()
+        self._live = None
+        self._agents = DummyAgents(config.agents)
+        self.profile = TickProfile()
+        scan = np.full(config.lidar.beams, np.inf, dtype=np.float32)
+        scan.flags.writeable = False
+        record = _Record(environment, config, MetricsRecorder(math.inf), config.lidar.info, scan)
+        self._record = record
+
+        try:
+            environment.validate()
+            config = config.resolved(get_scenario(environment.scenario))
+            record.config = config
+            robot = create_robot(str(config.robot), config.robot_params)
+        except (SessganGenError, UnknownRobotError) as err:
+            self._end(Outcome.INVALID_ENVIRONMENT, str(err))
+            return self._blank_observation()
+        clearance_range = float(config.clearance_range or 0.0)
+        record.recorder = MetricsRecorder(clearance_range)
+
+        client = self._world.client
+        layout = self._world.build(environment, config.physics_timestep, config.world)
+        robot.spawn(client, environment.start)
+        overlap = self._start_overlap(environment, robot, layout)
+        if overlap is not None:
+            self._end(Outcome.INVALID_ENVIRONMENT, overlap)
+            return self._blank_observation()
+
+        noise_seed, agent_seed = np.random.SeedSequence(config.seed).spawn(2)
+        self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
+                           np.random.default_rng(agent_seed))
+        lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
+        lidar.attach(client, robot)
+        passable = np.isin(environment.occupancy, robot.passable_values)
+        live = _Live(
+            robot=robot, lidar=lidar,
+            clearance=ClearanceSensor(client, robot, layout, clearance_range),
+            progress_field=geodesic_field(
+                passable, environment.cell_of(environment.goal.x, environment.goal.y)),
+            time_limit=float(config.time_limit or 0.0),
+            proximity_distance=float(config.proximity_distance or 0.0),
+            goal_tolerance=float(config.goal_tolerance or 0.0),
+            next_scan_time=record.lidar_info.scan_time)
+        self._live = live
+        live.best_progress = self._progress_distance(record, live)
+        record.scan = lidar.scan()
+        return self._observation(record, live, scan_updated=True)
+
+    def step(self, command: VelocityCommand | Sequence[float]) -> StepResult:
+        """Apply ``command`` (body-frame vx, vy, wz) for one control tick; return the result."""
+        record = self._require_record()
+        if record.outcome is not None:
+            raise EpisodeError(f'the episode is over ({record.outcome.value}); call reset()')
+        live = self._require_live()
+        command = _as_command(command)
+        if not (math.isfinite(command.vx) and math.isfinite(command.vy)
+                and math.isfinite(command.wz)):
+            record.recorder.invalid_commands += 1
+            command = STOP
+        config, robot, recorder = record.config, live.robot, record.recorder
+        client = self._world.client
+        body = robot.body_id
+        dt = config.physics_timestep
+        goal = record.environment.goal
+        tolerance = live.goal_tolerance
+        reached = touching = False
+        clock = self._clock
+        started = clock()
+
+        # The hot loop: bound methods and locals keep Python's overhead per step low.
+        advance_agents, apply, sync = self._agents.advance, robot.apply, robot.sync
+        record_contact, hypot = recorder.record_contact, math.hypot
+        step_simulation = p.stepSimulation
+        x, y = robot.position
+        travelled = 0.0
+        for _ in range(config.physics_steps_per_tick):
+            advance_agents(dt)
+            x_before, y_before = x, y
+            apply(command, dt)
+            step_simulation(physicsClientId=client)
+            sync()
+            touching = in_contact(client, body)
+            record_contact(touching)
+            x, y = robot.position
+            travelled += hypot(x - x_before, y - y_before)
+            if hypot(x - goal.x, y - goal.y) <= tolerance:
+                reached = True
+        recorder.record_motion(travelled)
+        record.touching = touching
+        record.ticks += 1
+        now = self.time
+        physics_done = clock()
+
+        scan_updated = now >= live.next_scan_time - 1e-9
+        if scan_updated:
+            record.scan = live.lidar.scan()
+            live.next_scan_time += record.lidar_info.scan_time
+            if live.next_scan_time <= now:  # lidar faster than control: scan every tick
+                live.next_scan_time = now + config.control_period
+        agents = self._agents
+        clearance = live.clearance.measure(agents.body_ids, agents.positions,
+                                           agents.config.radius)
+        sensors_done = clock()
+
+        recorder.record_tick(config.control_period, clearance, touching,
+                             live.proximity_distance)
+        self._check_end(record, live, reached, now)
+        observation = self._observation(record, live, scan_updated)
+        finished = clock()
+        profile = self.profile
+        profile.ticks += 1
+        profile.physics += physics_done - started
+        profile.sensors += sensors_done - physics_done
+        profile.metrics += finished - sensors_done
+        return StepResult(observation, record.outcome is not None, record.outcome)
+
+    def abort(self, outcome: Outcome | str, detail: str = '') -> None:
+        """End the running episode from outside (e.g. controller_unresponsive).
+
+        No-op when the episode already ended: its first outcome stands.
+        """
+        record = self._require_record()
+        if record.outcome is None:
+            self._end(Outcome(outcome), detail)
+
+    def metrics(self) -> EpisodeMetrics:
+        """The episode's metrics (so far, with outcome None, while it runs)."""
+        record = self._require_record()
+        detail = record.detail
+        invalid = record.recorder.invalid_commands
+        if invalid:
+            note = (f'{invalid} command(s) with NaN or infinite components were replaced by '
+                    f'a stop')
+            detail = f'{detail}; {note}' if detail else note
+        return record.recorder.snapshot(
+            simulation_time=self.time, feasible=bool(record.environment.feasible),
+            distance_to_goal=self._distance_to_goal(record), outcome=record.outcome,
+            detail=detail)
+
+    # --- internals ------------------------------------------------------------------------
+
+    def _require_record(self) -> _Record:
+        if self._record is None:
+            raise EpisodeError('no episode yet: call reset(environment, config) first')
+        return self._record
+
+    def _require_live(self) -> _Live:
+        if self._live is None:
+            raise EpisodeError('no running simulation: reset() has not built a valid episode')
+        return self._live
+
+    def _end(self, outcome: Outcome, detail: str) -> None:
+        record = self._require_record()
+        record.outcome = outcome
+        record.detail = detail
+
+    def _check_end(self, record: _Record, live: _Live, reached: bool, now: float) -> None:
+        config = record.config
+        recorder = record.recorder
+        if config.collision_limit and recorder.collisions >= config.collision_limit:
+            self._end(Outcome.COLLISION_LIMIT,
+                      f'{recorder.collisions} collisions reached the limit of '
+                      f'{config.collision_limit} at {now:.2f} s')
+        elif reached:
+            self._end(Outcome.GOAL_REACHED,
+                      f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
+        elif now >= live.time_limit - 1e-9:
+            self._end(Outcome.TIMEOUT, f'time limit of {live.time_limit:.2f} s reached, '
+                                       f'{self._distance_to_goal(record):.2f} m from the goal')
+        elif config.stuck_timeout > 0:
+            progress = self._progress_distance(record, live)
+            if progress < live.best_progress:
+                live.best_progress = progress
+                live.last_progress_time = now
+            elif now - live.last_progress_time >= config.stuck_timeout - 1e-9:
+                self._end(Outcome.STUCK,
+                          f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
+                          f'stopped {self._distance_to_goal(record):.2f} m from it at '
+                          f'{now:.2f} s')
+
+    def _progress_distance(self, record: _Record, live: _Live) -> float:
+        """Geodesic grid distance (m) from the robot's cell to the goal; straight-line
+        distance where the grid gives none."""
+        environment = record.environment
+        x, y = live.robot.position
+        row, col = environment.cell_of(x, y)
+        field_ = live.progress_field
+        if 0 <= row < field_.shape[0] and 0 <= col < field_.shape[1]:
+            cells = field_[row, col]
+            if math.isfinite(cells):
+                return float(cells) * environment.resolution
+        return self._distance_to_goal(record)
+
+    def _distance_to_goal(self, record: _Record) -> float:
+        environment = record.environment
+        goal = environment.goal
+        if self._live is not None:
+            x, y = self._live.robot.position
+        else:
+            x, y = environment.start.x, environment.start.y
+        try:
+            distance = math.hypot(x - goal.x, y - goal.y)
+        except TypeError:  # an invalid environment may hold anything
+            return math.inf
+        return distance if math.isfinite(distance) else math.inf
+
+    def _start_overlap(self, environment: Environment, robot: Robot,
+                       layout: WorldLayout) -> str | None:
+        """Why the robot's footprint at the start overlaps an obstacle, or None."""
+        x, y = robot.position
+        client = self._world.client
+        for other in layout.obstacles_near(x, y, robot.footprint_radius):
+            for point in p.getClosestPoints(robot.body_id, other, 0.0, physicsClientId=client):
+                if point[8] < -START_OVERLAP_TOLERANCE:
+                    kind = layout.kind_of(other)
+                    name = kind.value.replace('_', ' ') if kind else 'obstacle'
+                    start = environment.start
+                    row, col = environment.cell_of(x, y)
+                    inside = (' (start inside it)'
+                              if int(environment.occupancy[row, col]) not in robot.passable_values
+                              else '')
+                    return (f'environment {environment.id!r}: the {robot.name} footprint at the '
+                            f'start ({start.x:.2f}, {start.y:.2f}) m overlaps a {name} by '
+                            f'{-point[8]:.3f} m{inside}')
+        return None
+
+    def _observation(self, record: _Record, live: _Live, scan_updated: bool) -> Observation:
+        odometry = read_odometry(live.robot)
+        return Observation(
+            time=self.time, scan=record.scan, scan_updated=scan_updated,
+            lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
+            goal=record.environment.goal, in_contact=record.touching)
+
+    def _blank_observation(self) -> Observation:
+        """The observation of an episode that could not start: no returns, at the start."""
+        record = self._require_record()
+        environment = record.environment
+        try:
+            start, goal = environment.start, environment.goal
+            pose = Pose2D(float(start.x), float(start.y), float(start.yaw))
+            goal = Pose2D(float(goal.x), float(goal.y), float(goal.yaw))
+        except (TypeError, ValueError, AttributeError):
+            pose = goal = Pose2D(0.0, 0.0, 0.0)
+        return Observation(time=0.0, scan=record.scan, scan_updated=False,
+                           lidar=record.lidar_info, pose=pose, twist=Twist2D(0.0, 0.0, 0.0),
+                           goal=goal, in_contact=False)

@@ -1,0 +1,550 @@
+"""Robot models under test: a registry of planar robots with real dynamics.
+
+Every robot takes a body-frame velocity command like geometry_msgs/Twist
+(:class:`VelocityCommand`: linear.x, linear.y, angular.z) and turns it into
+motion through its own dynamics:
+
+* ``diff_drive``: a differential-drive cylinder. linear.x is the forward speed,
+  angular.z the yaw rate, each under speed and acceleration limits; linear.y is
+  ignored (it cannot move sideways).
+* ``car``: a kinematic bicycle (rear-axle reference) with a steering angle
+  limit, a steering rate limit, separate acceleration and braking limits and a
+  high top speed. angular.z is turned into a steering angle through the bicycle
+  model, ``delta = atan(wheelbase * wz / vx)`` at the *commanded* speed (the
+  Twist-to-Ackermann convention); at standstill a non-zero wz asks for full
+  lock. The tyres' grip caps the lateral acceleration: beyond it the car
+  understeers (its yaw rate saturates at grip / speed), so a sharp turn taken
+  too fast runs wide into the barrier. linear.y is ignored.
+* ``flyer``: a holonomic flyer at a fixed cruise altitude, above low obstacles.
+  linear.x and linear.y are body-frame velocities, angular.z the yaw rate; the
+  velocity follows the command through a first-order lag (its response time)
+  under an acceleration limit and a top speed.
+
+How the dynamics are integrated: each physics step the model advances its state
+(speed, steering, ...) toward the command and sets the body's velocity; pybullet
+then resolves contacts, so a wall stops or deflects the robot. After the step
+the model reads the body's real velocity back, so a robot pressed against a
+wall does not keep a speed it does not have. Bodies ride at a fixed height with
+gravity off (the world is planar); contact-induced tilt and height drift are
+removed after each step.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple
+
+import pybullet as p
+
+from sessgan_gen.environment import Pose2D
+from sessgan_gen.scenarios import FREE, LOW_OBSTACLE
+from sessgan_sim.errors import InvalidConfigError, UnknownRobotError
+from sessgan_sim.world import ROBOT_MASK, CollisionGroup
+
+DRIFT_TOLERANCE = 1e-4
+"""Height (m) or quaternion tilt component above which a body is put back upright."""
+
+TILT_INERTIA_FACTOR = 1000.0
+"""Roll and pitch inertia multiplier: contacts must not tip a planar robot over."""
+
+
+class VelocityCommand(NamedTuple):
+    """A body-frame velocity command, as geometry_msgs/Twist carries it."""
+
+    vx: float = 0.0
+    """linear.x in m/s (forward)."""
+    vy: float = 0.0
+    """linear.y in m/s (left); only the flyer uses it."""
+    wz: float = 0.0
+    """angular.z in rad/s (counter-clockwise)."""
+
+
+STOP = VelocityCommand()
+
+
+class RobotState(NamedTuple):
+    """Pose in the map frame and twist in the body frame."""
+
+    x: float
+    y: float
+    yaw: float
+    vx: float
+    vy: float
+    wz: float
+
+
+def _clip(value: float, low: float, high: float) -> float:
+    return low if value < low else high if value > high else value
+
+
+def _check_positive(owner: str, params: Any, names: tuple[str, ...]) -> None:
+    for name in names:
+        value = getattr(params, name)
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise InvalidConfigError(f'{owner}: {name} must be a positive finite number, '
+                                     f'got {value!r}')
+
+
+class Robot(abc.ABC):
+    """A planar robot body in a pybullet world, driven by velocity commands.
+
+    Subclasses set ``name``, ``params_type`` and the model hooks; the base class owns
+    the pybullet body and the per-step read-back.
+    """
+
+    name: ClassVar[str]
+    params_type: ClassVar[type]
+    flies: ClassVar[bool] = False
+    passable_values: ClassVar[tuple[int, ...]] = (FREE,)
+    """OccupancyGrid values the robot's centre may stand on."""
+
+    def __init__(self, params: Any = None) -> None:
+        self.params = params if params is not None else self.params_type()
+        if not isinstance(self.params, self.params_type):
+            raise InvalidConfigError(f'robot {self.name!r} takes {self.params_type.__name__}, '
+                                     f'got {type(self.params).__name__}')
+        self.validate()
+        self.client = -1
+        self.body_id = -1
+        self._x = self._y = self._yaw = 0.0
+        self._cos_yaw, self._sin_yaw = 1.0, 0.0
+        self._vx = self._vy = self._wz = 0.0
+
+    @classmethod
+    def with_overrides(cls, overrides: Mapping[str, float] | None = None) -> Robot:
+        """A robot whose default parameters are replaced by ``overrides``."""
+        known = {item.name for item in dataclasses.fields(cls.params_type)}
+        unknown = sorted(set(overrides or {}) - known)
+        if unknown:
+            raise InvalidConfigError(f'robot {cls.name!r} has no parameter(s) {unknown}; '
+                                     f'known: {sorted(known)}')
+        return cls(dataclasses.replace(cls.params_type(), **dict(overrides or {})))
+
+    # --- geometry, supplied by each model -------------------------------------------------
+
+    @property
+    @abc.abstractmethod
+    def footprint_radius(self) -> float:
+        """Radius (m) of the smallest circle around the centre holding the footprint."""
+
+    @property
+    @abc.abstractmethod
+    def ride_height(self) -> float:
+        """Height (m) of the body's centre above the ground."""
+
+    @property
+    @abc.abstractmethod
+    def sensor_height(self) -> float:
+        """Height (m) of the lidar's scan plane above the ground."""
+
+    @abc.abstractmethod
+    def validate(self) -> None:
+        """Raise InvalidConfigError naming the first unusable parameter."""
+
+    @abc.abstractmethod
+    def _create_shape(self, client: int) -> int:
+        """Create the body's collision shape in ``client``; return its id."""
+
+    @property
+    @abc.abstractmethod
+    def mass(self) -> float:
+        """Mass in kg."""
+
+    # --- dynamics, supplied by each model -------------------------------------------------
+
+    @abc.abstractmethod
+    def _reset_model(self) -> None:
+        """Zero the model's internal state (speeds, steering)."""
+
+    @abc.abstractmethod
+    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+        """Advance the model by ``dt`` seconds toward ``command``; return the body-frame
+        velocity (vx, vy, wz) of the body's centre to impose for this step."""
+
+    @abc.abstractmethod
+    def _observe(self, vx: float, vy: float, wz: float) -> None:
+        """Take the body's real body-frame velocity after a step back into the model."""
+
+    # --- the body ------------------------------------------------------------------------
+
+    def spawn(self, client: int, pose: Pose2D) -> int:
+        """Create the robot's body in ``client`` at ``pose``, at rest; return the body id."""
+        shape = self._create_shape(client)
+        orientation = p.getQuaternionFromEuler([0.0, 0.0, pose.yaw])
+        body = p.createMultiBody(self.mass, shape,
+                                 basePosition=[pose.x, pose.y, self.ride_height],
+                                 baseOrientation=orientation, physicsClientId=client)
+        inertia = p.getDynamicsInfo(body, -1, physicsClientId=client)[2]
+        p.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, restitution=0.0,
+                         lateralFriction=0.5,
+                         localInertiaDiagonal=[inertia[0] * TILT_INERTIA_FACTOR,
+                                               inertia[1] * TILT_INERTIA_FACTOR, inertia[2]],
+                         physicsClientId=client)
+        p.setCollisionFilterGroupMask(body, -1, int(CollisionGroup.ROBOT), ROBOT_MASK,
+                                      physicsClientId=client)
+        self.client = client
+        self.body_id = body
+        self._x, self._y, self._yaw = float(pose.x), float(pose.y), float(pose.yaw)
+        self._cos_yaw, self._sin_yaw = math.cos(self._yaw), math.sin(self._yaw)
+        self._vx = self._vy = self._wz = 0.0
+        self._reset_model()
+        return body
+
+    def apply(self, command: VelocityCommand, dt: float) -> None:
+        """Advance the model by one physics step of ``dt`` s and set the body's velocity."""
+        vx, vy, wz = self._advance(command, dt)
+        cos_yaw, sin_yaw = self._cos_yaw, self._sin_yaw
+        p.resetBaseVelocity(self.body_id,
+                            [cos_yaw * vx - sin_yaw * vy, sin_yaw * vx + cos_yaw * vy, 0.0],
+                            [0.0, 0.0, wz], physicsClientId=self.client)
+
+    def sync(self) -> None:
+        """Read the body's pose and velocity after a physics step into the robot state."""
+        client = self.client
+        position, (qx, qy, qz, qw) = p.getBasePositionAndOrientation(self.body_id,
+                                                                     physicsClientId=client)
+        linear, angular = p.getBaseVelocity(self.body_id, physicsClientId=client)
+        x, y, z = position
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        if (abs(z - self.ride_height) > DRIFT_TOLERANCE or abs(qx) > DRIFT_TOLERANCE
+                or abs(qy) > DRIFT_TOLERANCE):
+            p.resetBasePositionAndOrientation(
+                self.body_id, [x, y, self.ride_height],
+                [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)], physicsClientId=client)
+        cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
+        self._x, self._y, self._yaw = x, y, yaw
+        self._cos_yaw, self._sin_yaw = cos_yaw, sin_yaw
+        self._vx = cos_yaw * linear[0] + sin_yaw * linear[1]
+        self._vy = -sin_yaw * linear[0] + cos_yaw * linear[1]
+        self._wz = angular[2]
+        self._observe(self._vx, self._vy, self._wz)
+
+    @property
+    def state(self) -> RobotState:
+        """Pose (map frame) and body-frame twist after the last step."""
+        return RobotState(self._x, self._y, self._yaw, self._vx, self._vy, self._wz)
+
+    @property
+    def position(self) -> tuple[float, float]:
+        return self._x, self._y
+
+
+ROBOTS: dict[str, type[Robot]] = {}
+"""The robot registry: name -> Robot subclass."""
+
+
+def register_robot(cls: type[Robot]) -> type[Robot]:
+    """Class decorator adding a Robot subclass to the registry under ``cls.name``."""
+    ROBOTS[cls.name] = cls
+    return cls
+
+
+def robot_names() -> list[str]:
+    """Names of the registered robots, sorted."""
+    return sorted(ROBOTS)
+
+
+def get_robot_class(name: str) -> type[Robot]:
+    """Look a robot model up by name; the error lists the known names."""
+    try:
+        return ROBOTS[name]
+    except KeyError as err:
+        raise UnknownRobotError(
+            f'unknown robot {name!r}; known robots: {", ".join(robot_names())}') from err
+
+
+def create_robot(name: str, overrides: Mapping[str, float] | None = None) -> Robot:
+    """A robot of model ``name`` with default parameters replaced by ``overrides``."""
+    return get_robot_class(name).with_overrides(overrides)
+
+
+# --- differential drive ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DiffDriveParams:
+    """A factory robot (TurtleBot-like footprint, AMR-like speeds)."""
+
+    radius: float = 0.2
+    height: float = 0.3
+    mass: float = 10.0
+    ground_clearance: float = 0.01
+    sensor_height: float = 0.2
+    max_linear_speed: float = 1.0
+    """m/s forward."""
+    max_reverse_speed: float = 0.3
+    """m/s backward."""
+    max_angular_speed: float = 2.0
+    """rad/s."""
+    max_linear_acceleration: float = 1.0
+    """m/s^2, speeding up and slowing down."""
+    max_angular_acceleration: float = 4.0
+    """rad/s^2."""
+
+
+@register_robot
+class DiffDriveRobot(Robot):
+    """Differential drive: forward speed and yaw rate, no sideways motion."""
+
+    name = 'diff_drive'
+    params_type = DiffDriveParams
+    params: DiffDriveParams
+
+    def validate(self) -> None:
+        _check_positive('diff_drive', self.params, (
+            'radius', 'height', 'mass', 'sensor_height', 'max_linear_speed',
+            'max_reverse_speed', 'max_angular_speed', 'max_linear_acceleration',
+            'max_angular_acceleration'))
+
+    @property
+    def footprint_radius(self) -> float:
+        return self.params.radius
+
+    @property
+    def ride_height(self) -> float:
+        return self.params.ground_clearance + self.params.height / 2
+
+    @property
+    def sensor_height(self) -> float:
+        return self.params.sensor_height
+
+    @property
+    def mass(self) -> float:
+        return self.params.mass
+
+    def _create_shape(self, client: int) -> int:
+        return p.createCollisionShape(p.GEOM_CYLINDER, radius=self.params.radius,
+                                      height=self.params.height, physicsClientId=client)
+
+    def _reset_model(self) -> None:
+        self._speed = 0.0
+        self._turn_rate = 0.0
+
+    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+        params = self.params
+        target_speed = _clip(command.vx, -params.max_reverse_speed, params.max_linear_speed)
+        target_rate = _clip(command.wz, -params.max_angular_speed, params.max_angular_speed)
+        step = params.max_linear_acceleration * dt
+        self._speed += _clip(target_speed - self._speed, -step, step)
+        step = params.max_angular_acceleration * dt
+        self._turn_rate += _clip(target_rate - self._turn_rate, -step, step)
+        return self._speed, 0.0, self._turn_rate
+
+    def _observe(self, vx: float, vy: float, wz: float) -> None:
+        # Wheels do not slide sideways: only the forward part of a deflection survives.
+        self._speed = vx
+        self._turn_rate = wz
+
+
+# --- car (bicycle model) --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CarParams:
+    """A small race car (footprint inside the race track's 0.6 m radius)."""
+
+    length: float = 1.0
+    width: float = 0.5
+    height: float = 0.35
+    mass: float = 40.0
+    ground_clearance: float = 0.05
+    sensor_height: float = 0.2
+    wheelbase: float = 0.7
+    """m between the axles; the body's centre is halfway between them."""
+    max_steering_angle: float = 0.5
+    """rad (about 29 degrees)."""
+    max_steering_rate: float = 1.5
+    """rad/s."""
+    max_speed: float = 12.0
+    """m/s forward."""
+    max_reverse_speed: float = 3.0
+    """m/s backward."""
+    max_acceleration: float = 4.0
+    """m/s^2 when speeding up."""
+    max_braking: float = 8.0
+    """m/s^2 when slowing down."""
+    max_lateral_acceleration: float = 8.0
+    """m/s^2 the tyres can hold in a turn (about 0.8 g); beyond it the car understeers."""
+
+
+@register_robot
+class CarRobot(Robot):
+    """Kinematic bicycle with steering and grip limits."""
+
+    name = 'car'
+    params_type = CarParams
+    params: CarParams
+
+    def validate(self) -> None:
+        _check_positive('car', self.params, (
+            'length', 'width', 'height', 'mass', 'sensor_height', 'wheelbase',
+            'max_steering_angle', 'max_steering_rate', 'max_speed', 'max_reverse_speed',
+            'max_acceleration', 'max_braking', 'max_lateral_acceleration'))
+        if self.params.max_steering_angle >= math.pi / 2:
+            raise InvalidConfigError(f'car: max_steering_angle must be < pi/2 rad, got '
+                                     f'{self.params.max_steering_angle}')
+
+    @property
+    def footprint_radius(self) -> float:
+        return math.hypot(self.params.length / 2, self.params.width / 2)
+
+    @property
+    def ride_height(self) -> float:
+        return self.params.ground_clearance + self.params.height / 2
+
+    @property
+    def sensor_height(self) -> float:
+        return self.params.sensor_height
+
+    @property
+    def mass(self) -> float:
+        return self.params.mass
+
+    @property
+    def steering_angle(self) -> float:
+        """Current steering angle in rad (positive = left)."""
+        return self._steering
+
+    def _create_shape(self, client: int) -> int:
+        params = self.params
+        return p.createCollisionShape(
+            p.GEOM_BOX, halfExtents=[params.length / 2, params.width / 2, params.height / 2],
+            physicsClientId=client)
+
+    def _reset_model(self) -> None:
+        self._speed = 0.0
+        self._steering = 0.0
+
+    def target_steering(self, command: VelocityCommand) -> float:
+        """Steering angle (rad) that turns at ``command.wz`` when driving at ``command.vx``."""
+        params = self.params
+        speed = command.vx
+        angle = math.atan2(params.wheelbase * command.wz, abs(speed))
+        if speed < 0:
+            angle = -angle
+        return _clip(angle, -params.max_steering_angle, params.max_steering_angle)
+
+    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+        params = self.params
+        step = params.max_steering_rate * dt
+        self._steering += _clip(self.target_steering(command) - self._steering, -step, step)
+        target = _clip(command.vx, -params.max_reverse_speed, params.max_speed)
+        speed = self._speed
+        braking = (speed > 0 and target < speed) or (speed < 0 and target > speed)
+        step = (params.max_braking if braking else params.max_acceleration) * dt
+        new_speed = speed + _clip(target - speed, -step, step)
+        if braking and speed * new_speed < 0:
+            new_speed = 0.0  # brakes stop the car; reversing is a new acceleration
+        self._speed = new_speed
+        yaw_rate = new_speed * math.tan(self._steering) / params.wheelbase
+        if new_speed != 0.0:
+            grip_limit = params.max_lateral_acceleration / abs(new_speed)
+            yaw_rate = _clip(yaw_rate, -grip_limit, grip_limit)
+        # The centre lies half a wheelbase ahead of the rear axle: it swings sideways.
+        return new_speed, yaw_rate * params.wheelbase / 2, yaw_rate
+
+    def _observe(self, vx: float, vy: float, wz: float) -> None:
+        self._speed = vx
+
+
+# --- flyer ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FlyerParams:
+    """A small quadrotor holding its altitude."""
+
+    radius: float = 0.2
+    height: float = 0.1
+    mass: float = 1.5
+    cruise_altitude: float = 1.0
+    """m, height of the body's centre and of its scan plane: above low obstacles (0.3 m),
+    below walls (2 m)."""
+    max_speed: float = 2.0
+    """m/s, horizontal."""
+    max_acceleration: float = 3.0
+    """m/s^2, horizontal."""
+    response_time: float = 0.3
+    """s, time constant of the first-order lag from commanded to actual velocity."""
+    max_yaw_rate: float = 2.0
+    """rad/s."""
+    max_yaw_acceleration: float = 6.0
+    """rad/s^2."""
+
+
+@register_robot
+class FlyerRobot(Robot):
+    """Holonomic flyer with inertia at a fixed cruise altitude."""
+
+    name = 'flyer'
+    params_type = FlyerParams
+    params: FlyerParams
+    flies = True
+    passable_values = (FREE, LOW_OBSTACLE)
+
+    def validate(self) -> None:
+        _check_positive('flyer', self.params, (
+            'radius', 'height', 'mass', 'cruise_altitude', 'max_speed', 'max_acceleration',
+            'response_time', 'max_yaw_rate', 'max_yaw_acceleration'))
+        if self.params.cruise_altitude <= self.params.height / 2:
+            raise InvalidConfigError('flyer: cruise_altitude must exceed half its height')
+
+    @property
+    def footprint_radius(self) -> float:
+        return self.params.radius
+
+    @property
+    def ride_height(self) -> float:
+        return self.params.cruise_altitude
+
+    @property
+    def sensor_height(self) -> float:
+        return self.params.cruise_altitude
+
+    @property
+    def mass(self) -> float:
+        return self.params.mass
+
+    def _create_shape(self, client: int) -> int:
+        return p.createCollisionShape(p.GEOM_CYLINDER, radius=self.params.radius,
+                                      height=self.params.height, physicsClientId=client)
+
+    def _reset_model(self) -> None:
+        self._world_vx = 0.0
+        self._world_vy = 0.0
+        self._turn_rate = 0.0
+
+    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+        params = self.params
+        cos_yaw, sin_yaw = self._cos_yaw, self._sin_yaw
+        target_x = cos_yaw * command.vx - sin_yaw * command.vy
+        target_y = sin_yaw * command.vx + cos_yaw * command.vy
+        speed = math.hypot(target_x, target_y)
+        if speed > params.max_speed:
+            target_x *= params.max_speed / speed
+            target_y *= params.max_speed / speed
+        gain = min(1.0, dt / params.response_time)
+        change_x = (target_x - self._world_vx) * gain
+        change_y = (target_y - self._world_vy) * gain
+        change = math.hypot(change_x, change_y)
+        limit = params.max_acceleration * dt
+        if change > limit:
+            change_x *= limit / change
+            change_y *= limit / change
+        self._world_vx += change_x
+        self._world_vy += change_y
+        target_rate = _clip(command.wz, -params.max_yaw_rate, params.max_yaw_rate)
+        limit = params.max_yaw_acceleration * dt
+        self._turn_rate += _clip((target_rate - self._turn_rate) * gain, -limit, limit)
+        return (cos_yaw * self._world_vx + sin_yaw * self._world_vy,
+                -sin_yaw * self._world_vx + cos_yaw * self._world_vy, self._turn_rate)
+
+    def _observe(self, vx: float, vy: float, wz: float) -> None:
+        cos_yaw, sin_yaw = self._cos_yaw, self._sin_yaw
+        self._world_vx = cos_yaw * vx - sin_yaw * vy
+        self._world_vy = sin_yaw * vx + cos_yaw * vy
+        self._turn_rate = wz

@@ -1,0 +1,188 @@
+#!/usr/bin/env python3
+"""Benchmark of the ROS-free simulator core: physics and sensors alone, no messaging.
+
+The factory reference episode: the shipped 32x32 factory map (0.5 m cells), the
+diff_drive robot, a 360-beam scan every 50 ms tick (lidar at 20 Hz, 20 Hz control),
+the scenario's 2 dummy agents, and a scripted wander policy that drives around the
+map for the whole time limit (stuck and collision limits off, so every episode
+runs its full 60 sim seconds).
+
+It prints, per tick, the time spent in physics (agents, robot dynamics, pybullet
+steps, contact checks), sensors (lidar and clearance) and metrics, and the
+sim-time / time factor of physics + sensors, for the world as built (merged
+boxes, lidar on the ray-only scan surface), for merged boxes that the rays hit
+directly, for the baseline of one box per cell hit by the rays, and for the
+built world with the lidar at 10 Hz. It also times one 360-beam scan cast with
+``rayTestBatch`` against a per-beam ``rayTest`` loop.
+
+Times are this thread's CPU time by default (``--clock cpu``): on a shared
+machine, wall time also counts the time other processes hold the core.
+``--clock wall`` measures wall time. Usage::
+
+    python tests/benchmarks/bench_simulator_core.py [--episodes 3] [--clock cpu|wall]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+
+ROOT = Path(__file__).resolve().parents[2]
+for package in ('sessgan_gen', 'sessgan_sim'):
+    sys.path.insert(0, str(ROOT / package))
+
+from sessgan_gen.navigation import make_environment  # noqa: E402
+from sessgan_gen.token_map import load_example_map  # noqa: E402
+from sessgan_sim.episode import Episode, EpisodeConfig, Observation  # noqa: E402
+from sessgan_sim.robots import VelocityCommand  # noqa: E402
+from sessgan_sim.sensors import LidarConfig  # noqa: E402
+from sessgan_sim.world import SCAN_RAY_MASK, WorldStyle  # noqa: E402
+
+CLOCKS: dict[str, Callable[[], float]] = {'cpu': time.thread_time, 'wall': time.perf_counter}
+
+
+def wander(observation: Observation) -> VelocityCommand:
+    """A scripted policy that keeps driving: ahead when clear, turning away from walls."""
+    info = observation.lidar
+    ranges = np.where(np.isfinite(observation.scan), observation.scan, info.range_max)
+    angles = info.angles()
+    front = ranges[np.abs(angles) < 0.5].min()
+    left = ranges[(angles > 0.5) & (angles < 1.6)].mean()
+    right = ranges[(angles < -0.5) & (angles > -1.6)].mean()
+    if front < 0.6:
+        return VelocityCommand(0.0, 0.0, 1.5 if left >= right else -1.5)
+    turn = float(np.clip(1.5 * (left - right) / (left + right), -1.0, 1.0))
+    return VelocityCommand(min(0.8, float(front) - 0.4), 0.0, turn)
+
+
+@dataclass
+class Figures:
+    label: str
+    ticks: int
+    physics: float
+    sensors: float
+    metrics: float
+    sim_time: float
+    collisions: int
+
+    @property
+    def core(self) -> float:
+        """Physics and sensors."""
+        return self.physics + self.sensors
+
+    def per_tick_us(self, seconds: float) -> float:
+        return seconds / self.ticks * 1e6
+
+
+def run_episodes(label: str, style: WorldStyle, episodes: int, clock_name: str,
+                 lidar_rate_hz: float = 20.0) -> Figures:
+    """Run the reference episode ``episodes`` times (seeds 0..n-1); sum the profile."""
+    environment = make_environment(load_example_map('factory').cells, 'factory',
+                                   'factory-reference')
+    totals = Figures(label, 0, 0.0, 0.0, 0.0, 0.0, 0)
+    with Episode(clock=CLOCKS[clock_name]) as episode:
+        for seed in range(episodes):
+            config = EpisodeConfig(seed=seed, stuck_timeout=0.0, collision_limit=0,
+                                   world=style, lidar=LidarConfig(rate_hz=lidar_rate_hz))
+            observation = episode.reset(environment, config)
+            done = episode.done
+            while not done:
+                observation, done, _ = episode.step(wander(observation))
+            profile, metrics = episode.profile, episode.metrics()
+            totals.ticks += profile.ticks
+            totals.physics += profile.physics
+            totals.sensors += profile.sensors
+            totals.metrics += profile.metrics
+            totals.sim_time += metrics.simulation_time
+            totals.collisions += metrics.collisions
+    return totals
+
+
+def time_scan_casts(clock_name: str, repeats: int = 200) -> tuple[float, float]:
+    """Seconds per 360-beam scan in the reference map: one rayTestBatch vs a rayTest loop."""
+    clock = CLOCKS[clock_name]
+    environment = make_environment(load_example_map('factory').cells, 'factory', 'rays')
+    with Episode() as episode:
+        episode.reset(environment, EpisodeConfig())
+        client = episode._world.client  # noqa: SLF001 (benchmark reaches into the core)
+        x, y = episode.robot.position
+        height = episode.robot.sensor_height
+        angles = episode.lidar_info.angles()
+        starts = [[x, y, height]] * len(angles)
+        ends = np.stack([x + 10 * np.cos(angles), y + 10 * np.sin(angles),
+                         np.full(len(angles), height)], axis=1).tolist()
+        started = clock()
+        for _ in range(repeats):
+            p.rayTestBatch(starts, ends, numThreads=1, collisionFilterMask=SCAN_RAY_MASK,
+                           physicsClientId=client)
+        batch = (clock() - started) / repeats
+        started = clock()
+        for _ in range(repeats // 10):
+            for start, end in zip(starts, ends, strict=True):
+                p.rayTest(start, end, collisionFilterMask=SCAN_RAY_MASK,
+                          physicsClientId=client)
+        loop = (clock() - started) / (repeats // 10)
+    return batch, loop
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--episodes', type=int, default=3,
+                        help='reference episodes (60 sim seconds each) per world variant')
+    parser.add_argument('--clock', choices=sorted(CLOCKS), default='cpu',
+                        help="cpu: this thread's CPU time; wall: wall-clock time")
+    args = parser.parse_args(argv)
+
+    print(f'machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, '
+          f'load average {os.getloadavg()[0]:.2f}; python {platform.python_version()}; '
+          f'clock: {args.clock}')
+    config = EpisodeConfig()
+    print(f'reference episode: factory 32x32 @ 0.5 m, diff_drive, {config.lidar.beams} beams '
+          f'@ {config.lidar.rate_hz:g} Hz, control {config.control_rate_hz:g} Hz, physics '
+          f'{config.physics_rate_hz:g} Hz ({config.physics_steps_per_tick} steps/tick), '
+          f'2 agents, {args.episodes} x 60 s sim')
+    rows = [
+        run_episodes('merged + scan surface', WorldStyle(), args.episodes, args.clock),
+        run_episodes('merged, rays on boxes', WorldStyle(scan_surface=False), args.episodes,
+                     args.clock),
+        run_episodes('baseline: box per cell', WorldStyle(merge_obstacles=False,
+                                                          scan_surface=False),
+                     args.episodes, args.clock),
+        run_episodes('merged + surface, 10 Hz lidar', WorldStyle(), args.episodes, args.clock,
+                     lidar_rate_hz=10.0),
+    ]
+    print(f'{"world":<30} {"physics":>8} {"sensors":>8} {"metrics":>8} {"core":>8} '
+          f'{"factor":>8} {"+metrics":>8}')
+    print(f'{"":<30} {"us/tick":>8} {"us/tick":>8} {"us/tick":>8} {"us/tick":>8} '
+          f'{"sim/" + args.clock:>8} {"factor":>8}')
+    for row in rows:
+        factor = row.sim_time / row.core if row.core > 0 else math.inf
+        with_metrics = row.sim_time / (row.core + row.metrics)
+        print(f'{row.label:<30} {row.per_tick_us(row.physics):8.1f} '
+              f'{row.per_tick_us(row.sensors):8.1f} {row.per_tick_us(row.metrics):8.1f} '
+              f'{row.per_tick_us(row.core):8.1f} {factor:7.0f}x {with_metrics:7.0f}x')
+    merged, boxes, baseline = rows[:3]
+    print(f'merged + scan surface vs baseline (box per cell): core '
+          f'{baseline.core / merged.core:.2f}x faster, sensors '
+          f'{baseline.sensors / merged.sensors:.2f}x, physics '
+          f'{baseline.physics / merged.physics:.2f}x')
+    print(f'scan surface vs rays on the merged boxes: sensors '
+          f'{boxes.sensors / merged.sensors:.2f}x faster')
+    batch, loop = time_scan_casts(args.clock)
+    print(f'one 360-beam scan: rayTestBatch {batch * 1e6:.0f} us, per-beam rayTest loop '
+          f'{loop * 1e6:.0f} us ({loop / batch:.1f}x)')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,136 @@
+"""Dummy agents: seeded patrols through free space, away from the start, and real contacts."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.token_map import load_example_map
+from sessgan_sim.agents import AgentConfig, DummyAgents, PatrolPath
+from sessgan_sim.episode import Episode, EpisodeConfig
+from sessgan_sim.errors import InvalidConfigError
+from sessgan_sim.robots import VelocityCommand, create_robot
+from sessgan_sim.sensors import LidarConfig
+from sessgan_sim.world import World
+
+pytestmark = pytest.mark.unit
+
+STEP = 0.01
+
+
+def factory() -> Environment:
+    return make_environment(load_example_map('factory').cells, 'factory', 'factory')
+
+
+def spawn(environment: Environment, count: int, seed: int, robot: str = 'diff_drive',
+          config: AgentConfig | None = None):
+    """Spawn agents in a fresh world; return their patrol paths and first positions."""
+    with World() as world:
+        world.build(environment, STEP)
+        body = create_robot(robot)
+        body.spawn(world.client, environment.start)
+        agents = DummyAgents(config)
+        agents.spawn(world.client, environment, body, count, np.random.default_rng(seed))
+        return agents.paths, agents.positions.copy()
+
+
+def test_patrol_path_goes_back_and_forth():
+    path = PatrolPath(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]]))
+    assert path.length == pytest.approx(3.0)
+    assert path.position(0.0) == (0.0, 0.0)
+    assert path.position(1.0) == pytest.approx((1.0, 0.0))
+    assert path.position(2.5) == pytest.approx((2.0, 0.5))
+    assert path.position(3.0) == pytest.approx((2.0, 1.0))
+    assert path.position(4.5) == pytest.approx((1.5, 0.0))  # on the way back
+    assert path.position(6.0) == pytest.approx((0.0, 0.0))
+    assert path.position(7.0) == pytest.approx((1.0, 0.0))
+
+
+def test_a_one_point_path_stands_still():
+    path = PatrolPath(np.array([[1.0, 2.0]]))
+    assert path.length == 0.0
+    assert path.position(5.0) == (1.0, 2.0)
+
+
+def test_agents_patrol_free_cells_away_from_the_start():
+    environment = factory()
+    paths, positions = spawn(environment, 4, seed=1)
+    assert len(paths) == 4
+    start = environment.start
+    for path, (x, y) in zip(paths, positions, strict=True):
+        assert math.hypot(x - start.x, y - start.y) >= AgentConfig().min_start_distance
+        assert len(path.points) >= AgentConfig().min_patrol_cells
+        for px, py in path.points:
+            row, col = environment.cell_of(px, py)
+            assert environment.occupancy[row, col] == 0
+        steps = np.abs(np.diff(path.points, axis=0)).sum(axis=1)
+        assert np.allclose(steps, environment.resolution)  # 4-connected, cell to cell
+
+
+def test_agent_patrols_are_seeded():
+    environment = factory()
+    first = spawn(environment, 3, seed=7)
+    again = spawn(environment, 3, seed=7)
+    other = spawn(environment, 3, seed=8)
+    def same(a, b):
+        return all(np.array_equal(x.points, y.points) for x, y in zip(a[0], b[0], strict=True))
+
+    assert same(first, again)
+    assert not same(first, other)
+
+
+def test_flying_agents_may_cross_low_obstacles():
+    environment = make_environment(load_example_map('drone').cells, 'drone', 'drone')
+    paths, _ = spawn(environment, 6, seed=3, robot='flyer')
+    cells = [environment.occupancy[environment.cell_of(x, y)] for path in paths
+             for x, y in path.points]
+    assert set(cells) <= {0, 50}
+
+
+def test_no_room_far_from_the_start_means_no_agents():
+    rows = np.zeros((3, 3), dtype=np.int8)
+    environment = Environment('tiny', 'factory', rows, 0.5, Pose2D(0.75, 0.75), Pose2D(0.25, 0.25))
+    paths, positions = spawn(environment, 2, seed=0)
+    assert paths == [] and positions.shape == (0, 2)
+
+
+def test_bad_agent_config_is_rejected():
+    with pytest.raises(InvalidConfigError, match='speed'):
+        DummyAgents(AgentConfig(speed=0.0))
+
+
+def test_agents_move_at_their_speed():
+    with Episode() as episode:
+        episode.reset(factory(), EpisodeConfig(dummy_agents=2, stuck_timeout=0.0))
+        before = episode.agents.positions.copy()
+        paths = episode.agents.paths
+        for _ in range(10):
+            episode.step(VelocityCommand())
+        after = episode.agents.positions
+        expected = [path.position(0.5 * 0.5) for path in paths]  # 0.5 m/s for 0.5 s
+        np.testing.assert_allclose(after, expected)
+        assert not np.allclose(before, after)
+
+
+def test_an_agent_running_into_the_robot_is_a_collision():
+    # A one-cell corridor: the agent patrols ahead of the robot, which drives into it.
+    rows = np.zeros((3, 30), dtype=np.int8)
+    rows[0, :] = rows[2, :] = 100
+    environment = Environment('corridor', 'factory', rows, 0.5, Pose2D(0.25, 0.75),
+                              Pose2D(14.75, 0.75))
+    config = EpisodeConfig(dummy_agents=1, stuck_timeout=0.0, collision_limit=0,
+                           lidar=LidarConfig(noise_std=0.0))
+    with Episode() as episode:
+        episode.reset(environment, config)
+        hit = False
+        for _ in range(1000):
+            observation = episode.step(VelocityCommand(0.3, 0.0, 0.0)).observation
+            if observation.in_contact:
+                hit = True
+                break
+        assert hit
+        x_agent = episode.agents.positions[0, 0]
+        assert observation.pose.x < x_agent
+        assert episode.metrics().collisions == 1

@@ -1,0 +1,323 @@
+"""Episodes: outcomes, invalid environments and commands, metrics, determinism."""
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.token_map import load_example_map
+from sessgan_sim.episode import Episode, EpisodeConfig, Observation, geodesic_field
+from sessgan_sim.errors import EpisodeError, InvalidConfigError
+from sessgan_sim.metrics import Outcome
+from sessgan_sim.robots import VelocityCommand
+from sessgan_sim.sensors import LidarConfig
+
+pytestmark = pytest.mark.unit
+
+VALUES = {'#': 100, 'O': 50, '.': 0}
+CORRIDOR = ['################', '#..............#', '#..............#', '################']
+"""Interior x in [0.5, 7.5] m, y in [0.5, 1.5] m (0.5 m cells)."""
+
+
+def environment(rows, start, goal, scenario='factory', **fields) -> Environment:
+    grid = np.array([[VALUES[char] for char in row] for row in reversed(rows)], dtype=np.int8)
+    return Environment('episode', scenario, grid, 0.5, Pose2D(*start), Pose2D(*goal), **fields)
+
+
+def corridor(**fields) -> Environment:
+    return environment(CORRIDOR, (1.0, 1.0, 0.0), (7.0, 1.0), **fields)
+
+
+def config(**overrides) -> EpisodeConfig:
+    base = {'lidar': LidarConfig(noise_std=0.0), 'dummy_agents': 0}
+    base.update(overrides)
+    return EpisodeConfig(**base)
+
+
+def run(episode: Episode, policy, limit: int = 10000):
+    """Step ``policy`` (a command, or a function of the observation) until the episode ends."""
+    observation = None
+    for _ in range(limit):
+        if episode.done:
+            break
+        command = policy(observation) if callable(policy) else policy
+        observation = episode.step(command).observation
+    return episode.metrics()
+
+
+def wander(observation: Observation | None) -> VelocityCommand:
+    """A scan-driven policy whose commands depend on every observation bit."""
+    if observation is None:
+        return VelocityCommand(0.3, 0.0, 0.0)
+    ranges = np.nan_to_num(observation.scan, posinf=10.0, neginf=0.0)
+    front = float(ranges[150:210].min())
+    turn = float(ranges[200:300].mean() - ranges[60:160].mean())
+    return VelocityCommand(min(0.8, front - 0.4), 0.0, float(np.clip(turn, -1.5, 1.5)))
+
+
+@pytest.fixture
+def episode():
+    with Episode() as running:
+        yield running
+
+
+def test_reset_returns_the_first_observation(episode):
+    observation = episode.reset(corridor(), config())
+    assert observation.time == 0.0
+    assert observation.pose == Pose2D(1.0, 1.0, 0.0)
+    assert observation.goal == Pose2D(7.0, 1.0)
+    assert observation.scan_updated and not observation.in_contact
+    assert observation.lidar == LidarConfig().info
+    assert not episode.done and episode.outcome is None
+    assert episode.config.robot == 'diff_drive'  # the scenario's robot
+
+
+def test_driving_to_the_goal_reaches_it(episode):
+    episode.reset(corridor(), config())
+    metrics = run(episode, VelocityCommand(1.0, 0.0, 0.0))
+    assert metrics.outcome is Outcome.GOAL_REACHED
+    assert metrics.final_distance_to_goal <= episode.config.goal_tolerance
+    assert metrics.distance_travelled == pytest.approx(6.0 - metrics.final_distance_to_goal,
+                                                       abs=0.06)
+    assert metrics.collisions == 0 and metrics.risk_score == 0.0
+    assert metrics.ticks == round(metrics.simulation_time * 20)
+    assert 'reached the goal' in metrics.detail
+
+
+def test_standing_still_ends_stuck_or_at_the_time_limit(episode):
+    episode.reset(corridor(), config(stuck_timeout=2.0))
+    metrics = run(episode, VelocityCommand())
+    assert metrics.outcome is Outcome.STUCK
+    assert metrics.simulation_time == pytest.approx(2.0)
+    assert 'no progress' in metrics.detail
+    episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=3.0))
+    metrics = run(episode, VelocityCommand())
+    assert metrics.outcome is Outcome.TIMEOUT
+    assert metrics.simulation_time == pytest.approx(3.0)
+    assert metrics.ticks == 60
+
+
+def test_progress_is_measured_along_the_free_space():
+    passable = np.array([[1, 1, 1], [0, 0, 1], [1, 1, 1]], dtype=bool)
+    field = geodesic_field(passable, (0, 0))
+    assert field[2, 0] == 6  # around the wall, not 2 cells straight up
+    assert np.isinf(field[1, 0])
+    assert np.isinf(geodesic_field(passable, (1, 0))).all()
+
+
+def test_a_detour_away_from_the_goal_is_not_stuck(episode):
+    # The goal lies behind a wall: the way round first leads away from it.
+    rows = ['##########', '#........#', '#.######.#', '#........#', '##########']
+    env = environment(rows, (1.75, 1.75, math.pi), (1.75, 0.75))
+    observation = episode.reset(env, config(stuck_timeout=1.0, goal_tolerance=0.2))
+    while observation.pose.x > 0.8 and not episode.done:
+        observation = episode.step(VelocityCommand(1.0, 0.0, 0.0)).observation
+    assert episode.outcome is None
+    # Straight-line distance to the goal grew; the distance along free space shrank.
+    assert math.hypot(observation.pose.x - 1.75, observation.pose.y - 0.75) > 1.3
+
+
+def test_pressing_into_a_wall_is_one_collision(episode):
+    episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=4.0))
+    metrics = run(episode, VelocityCommand(-0.3, 0.0, 0.0))  # back into the west wall
+    assert metrics.collisions == 1
+    assert metrics.outcome is Outcome.TIMEOUT
+    assert metrics.min_clearance == 0.0
+
+
+def test_repeated_crashes_end_at_the_collision_limit(episode):
+    episode.reset(corridor(), config(collision_limit=3, stuck_timeout=0.0))
+
+    def bump(observation):
+        # Back into the west wall, pull away, and back again.
+        if observation is None or observation.time % 2.0 < 1.0:
+            return VelocityCommand(-0.3, 0.0, 0.0)
+        return VelocityCommand(0.3, 0.0, 0.0)
+
+    metrics = run(episode, bump, limit=400)
+    assert metrics.outcome is Outcome.COLLISION_LIMIT
+    assert metrics.collisions == 3
+    assert '3 collisions' in metrics.detail
+
+
+def test_risk_score_follows_its_definition(episode):
+    env = environment(CORRIDOR, (1.0, 0.8, 0.0), (7.0, 1.0))  # 0.1 m above the south wall
+    episode.reset(env, config(stuck_timeout=0.0, time_limit=4.0))
+
+    def graze(observation):
+        # Wait close to the wall, then back along it into the west wall and stay there.
+        if observation is None or observation.time < 1.0 or observation.in_contact:
+            return VelocityCommand()
+        return VelocityCommand(-0.3, 0.0, 0.0)
+
+    metrics = run(episode, graze)
+    assert metrics.collisions == 1
+    assert 1.0 <= metrics.proximity_time < metrics.simulation_time
+    assert metrics.risk_score == pytest.approx(
+        metrics.collisions * metrics.proximity_time / metrics.simulation_time)
+
+
+def test_feasible_is_copied_from_the_environment(episode):
+    episode.reset(corridor(feasible=False), config(time_limit=0.5))
+    metrics = run(episode, VelocityCommand())
+    assert metrics.feasible is False
+
+
+@pytest.mark.parametrize('start, words', [
+    ((0.25, 1.0, 0.0), ['overlaps a wall', 'start inside it']),
+    ((0.6, 1.0, 0.0), ['overlaps a wall by 0.100 m']),
+])
+def test_a_start_in_or_against_a_wall_is_an_invalid_environment(episode, start, words):
+    observation = episode.reset(environment(CORRIDOR, start, (7.0, 1.0)), config())
+    assert episode.done and episode.outcome is Outcome.INVALID_ENVIRONMENT
+    metrics = episode.metrics()
+    for word in words:
+        assert word in metrics.detail
+    assert metrics.ticks == 0 and metrics.simulation_time == 0.0 and metrics.risk_score == 0.0
+    assert np.isposinf(observation.scan).all()
+    with pytest.raises(EpisodeError, match='invalid_environment'):
+        episode.step(VelocityCommand())
+
+
+def test_a_ground_robot_starting_on_a_low_obstacle_is_invalid(episode):
+    rows = ['######', '#.O..#', '######']
+    episode.reset(environment(rows, (1.25, 0.75, 0.0), (2.25, 0.75), 'drone'),
+                  config(robot='diff_drive'))
+    assert episode.outcome is Outcome.INVALID_ENVIRONMENT
+    assert 'low obstacle' in episode.metrics().detail
+    episode.reset(environment(rows, (1.25, 0.75, 0.0), (2.25, 0.75), 'drone'), config())
+    assert not episode.done  # the flyer hovers above it
+
+
+@pytest.mark.parametrize('change, words', [
+    ({'resolution': 0.0}, 'resolution'),
+    ({'resolution': math.nan}, 'resolution'),
+    ({'occupancy': np.zeros(5, dtype=np.int8)}, '2-D'),
+    ({'occupancy': np.full((3, 3), 7, dtype=np.int8)}, 'occupancy 7'),
+    ({'scenario': 'moon'}, 'unknown scenario'),
+    ({'start': Pose2D(math.inf, 1.0)}, 'not finite'),
+    ({'goal': Pose2D(99.0, 1.0)}, 'outside'),
+])
+def test_malformed_environments_end_with_a_clear_detail(episode, change, words):
+    env = dataclasses.replace(corridor(), **change)
+    episode.reset(env, config())
+    assert episode.outcome is Outcome.INVALID_ENVIRONMENT
+    assert words in episode.metrics().detail
+
+
+def test_an_unknown_robot_is_an_invalid_environment(episode):
+    episode.reset(corridor(), config(robot='tank'))
+    assert episode.outcome is Outcome.INVALID_ENVIRONMENT
+    assert episode.metrics().detail == "unknown robot 'tank'; known robots: car, diff_drive, flyer"
+    observation = episode.reset(corridor(), config())  # the next episode runs normally
+    assert not episode.done and observation.pose.x == 1.0
+
+
+def test_non_finite_commands_become_stops_and_are_counted(episode):
+    episode.reset(corridor(), config(stuck_timeout=0.0))
+    for _ in range(10):
+        episode.step(VelocityCommand(0.5, 0.0, 0.0))
+    moving = episode.step(VelocityCommand(0.5, 0.0, 0.0)).observation
+    for command in [(math.nan, 0.0, 0.0), (0.0, math.inf, 0.0), (0.1, 0.0, -math.inf)]:
+        result = episode.step(command)
+    assert not result.done
+    assert result.observation.twist.vx < moving.twist.vx  # braking toward a stop
+    metrics = episode.metrics()
+    assert metrics.invalid_commands == 3
+    assert '3 command(s) with NaN or infinite components' in metrics.detail
+
+
+def test_abort_ends_the_episode_with_the_given_outcome(episode):
+    episode.reset(corridor(), config())
+    episode.step(VelocityCommand(0.5, 0.0, 0.0))
+    episode.abort('controller_unresponsive', 'no cmd_vel for 5.0 s of wall time')
+    assert episode.done and episode.outcome is Outcome.CONTROLLER_UNRESPONSIVE
+    episode.abort(Outcome.TIMEOUT, 'ignored')  # the first outcome stands
+    metrics = episode.metrics()
+    assert metrics.outcome is Outcome.CONTROLLER_UNRESPONSIVE
+    assert metrics.detail == 'no cmd_vel for 5.0 s of wall time'
+    assert metrics.ticks == 1
+    with pytest.raises(EpisodeError, match='over'):
+        episode.step(VelocityCommand())
+
+
+def test_using_an_episode_out_of_order_says_what_to_do():
+    with Episode() as episode:
+        with pytest.raises(EpisodeError, match='reset'):
+            episode.step(VelocityCommand())
+        with pytest.raises(EpisodeError, match='reset'):
+            episode.metrics()
+        with pytest.raises(EpisodeError, match='reset'):
+            episode.abort('timeout')
+
+
+@pytest.mark.parametrize('overrides, words', [
+    ({'control_rate_hz': 0.0}, 'control_rate_hz'),
+    ({'physics_rate_hz': 10.0}, 'at least'),
+    ({'time_limit': -1.0}, 'time_limit'),
+    ({'dummy_agents': -2}, 'dummy_agents'),
+    ({'lidar': LidarConfig(beams=0)}, 'beams'),
+])
+def test_bad_config_raises(episode, overrides, words):
+    with pytest.raises(InvalidConfigError, match=words):
+        episode.reset(corridor(), EpisodeConfig(**overrides))
+
+
+def test_scenario_defaults_fill_the_config():
+    env = make_environment(load_example_map('racetrack').cells, 'racetrack', 'track')
+    with Episode() as episode:
+        episode.reset(env)
+        resolved = episode.config
+    assert (resolved.robot, resolved.time_limit, resolved.proximity_distance) == (
+        'car', 120.0, 0.5)
+    assert resolved.dummy_agents == 0 and resolved.goal_tolerance == 1.0
+    assert resolved.physics_steps_per_tick == 5
+    assert resolved.physics_timestep == pytest.approx(0.01)
+
+
+def test_metrics_serialise_to_json(episode):
+    episode.reset(corridor(), config(time_limit=0.5))
+    metrics = run(episode, VelocityCommand(0.2, 0.0, 0.0))
+    data = json.loads(json.dumps(metrics.to_dict()))
+    assert data['outcome'] == 'timeout' and data['ticks'] == 10
+
+
+@pytest.mark.parametrize('scenario', ['factory', 'racetrack', 'drone'])
+def test_each_example_map_runs_with_its_robot(episode, scenario):
+    env = make_environment(load_example_map(scenario).cells, scenario, scenario)
+    observation = episode.reset(env)
+    assert not episode.done
+    for _ in range(20):
+        observation = episode.step(wander(observation)).observation
+    assert np.isfinite(observation.pose.x) and episode.metrics().ticks == 20
+
+
+def record(episode: Episode, env: Environment, seed: int, ticks: int = 200):
+    observation = episode.reset(env, EpisodeConfig(seed=seed, stuck_timeout=0.0))
+    scans, poses = [np.array(observation.scan)], [observation.pose]
+    for _ in range(ticks):
+        if episode.done:
+            break
+        observation = episode.step(wander(observation)).observation
+        scans.append(np.array(observation.scan))
+        poses.append(observation.pose)
+    return np.array(scans), poses, episode.metrics(), episode.agents.positions.copy()
+
+
+def test_same_seed_same_commands_same_everything():
+    env = make_environment(load_example_map('factory').cells, 'factory', 'factory')
+    with Episode() as first, Episode() as second:
+        a = record(first, env, seed=11)
+        b = record(second, env, seed=11)
+        c = record(first, env, seed=11)  # the same Episode again: nothing carries over
+        d = record(second, env, seed=12)
+    for other in (b, c):
+        np.testing.assert_array_equal(a[0], other[0])
+        assert a[1] == other[1]
+        assert a[2] == other[2]
+        np.testing.assert_array_equal(a[3], other[3])
+    assert not np.array_equal(a[0][0], d[0][0])

@@ -1,0 +1,80 @@
+"""Metric definitions: risk score, contact events, proximity time, JSON output."""
+
+import json
+import math
+
+import pytest
+
+from sessgan_sim.metrics import EpisodeMetrics, MetricsRecorder, Outcome, risk_score
+
+pytestmark = pytest.mark.unit
+
+
+def test_risk_score_is_collisions_times_proximity_share():
+    assert risk_score(3, 2.0, 8.0) == pytest.approx(0.75)
+    assert risk_score(0, 5.0, 10.0) == 0.0
+    assert risk_score(4, 0.0, 10.0) == 0.0
+
+
+def test_risk_score_is_zero_without_simulation_time():
+    assert risk_score(2, 0.0, 0.0) == 0.0
+
+
+def test_contact_events_count_transitions_only():
+    recorder = MetricsRecorder(clearance_range=1.0)
+    states = [False, True, True, True, False, False, True, False, True, True]
+    started = [recorder.record_contact(state) for state in states]
+    assert recorder.collisions == 3
+    assert started == [False, True, False, False, False, False, True, False, True, False]
+
+
+def test_proximity_time_counts_only_close_ticks_without_contact():
+    recorder = MetricsRecorder(clearance_range=1.0)
+    recorder.record_tick(0.05, clearance=0.1, touching=False, proximity_distance=0.25)
+    recorder.record_tick(0.05, clearance=0.3, touching=False, proximity_distance=0.25)
+    recorder.record_tick(0.05, clearance=0.0, touching=True, proximity_distance=0.25)
+    recorder.record_tick(0.05, clearance=0.2, touching=False, proximity_distance=0.25)
+    assert recorder.ticks == 4
+    assert recorder.proximity_time == pytest.approx(0.10)
+    assert recorder.min_clearance == 0.0
+
+
+def test_min_clearance_is_capped_at_the_clearance_range():
+    recorder = MetricsRecorder(clearance_range=0.25)
+    recorder.record_tick(0.05, clearance=0.25, touching=False, proximity_distance=0.25)
+    assert recorder.min_clearance == 0.25
+    assert recorder.proximity_time == 0.0
+
+
+def test_snapshot_applies_the_risk_formula():
+    recorder = MetricsRecorder(clearance_range=1.0)
+    recorder.record_contact(True)
+    recorder.record_contact(False)
+    recorder.record_contact(True)
+    for _ in range(10):
+        recorder.record_tick(0.1, clearance=0.1, touching=False, proximity_distance=0.25)
+    metrics = recorder.snapshot(simulation_time=4.0, feasible=True, distance_to_goal=2.5,
+                                outcome=Outcome.TIMEOUT, detail='time limit')
+    assert metrics.collisions == 2
+    assert metrics.proximity_time == pytest.approx(1.0)
+    assert metrics.risk_score == pytest.approx(2 * 1.0 / 4.0)
+    assert metrics.outcome is Outcome.TIMEOUT
+
+
+def test_to_dict_is_json_ready():
+    metrics = EpisodeMetrics(
+        collisions=1, proximity_time=0.5, simulation_time=2.0, risk_score=0.25, feasible=False,
+        min_clearance=0.0, distance_travelled=1.0, final_distance_to_goal=math.inf, ticks=40,
+        outcome=Outcome.STUCK, invalid_commands=2, detail='x')
+    data = metrics.to_dict()
+    assert data['outcome'] == 'stuck'
+    assert data['final_distance_to_goal'] is None
+    assert json.loads(json.dumps(data)) == data
+
+
+def test_outcome_values_are_the_contract_strings():
+    assert {outcome.value for outcome in Outcome} == {
+        'goal_reached', 'collision_limit', 'timeout', 'stuck', 'controller_unresponsive',
+        'invalid_environment'}
+    assert Outcome('stuck') is Outcome.STUCK
+    assert Outcome.STUCK == 'stuck'

@@ -24,7 +24,8 @@ from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
@@ -53,6 +54,35 @@ LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 FAILURE_OUTCOMES = ('timeout', 'stuck')
+
+
+class CommandReceiver:
+    """Takes ``cmd_vel`` messages straight from a wait set, without an executor.
+
+    Lockstep waits for one command per tick; an executor's Python overhead per wake-up costs
+    more than the whole round trip, and the subscription's node is spun by nobody else.
+    """
+
+    def __init__(self, node, msg_type, topic: str) -> None:
+        self.subscription = node.create_subscription(msg_type, topic, lambda _: None, 10)
+        self.wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, node.context.handle)
+
+    def take(self):
+        """The oldest received command, or None."""
+        taken = self.subscription.handle.take_message(self.subscription.msg_type, False)
+        return None if taken is None else taken[0]
+
+    def take_all(self) -> list:
+        commands = []
+        while (command := self.take()) is not None:
+            commands.append(command)
+        return commands
+
+    def wait(self, timeout: float) -> None:
+        """Block until a command is ready or ``timeout`` seconds pass."""
+        self.wait_set.clear_entities()
+        self.wait_set.add_subscription(self.subscription.handle)
+        self.wait_set.wait(max(0, int(timeout * 1e9)))
 
 
 @dataclass
@@ -105,17 +135,11 @@ class SimulatorNode(Node):
         self.topics = {name: self.resolve_topic_name(name) for name in (
             'scan', 'odom', 'tf', 'tf_static', 'clock', 'map', 'goal_pose', 'cmd_vel')}
 
-        # Commands are received by a private node spun from the episode thread itself, so
-        # lockstep never waits on a thread hand-off of the main executor.
-        self.command_node = rclpy.create_node(
-            self.get_name() + '_cmd_vel', namespace=self.get_namespace(), context=self.context)
         stamped = bool(self.get_parameter('use_stamped_cmd_vel').value)
         self.command_type = TwistStamped if stamped else Twist
-        self.commands: list = []
-        self.command_node.create_subscription(
-            self.command_type, 'cmd_vel', self.commands.append, 10)
-        self.command_executor = SingleThreadedExecutor(context=self.context)
-        self.command_executor.add_node(self.command_node)
+        self.command_node = rclpy.create_node(
+            self.get_name() + '_cmd_vel', namespace=self.get_namespace(), context=self.context)
+        self.commands = CommandReceiver(self.command_node, self.command_type, 'cmd_vel')
 
         self.action_server = ActionServer(
             self, EvaluateEnvironment, 'evaluate', execute_callback=self.execute,
@@ -275,32 +299,29 @@ class SimulatorNode(Node):
         pose = observation.pose
         odom = rm.odom_msg(stamp, pose.x, pose.y, pose.yaw, *observation.twist)
         self.publish(self.odom_publisher, 'odom', 'nav_msgs/msg/Odometry', odom, t, recording)
-        self.publish(self.tf_publisher, 'tf', 'tf2_msgs/msg/TFMessage',
-                     rm.dynamic_tf_msg(stamp, odom), t, recording)
+        if recording is not None or self.tf_publisher.get_subscription_count() > 0:
+            # Building tf costs more than the check; most controllers under test use odom.
+            self.publish(self.tf_publisher, 'tf', 'tf2_msgs/msg/TFMessage',
+                         rm.dynamic_tf_msg(stamp, odom), t, recording)
         lidar = observation.lidar
         self.publish(self.scan_publisher, 'scan', 'sensor_msgs/msg/LaserScan', rm.scan_msg(
             stamp, observation.scan, lidar.angle_min, lidar.angle_increment, lidar.range_min,
             lidar.range_max, lidar.scan_time), t, recording)
 
-    def drain_commands(self) -> None:
-        while True:
-            self.command_executor.spin_once(timeout_sec=0.0)
-            if not self.commands:
-                return
-            self.commands.clear()
-
     def wait_for_command(self, deadline: float, republish) -> object | None:
         """The next command received before the wall-clock ``deadline``, else None."""
         next_republish = time.monotonic() + 1.0
-        while not self.commands:
+        while True:
+            command = self.commands.take()
+            if command is not None:
+                return command
             now = time.monotonic()
             if now >= deadline:
                 return None
             if republish is not None and now >= next_republish:
                 republish()  # covers a controller that matched our publishers only now
                 next_republish = now + 1.0
-            self.command_executor.spin_once(timeout_sec=min(deadline, next_republish) - now)
-        return self.commands.pop(0)
+            self.commands.wait(min(deadline, next_republish) - now)
 
     def step_loop(self, episode, observation, recording, goal_handle):
         lockstep = self.get_parameter('mode').value != 'clocked'
@@ -314,7 +335,7 @@ class SimulatorNode(Node):
         wall_origin = time.monotonic()
         first = True
         ticks = 0
-        self.drain_commands()
+        self.commands.take_all()  # stale answers of an earlier episode
         while not episode.done:
             if goal_handle is not None and goal_handle.is_cancel_requested:
                 episode.abort(Outcome.TIMEOUT, 'cancelled by the evaluate client')
@@ -332,13 +353,12 @@ class SimulatorNode(Node):
                 command = received
             else:
                 tick_deadline = wall_origin + (observation.time + dt) / rtf
-                while time.monotonic() < tick_deadline:
-                    self.command_executor.spin_once(
-                        timeout_sec=max(0.0, tick_deadline - time.monotonic()))
-                if self.commands:
-                    command = self.commands[-1]
-                    self.commands.clear()
-                    last_command_wall = time.monotonic()
+                while (remaining := tick_deadline - time.monotonic()) > 0:
+                    self.commands.wait(remaining)
+                    received = self.commands.take_all()
+                    if received:
+                        command = received[-1]
+                        last_command_wall = time.monotonic()
                 limit = startup_timeout if command is None else timeout
                 if time.monotonic() - last_command_wall > limit:
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,

@@ -197,6 +197,7 @@ class Campaign:
         sample_generations = set(report_generations(config.generations - 1))
         progress = ProgressPrinter()
         last_tokens: list[list[np.ndarray]] = []
+        first_generation = algorithm.generation
         while algorithm.generation < config.generations:
             generation = algorithm.generation
             self.store.save_checkpoint(generation, algorithm.state_dict(),
@@ -252,11 +253,15 @@ class Campaign:
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
             done = generation + 1
+            per_generation = elapsed / (done - first_generation)
             self.log(
                 f'generation {generation}: mean risk {fmt(summary["mean_risk_score"])}, '
                 f'collisions {fmt(summary["mean_collisions"])}, feasible '
                 f'{summary["feasible_fraction"]:.0%}, TPKL {fmt(summary["mean_tpkl"])}, best '
-                f'fitness {summary["best_fitness"]:.3f} | elapsed {format_duration(elapsed)}')
+                f'fitness {summary["best_fitness"]:.3f} | {done}/{config.generations} '
+                f'generations, {60 / per_generation:.1f}/min, elapsed '
+                f'{format_duration(elapsed)}, ETA '
+                f'{format_duration(per_generation * (config.generations - done))}')
             if done < config.generations:
                 self.store.save_checkpoint(done, algorithm.state_dict(),
                                            {'tpkl_reference': tpkl_reference})

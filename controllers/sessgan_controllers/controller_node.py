@@ -5,10 +5,13 @@ Subscribes ``scan`` (sensor_msgs/LaserScan), ``odom`` (nav_msgs/Odometry) and
 (geometry_msgs/Twist, or TwistStamped with ``use_stamped_cmd_vel``). Topic
 names are relative, so a namespace (``-r __ns:=/w0``) moves them all.
 
-One command is published per received scan, computed from that scan and the
-latest odometry: a lockstep simulator that publishes a tick's odom, then its
-scan, and waits for ``cmd_vel`` gets exactly one answer per tick. Without a
-goal, odometry, or once the goal is reached, the command is zero. Every
+One command is published per received scan, computed from that scan, the
+odometry of the same tick (same stamp, or newer) and the goal: a lockstep
+simulator that publishes a tick's odom, then its scan, and waits for
+``cmd_vel`` gets exactly one answer per tick, whatever order the executor
+hands the messages over in. A scan waits for its odometry and for a goal
+(sim time going back starts a new episode: the old goal and pose are
+dropped). Once the goal is reached the command is zero. Every
 message on ``goal_pose`` is a new goal (as for Nav2's bt_navigator), even at
 the same position: a new episode may reuse a goal.
 
@@ -80,6 +83,8 @@ class ControllerNode(Node):
         self._state: RobotState | None = None
         self._odom_stamp: int | None = None
         self._waiting_scan: tuple[int, LaserScan] | None = None
+        self._last_scan_stamp: int | None = None
+        self._goal_since_last_scan = False
         self._goal: Goal | None = None
         self._goal_reached = False
         self._warned_no_odom = False
@@ -137,19 +142,35 @@ class ControllerNode(Node):
     def _on_odom(self, msg: Odometry) -> None:
         self._state = state_from_odom(msg)
         self._odom_stamp = _nanoseconds(msg.header.stamp)
-        if self._waiting_scan is not None and self._odom_stamp >= self._waiting_scan[0]:
-            self._answer(self._waiting_scan[1])
+        self._answer_if_ready()
 
     def _on_scan(self, msg: LaserScan) -> None:
-        # Answer a scan with the odometry of the same tick: the executor may hand us the scan
-        # before the odom published just ahead of it, and a stale pose would make the
-        # command (and so the whole episode) depend on callback order.
         stamp = _nanoseconds(msg.header.stamp)
-        if self._odom_stamp is not None and self._odom_stamp < stamp and \
-                self._waiting_scan is None:
-            self._waiting_scan = (stamp, msg)
+        if self._last_scan_stamp is not None and stamp < self._last_scan_stamp:
+            # Sim time went back: a new episode. Odometry newer than this scan, and a goal
+            # that came before the previous episode's last scan, belong to the old episode.
+            if self._odom_stamp is not None and self._odom_stamp > stamp:
+                self._state, self._odom_stamp = None, None
+            if not self._goal_since_last_scan:
+                self._goal = None
+        self._last_scan_stamp = stamp
+        self._goal_since_last_scan = False
+        # A newer scan replaces one still waiting: answer only the latest tick.
+        self._waiting_scan = (stamp, msg)
+        self._answer_if_ready()
+
+    def _answer_if_ready(self) -> None:
+        """Answer the waiting scan once its tick's odometry and a goal are known.
+
+        The executor may hand us a scan before the odom or the goal published just ahead of
+        it; answering then, with a stale pose or no goal, would make the command (and so a
+        lockstep episode) depend on callback order instead of on the robot's state.
+        """
+        if self._waiting_scan is None or self._goal is None or self._odom_stamp is None:
             return
-        self._answer(msg)
+        stamp, msg = self._waiting_scan
+        if self._odom_stamp >= stamp:
+            self._answer(msg)
 
     def _on_goal(self, msg: PoseStamped) -> None:
         goal = goal_from_pose(msg)
@@ -162,10 +183,12 @@ class ControllerNode(Node):
             self.get_logger().warning(
                 f'Goal in frame {frame!r}: read as map coordinates (map = odom here)')
         self._goal = goal
+        self._goal_since_last_scan = True
         self._goal_reached = False
         self._controller.reset()
         self.get_logger().info(
             f'New goal ({goal.x:.2f}, {goal.y:.2f}) in frame {msg.header.frame_id!r}')
+        self._answer_if_ready()
 
     def _answer(self, msg: LaserScan) -> None:
         self._waiting_scan = None

@@ -240,7 +240,13 @@ class SimulatorNode(Node):
         episode = self.episode
         observation = episode.reset(environment, config)
         config = episode.config  # resolved: scenario defaults filled in
+        startup_timeout = float(self.get_parameter('controller_startup_timeout').value)
         if episode.done:
+            metrics = episode.metrics()
+        elif not self.wait_for_controller(startup_timeout):
+            episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                          f'no controller subscribed to scan and published cmd_vel within '
+                          f'{startup_timeout:.1f} s wall time')
             metrics = episode.metrics()
         else:
             self.publish_episode_start(environment, episode, observation, recording)
@@ -277,13 +283,27 @@ class SimulatorNode(Node):
         self.publish(self.goal_publisher, 'goal_pose', 'geometry_msgs/msg/PoseStamped',
                      rm.goal_msg(stamp, goal.x, goal.y, goal.yaw), observation.time, recording)
 
-    def republish_start(self, episode, observation) -> None:
-        """Resend the goal and first tick to a controller that matched only now (its volatile
-        goal_pose reader missed the first goal), without recording them twice."""
+    def wait_for_controller(self, timeout: float) -> bool:
+        """Wait until a controller reads our scan and publishes cmd_vel.
+
+        A reliable publisher delivers every message to readers it has matched, so once it
+        sees the controller no tick is ever published twice (a repeated tick would earn a
+        second answer and shift every later command by one tick).
+        """
+        deadline = time.monotonic() + timeout
+        while (self.scan_publisher.get_subscription_count() == 0
+               or self.command_node.count_publishers(self.topics['cmd_vel']) == 0):
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
+        return True
+
+    def republish_goal(self, episode, observation) -> None:
+        """Resend the goal to a controller whose volatile goal_pose reader (Nav2's is) joined
+        after the first one; not recorded twice."""
         goal = episode.environment.goal
         self.goal_publisher.publish(
             rm.goal_msg(rm.time_msg(observation.time), goal.x, goal.y, goal.yaw))
-        self.publish_tick(episode, observation, None)
 
     def publish(self, publisher, topic: str, msgtype: str, message, sim_time: float,
                 recording: Recording | None) -> None:
@@ -345,7 +365,7 @@ class SimulatorNode(Node):
                 limit = startup_timeout if first else timeout
                 received = self.wait_for_command(
                     time.monotonic() + limit,
-                    (lambda: self.republish_start(episode, observation)) if first else None)
+                    (lambda: self.republish_goal(episode, observation)) if first else None)
                 if received is None:
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
                                   f'no cmd_vel within {limit:.1f} s wall time')
@@ -379,8 +399,10 @@ class SimulatorNode(Node):
                 feedback.collisions = so_far.collisions
                 feedback.distance_to_goal = so_far.final_distance_to_goal
                 goal_handle.publish_feedback(feedback)
-        # The final state, so subscribers and bags see where the robot ended.
-        self.publish_tick(episode, observation, recording)
+        if not lockstep:
+            # The final state, so subscribers and bags see where the robot ended. Not in
+            # lockstep: its answer could arrive during the next episode.
+            self.publish_tick(episode, observation, recording)
         return episode.metrics()
 
     def write_bag(self, record_directory, environment, config, metrics, recording, seed,

@@ -119,13 +119,15 @@ def harness(request):
         item.close()
 
 
-def test_zero_without_goal_then_drives_to_the_goal(harness):
+def test_scan_waits_for_a_goal_then_drives_to_the_goal(harness):
     run = harness()
-    assert run.tick().linear.x == 0.0  # no goal, no odometry
+    run.scan.publish(scan_msg())  # no goal, no odometry: no answer yet
+    run.spin_until(lambda: run.node._waiting_scan is not None)
+    assert not run.commands
     run.odom.publish(odom_msg())
     run.goal.publish(goal_msg(3.0, 0.0))
-    run.spin_until(lambda: run.node._goal is not None and run.node._state is not None)
-    command = run.tick()
+    run.spin_until(lambda: run.commands)  # the waiting scan is answered with the goal
+    command = run.commands[-1]
     assert command.linear.x > 0.0 and abs(command.angular.z) < 1e-6
     # At the goal it stops, and keeps answering every scan with zero.
     run.odom.publish(odom_msg(2.95, 0.0))
@@ -182,3 +184,25 @@ def test_parameters_are_declared_and_validated(harness):
     accepted = run.node.set_parameters([Parameter('max_linear_speed', value=0.6)])[0]
     assert accepted.successful
     assert run.node._controller.config.max_linear_speed == pytest.approx(0.6)
+
+
+def test_new_episode_drops_the_old_goal_and_pose(harness):
+    run = harness()
+    old = odom_msg()
+    old.header.stamp.sec = 10
+    run.odom.publish(old)
+    run.goal.publish(goal_msg(3.0, 0.0))
+    run.spin_until(lambda: run.node._goal is not None and run.node._state is not None)
+    scan = scan_msg()
+    scan.header.stamp.sec = 10
+    run.tick(scan)
+    count = len(run.commands)
+    run.scan.publish(scan_msg())  # sim time back at 0: a new episode began
+    run.spin_until(lambda: run.node._waiting_scan is not None
+                   and run.node._waiting_scan[0] == 0)
+    assert run.node._goal is None and run.node._state is None
+    run.odom.publish(odom_msg())
+    run.spin_until(lambda: run.node._state is not None)
+    assert len(run.commands) == count, 'answered before the new episode had its goal'
+    run.goal.publish(goal_msg(0.0, 3.0))
+    run.spin_until(lambda: len(run.commands) > count)

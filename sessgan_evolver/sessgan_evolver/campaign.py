@@ -69,6 +69,11 @@ class CampaignConfig:
     """[max(30, 2 x time limit)] Wall seconds before an episode is retried elsewhere."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
+    seed_schedule: str = 'fixed'
+    """[fixed] Map and simulator seeds: 'fixed' uses the same K seeds in every generation (so a
+    member's fitness is comparable across generations and an elite keeps its score);
+    'per-generation' draws new shared seeds each generation (fitness then also varies with
+    the maps drawn)."""
     record_failures: bool = True
     """[True] Write every failure episode as a bag under bags/<run>/."""
     elite_count: int = 1
@@ -88,6 +93,9 @@ class CampaignConfig:
         for name in ('generations', 'population', 'maps_per_member', 'workers'):
             if getattr(self, name) < 1:
                 raise CampaignError(f'{name} must be >= 1, got {getattr(self, name)}')
+        if self.seed_schedule not in ('fixed', 'per-generation'):
+            raise CampaignError(f'seed schedule must be fixed or per-generation, got '
+                                f'{self.seed_schedule!r}')
         if self.bag_storage not in ('mcap', 'sqlite3'):
             raise CampaignError(f'bag storage must be mcap or sqlite3, got {self.bag_storage!r}')
         self.algorithm_config().validate()
@@ -203,8 +211,9 @@ class Campaign:
             self.store.save_checkpoint(generation, algorithm.state_dict(),
                                        {'tpkl_reference': tpkl_reference})
             genomes = algorithm.ask()
-            map_seeds = shared_seeds(config.seed, generation, config.maps_per_member)
-            sim_seeds = shared_seeds(config.seed, generation, config.maps_per_member,
+            seed_generation = 0 if config.seed_schedule == 'fixed' else generation
+            map_seeds = shared_seeds(config.seed, seed_generation, config.maps_per_member)
+            sim_seeds = shared_seeds(config.seed, seed_generation, config.maps_per_member,
                                      SeedStream.SIMULATION)
             jobs, token_maps = [], []
             for member, genome in enumerate(genomes):

@@ -1,0 +1,222 @@
+"""Generator checkpoints: one .pt file (state dicts and metadata) plus a JSON copy of the
+metadata next to it, both written atomically (temporary file, then os.replace).
+
+The .pt file is a torch-saved dict of plain types and tensors only, so it loads
+with ``weights_only=True`` and is safe to accept over the network (the evolver
+sends weights to generator nodes as checkpoint bytes)::
+
+    {'format': 'sessgan_gen.pyramid', 'format_version': 1,
+     'metadata': {...}, 'pyramid': state_dict, 'training_state': {...} or None}
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from sessgan_gen.errors import CheckpointError, UnknownScenarioError
+from sessgan_gen.model import GeneratorPyramid, pyramid_from_state_dict, resolve_device
+from sessgan_gen.scenarios import get_scenario
+
+CHECKPOINT_FORMAT = 'sessgan_gen.pyramid'
+FORMAT_VERSION = 1
+CHECKPOINT_DIR = Path(__file__).resolve().parent / 'data' / 'checkpoints'
+"""Where the shipped pre-trained checkpoints live."""
+
+
+def default_checkpoint_path(scenario: str) -> Path:
+    """Path of the shipped pre-trained checkpoint of ``scenario`` (UnknownScenarioError if the
+    scenario is not registered; the file may be absent for user-registered scenarios)."""
+    get_scenario(scenario)
+    return CHECKPOINT_DIR / f'{scenario}.pt'
+
+
+def metadata_path(path: str | Path) -> Path:
+    """The JSON metadata file that accompanies checkpoint ``path``."""
+    return Path(path).with_suffix('.json')
+
+
+def structural_metadata(pyramid: GeneratorPyramid) -> dict[str, Any]:
+    """Metadata fields that describe the pyramid itself (always taken from the pyramid)."""
+    return {
+        'num_tokens': pyramid.num_tokens,
+        'channels': pyramid.channels,
+        'num_scales': pyramid.num_scales,
+        'scale_shapes': [list(shape) for shape in pyramid.scale_shapes],
+        'noise_amplitudes': [round(float(a), 8) for a in pyramid.noise_amplitudes.cpu()],
+    }
+
+
+def _payload(
+    pyramid: GeneratorPyramid,
+    metadata: Mapping[str, Any],
+    training_state: Mapping[str, Any] | None,
+) -> dict[str, Any]:
+    full = {'format_version': FORMAT_VERSION, **dict(metadata), **structural_metadata(pyramid)}
+    try:  # plain JSON types only: the .pt must load with weights_only=True
+        full = json.loads(json.dumps(full))
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f'checkpoint metadata is not JSON-serialisable: {err}') from err
+    return {
+        'format': CHECKPOINT_FORMAT,
+        'format_version': FORMAT_VERSION,
+        'metadata': full,
+        'pyramid': {k: v.detach().cpu().clone() for k, v in pyramid.state_dict().items()},
+        'training_state': dict(training_state) if training_state is not None else None,
+    }
+
+
+def checkpoint_bytes(
+    pyramid: GeneratorPyramid,
+    metadata: Mapping[str, Any],
+    training_state: Mapping[str, Any] | None = None,
+) -> bytes:
+    """The checkpoint as bytes (what :func:`save_checkpoint` writes to the .pt file)."""
+    buffer = io.BytesIO()
+    torch.save(_payload(pyramid, metadata, training_state), buffer)
+    return buffer.getvalue()
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    try:
+        with os.fdopen(handle, 'wb') as stream:
+            stream.write(data)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.chmod(temporary, 0o644)  # mkstemp creates 0600; checkpoints are shared files
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def save_checkpoint(
+    path: str | Path,
+    pyramid: GeneratorPyramid,
+    metadata: Mapping[str, Any],
+    training_state: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write ``pyramid`` and ``metadata`` to ``path`` (.pt) and its .json metadata file.
+
+    ``metadata`` should name at least 'scenario' and 'tokens'; the structural
+    fields (num_tokens, channels, scale_shapes, noise_amplitudes) are added from
+    the pyramid. ``training_state`` (resume data) goes into the .pt only.
+    Returns the .pt path.
+    """
+    path = Path(path)
+    payload = _payload(pyramid, metadata, training_state)
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    _write_atomically(path, buffer.getvalue())
+    text = json.dumps(payload['metadata'], indent=2, sort_keys=True) + '\n'
+    _write_atomically(metadata_path(path), text.encode())
+    return path
+
+
+def read_checkpoint(source: str | Path | bytes) -> dict[str, Any]:
+    """Read and check the raw payload of a checkpoint file or bytes (no pyramid built)."""
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        label = f'checkpoint bytes ({len(source)} bytes)'
+        stream: Any = io.BytesIO(bytes(source))
+    else:
+        path = Path(source)
+        label = f'checkpoint {str(path)!r}'
+        if not path.is_file():
+            raise CheckpointError(f'{label} does not exist')
+        stream = path
+    if isinstance(stream, io.BytesIO) and not stream.getbuffer().nbytes:
+        raise CheckpointError(f'{label} is empty')
+    try:
+        payload = torch.load(stream, map_location='cpu', weights_only=True)
+    except Exception as err:  # torch raises many types for a truncated or foreign file
+        reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise CheckpointError(f'{label} is corrupt or truncated: {reason}') from err
+    if not isinstance(payload, dict) or payload.get('format') != CHECKPOINT_FORMAT:
+        raise CheckpointError(f'{label} is not a sessgan_gen generator checkpoint')
+    version = payload.get('format_version')
+    if version != FORMAT_VERSION:
+        raise CheckpointError(
+            f'{label} has format version {version}; this software reads {FORMAT_VERSION}')
+    metadata = payload.get('metadata')
+    if not isinstance(metadata, dict):
+        raise CheckpointError(f'{label} has no metadata')
+    for key in ('scenario', 'tokens', 'scale_shapes'):
+        if key not in metadata:
+            raise CheckpointError(f'{label} metadata lacks {key!r}')
+    if not isinstance(payload.get('pyramid'), dict):
+        raise CheckpointError(f'{label} holds no generator weights')
+    payload['label'] = label
+    return payload
+
+
+def _check_scenario(label: str, metadata: Mapping[str, Any], scenario: str | None) -> None:
+    name = metadata['scenario']
+    if scenario is not None and name != scenario:
+        raise CheckpointError(f'{label} was trained for scenario {name!r}, not {scenario!r}')
+    try:
+        known = get_scenario(name)
+    except UnknownScenarioError:
+        return  # a user scenario registered elsewhere; its tokens cannot be checked
+    if list(metadata['tokens']) != list(known.tokens):
+        raise CheckpointError(
+            f'{label} has tokens {list(metadata["tokens"])}, but scenario {name!r} has '
+            f'{list(known.tokens)}')
+
+
+def _build(label: str, payload: Mapping[str, Any], device: str | torch.device) -> GeneratorPyramid:
+    metadata = payload['metadata']
+    try:
+        shapes = [(int(h), int(w)) for h, w in metadata['scale_shapes']]
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f'{label} has malformed scale_shapes: {err}') from err
+    try:
+        pyramid = pyramid_from_state_dict(payload['pyramid'], shapes)
+    except CheckpointError as err:
+        raise CheckpointError(f'{label}: {err}') from err
+    if pyramid.num_tokens != len(metadata['tokens']):
+        raise CheckpointError(
+            f'{label}: weights are for {pyramid.num_tokens} tokens but metadata lists '
+            f'{len(metadata["tokens"])}')
+    pyramid.eval()
+    return pyramid.to(resolve_device(device))
+
+
+def load_checkpoint(
+    source: str | Path | bytes,
+    device: str | torch.device = 'cpu',
+    scenario: str | None = None,
+) -> tuple[GeneratorPyramid, dict[str, Any]]:
+    """Load a checkpoint file or its bytes; returns (pyramid in eval mode, metadata).
+
+    ``scenario``, if given, must be the one the checkpoint was trained for.
+    Raises CheckpointError naming what is wrong: missing, empty, truncated or
+    corrupt file, foreign format, wrong scenario or tokens, missing keys or
+    tensors of the wrong shape.
+    """
+    payload = read_checkpoint(source)
+    label = payload['label']
+    _check_scenario(label, payload['metadata'], scenario)
+    return _build(label, payload, device), dict(payload['metadata'])
+
+
+def load_training_checkpoint(
+    path: str | Path, device: str | torch.device = 'cpu'
+) -> tuple[GeneratorPyramid, dict[str, Any], dict[str, Any]]:
+    """Load a (possibly partial) training checkpoint: (pyramid, metadata, training state)."""
+    payload = read_checkpoint(path)
+    label = payload['label']
+    _check_scenario(label, payload['metadata'], None)
+    state = payload.get('training_state')
+    if not isinstance(state, dict):
+        raise CheckpointError(f'{label} holds no training state to resume from')
+    return _build(label, payload, device), dict(payload['metadata']), state
+

@@ -1,0 +1,68 @@
+"""`ros2 run sessgan_gen report`: TPKL matrix, uniqueness table and sample maps of the
+generators of every scenario (the paper's Fig. 11 and Table 1), as PNG and markdown."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+
+from sessgan_gen.config_cli import parse_config
+from sessgan_gen.errors import SessganGenError
+from sessgan_gen.report import (
+    REPORT_SCENARIOS,
+    compute_report,
+    tpkl_markdown,
+    uniqueness_markdown,
+    write_report,
+)
+
+
+@dataclass
+class ReportConfig:
+    """Options of the report command."""
+
+    output_dir: str = 'sessgan_report'
+    """Directory the report files (report.md, PNGs, metrics.json) are written to."""
+    samples: int = 100
+    """Maps sampled per scenario."""
+    seed: int = 0
+    """Base seed of the sampled maps."""
+    scenarios: str = ','.join(REPORT_SCENARIOS)
+    """Comma-separated scenarios (rows and columns of the TPKL matrix)."""
+    factory_checkpoint: str = ''
+    """Factory generator checkpoint; empty: the shipped one."""
+    racetrack_checkpoint: str = ''
+    """Race-track generator checkpoint; empty: the shipped one."""
+    drone_checkpoint: str = ''
+    """Drone generator checkpoint; empty: the shipped one."""
+    threads: int = 0
+    """Torch CPU threads; 0 keeps torch's default."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit status (0 success, 1 error)."""
+    config = parse_config(
+        ReportConfig, argv, prog='ros2 run sessgan_gen report',
+        description='Write the TPKL matrix, uniqueness table and sample maps of the '
+                    'generators (paper Fig. 11 and Table 1).')
+    if config.threads:
+        torch.set_num_threads(config.threads)
+    scenarios = [name.strip() for name in config.scenarios.split(',') if name.strip()]
+    checkpoints = {name: getattr(config, f'{name}_checkpoint', '') for name in scenarios}
+    try:
+        data = compute_report(scenarios, checkpoints, config.samples, config.seed)
+        paths = write_report(data, config.output_dir)
+    except (SessganGenError, ValueError, OSError) as err:
+        print(f'report: error: {err}', file=sys.stderr)
+        return 1
+    print(tpkl_markdown(data))
+    print(uniqueness_markdown(data))
+    print('report: wrote ' + ', '.join(str(path) for path in paths))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,65 @@
+"""Sampling many maps from a pyramid: chunked batches, seeds, conversions to numpy.
+
+:meth:`GeneratorPyramid.sample` does the work; this module adds what callers that
+need hundreds of maps want: one seed per map derived from a base seed, batches of
+bounded size (memory), and numpy output.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from sessgan_gen.model import GeneratorPyramid
+from sessgan_gen.seeding import derive_seeds
+
+BATCH_CELLS = 32 * 32 * 32
+"""Cells per forward pass: 32 maps of 32x32 or 2 of 128x128. Measured on a 2-core CPU,
+throughput peaks between 16K and 64K cells per batch; larger batches fall out of cache
+(128 maps of 128x128 per batch run at half the speed of one map per call)."""
+
+SAMPLE_SEED_STREAM = 1
+"""Stream number of :func:`sample_seeds` (so they differ from other seeds of a base seed)."""
+
+
+def sample_seeds(base_seed: int, count: int) -> list[int]:
+    """``count`` per-map seeds derived from one base seed (same base, same list)."""
+    return derive_seeds(base_seed, count, SAMPLE_SEED_STREAM)
+
+
+def batch_size_for(size: tuple[int, int], budget_cells: int = BATCH_CELLS) -> int:
+    """Maps per batch so one batch has about ``budget_cells`` cells (at least 1)."""
+    return max(1, budget_cells // max(1, size[0] * size[1]))
+
+
+def sample_token_maps(
+    pyramid: GeneratorPyramid,
+    seeds: Sequence[int],
+    size: tuple[int, int] | None = None,
+    batch_size: int | None = None,
+) -> np.ndarray:
+    """Token maps (len(seeds), height, width) as int64, one per seed, in seed order.
+
+    Map i depends only on ``seeds[i]`` (and the weights), whatever ``batch_size``.
+    """
+    shape = tuple(size) if size is not None else pyramid.size
+    if batch_size is None:
+        batch_size = batch_size_for(shape)  # type: ignore[arg-type]
+    if batch_size < 1:
+        raise ValueError(f'batch_size must be at least 1, got {batch_size}')
+    chunks = []
+    for start in range(0, len(seeds), batch_size):
+        chunk = pyramid.sample(seeds=seeds[start:start + batch_size], size=size)
+        chunks.append(chunk.numpy())
+    if not chunks:
+        return np.zeros((0, *shape), dtype=np.int64)
+    return np.concatenate(chunks).astype(np.int64, copy=False)
+
+
+def sample_one(
+    pyramid: GeneratorPyramid, seed: int, size: tuple[int, int] | None = None
+) -> np.ndarray:
+    """One token map (height, width) for ``seed``."""
+    return pyramid.sample(seeds=[seed], size=size)[0].numpy().astype(np.int64, copy=False)
+

@@ -1,0 +1,164 @@
+"""`ros2 run sessgan_gen train`: train a TOAD-GAN pyramid on a scenario's example map or a
+token map file, checkpointing after every scale (resume with --resume)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from sessgan_gen.checkpoint import load_training_checkpoint, save_checkpoint
+from sessgan_gen.config_cli import parse_config
+from sessgan_gen.errors import CheckpointError, SessganGenError
+from sessgan_gen.progress import ProgressPrinter, format_duration
+from sessgan_gen.scenarios import Scenario, get_scenario
+from sessgan_gen.seeding import seed_everything
+from sessgan_gen.training import (
+    TrainConfig,
+    Trainer,
+    TrainingState,
+    config_dict,
+    resolve_config,
+    same_training,
+    training_metadata,
+)
+
+
+def load_training_map(config: TrainConfig) -> tuple[np.ndarray, Scenario, str]:
+    """(cells, scenario, source label) of the map the config asks to learn."""
+    from sessgan_gen import token_map  # the other half of the package; imported on use
+
+    scenario = get_scenario(config.scenario)
+    if config.map_file:
+        loaded = token_map.read_token_map(config.map_file)
+        source = str(Path(config.map_file).resolve())
+    else:
+        loaded = token_map.load_example_map(scenario.name)
+        source = f'example:{scenario.name}'
+    loaded_scenario = getattr(loaded, 'scenario', scenario.name)
+    loaded_name = getattr(loaded_scenario, 'name', loaded_scenario)
+    if loaded_name != scenario.name:
+        raise SessganGenError(
+            f'map {source} is a {loaded_name!r} map, but --scenario is {scenario.name!r}')
+    cells = np.asarray(loaded.cells, dtype=np.int64)
+    return cells, scenario, source
+
+
+class TotalEta:
+    """Whole-run ETA. Time per iteration is modelled as a + b * area: fitted over the scales
+    measured so far, or, with one scale measured, taken as proportional to area."""
+
+    def __init__(self, shapes: Sequence[tuple[int, int]], iterations: int) -> None:
+        self.areas = [h * w for h, w in shapes]
+        self.iterations = iterations
+        self.scale_started = time.perf_counter()
+        self.scale = -1
+        self.measured: dict[int, float] = {}
+
+    def estimate(self, scale: int, done: int) -> float:
+        now = time.perf_counter()
+        if scale != self.scale:
+            self.scale, self.scale_started = scale, now
+        per_iteration = (now - self.scale_started) / max(done, 1)
+        self.measured[scale] = per_iteration
+        areas = np.array([self.areas[s] for s in self.measured], dtype=float)
+        times = np.array(list(self.measured.values()))
+        if len(self.measured) >= 2 and np.ptp(areas) > 0:
+            slope, intercept = np.polyfit(areas, times, 1)
+            slope, intercept = max(slope, 0.0), max(intercept, 0.0)
+        else:
+            slope, intercept = per_iteration / self.areas[scale], 0.0
+        later = sum(intercept + slope * area for area in self.areas[scale + 1:])
+        return (self.iterations - done) * per_iteration + self.iterations * later
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit status (0 success, 1 error, 130 interrupted)."""
+    config = resolve_config(parse_config(
+        TrainConfig, argv, prog='ros2 run sessgan_gen train',
+        description='Train a SESS-GAN (TOAD-GAN) generator pyramid on one token map.'))
+    try:
+        return train(config)
+    except KeyboardInterrupt:
+        print('train: interrupted; run again with --resume to continue from the last '
+              'finished scale', file=sys.stderr)
+        return 130
+    except (SessganGenError, ValueError, OSError) as err:
+        print(f'train: error: {err}', file=sys.stderr)
+        return 1
+
+
+def train(config: TrainConfig) -> int:
+    """Run (or resume) the training that ``config`` describes; writes config.output."""
+    if config.threads:
+        torch.set_num_threads(config.threads)
+    cells, scenario, source = load_training_map(config)
+    output = Path(config.output)
+    seed_everything(config.seed, config.deterministic)
+
+    pyramid = None
+    state = None
+    if config.resume:
+        if not output.exists():
+            raise CheckpointError(f'--resume: checkpoint {str(output)!r} does not exist')
+        pyramid, metadata, raw_state = load_training_checkpoint(output, config.device)
+        differing = same_training(metadata.get('training_config', {}), config_dict(config))
+        if differing:
+            raise CheckpointError(
+                f'--resume: checkpoint {str(output)!r} was trained with different options: '
+                f'{", ".join(differing)}')
+        if metadata.get('map_source') != source:
+            raise CheckpointError(
+                f'--resume: checkpoint {str(output)!r} learned {metadata.get("map_source")}, '
+                f'not {source}')
+        state = TrainingState.from_dict(raw_state)
+    trainer = Trainer(cells, scenario, config, pyramid, state)
+    if pyramid is not None and trainer.pyramid.scale_shapes != pyramid.scale_shapes:
+        raise CheckpointError(
+            f'--resume: checkpoint {str(output)!r} has scales {pyramid.scale_shapes}, '
+            f'this map needs {trainer.pyramid.scale_shapes}')
+    shapes = trainer.pyramid.scale_shapes
+    log = sys.stderr
+    print(f'train: {scenario.name} map {source} {shapes[-1][0]}x{shapes[-1][1]}, '
+          f'{len(shapes)} scales {[f"{h}x{w}" for h, w in shapes]}, '
+          f'{config.iterations} iterations per scale, {config.channels} channels, '
+          f'device {trainer.device}, seed {config.seed}', file=log)
+    if trainer.finished:
+        print(f'train: {output} is already complete', file=log)
+        return 0
+    if state is not None:
+        print(f'train: resuming after scale {state.trained_scales}/{len(shapes)}', file=log)
+
+    printer = ProgressPrinter(log) if config.progress else None
+    eta = TotalEta(shapes, config.iterations)
+
+    def progress(scale: int, num_scales: int, done: int, total: int) -> None:
+        if printer is None:
+            return
+        if done == 1:
+            h, w = shapes[scale]
+            printer.start(f'scale {scale + 1}/{num_scales} {h}x{w}', total)
+        printer.update(done, f'total ETA {format_duration(eta.estimate(scale, done))}')
+
+    def checkpoint(pyramid, state: TrainingState) -> None:
+        metadata = training_metadata(scenario, config, pyramid, state, source)
+        save_checkpoint(output, pyramid, metadata, state.to_dict())
+        result = state.scale_results[-1]
+        print(f'train: scale {state.trained_scales}/{len(shapes)} done in '
+              f'{result["seconds"]:.1f} s (noise amplitude {result["noise_amplitude"]:.4f}, '
+              f'reconstruction accuracy {100 * result["reconstruction_accuracy"]:.1f} %); '
+              f'saved {output}',
+              file=log)
+
+    trainer.run(progress=progress, on_scale_done=checkpoint)
+    print(f'train: finished in {trainer.state.seconds:.1f} s of training; checkpoint {output} '
+          f'and {output.with_suffix(".json")}', file=log)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

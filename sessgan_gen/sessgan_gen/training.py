@@ -1,0 +1,394 @@
+"""Training of a TOAD-GAN pyramid on one token map (WGAN-GP plus reconstruction loss).
+
+Scales are trained one after the other, coarsest first, as in TOAD-GAN: at
+scale s a fresh discriminator (or the previous scale's, see
+``init_from_previous_scale``) and the scale's generator play a WGAN-GP game on
+the map downsampled to that scale, while the generator also learns to
+reproduce it from the fixed reconstruction noise (z_rec at the coarsest scale,
+zeros above). The scale's noise amplitude is ``noise_update`` times the RMSE
+between the real map and the upsampled reconstruction of the coarser scales
+(1 at the coarsest scale), so noise is strong where the coarse scales leave the
+most to invent.
+
+Randomness comes only from torch's global generator, seeded once by
+``seeding.seed_everything``; its state is saved after every finished scale so a
+resumed run continues exactly as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from sessgan_gen import __version__
+from sessgan_gen.downsampling import downsample_pyramid, one_hot
+from sessgan_gen.model import (
+    GeneratorPyramid,
+    PatchDiscriminator,
+    init_weights,
+    pad,
+    pyramid_scale_shapes,
+    resolve_device,
+    upsample,
+)
+from sessgan_gen.scenarios import Scenario
+
+LR_DECAY_FRACTIONS = (0.4, 0.625)
+"""Fractions of a scale's iterations after which the learning rate drops by
+``lr_decay`` (TOAD-GAN: iterations 1600 and 2500 of 4000)."""
+
+
+@dataclass
+class TrainConfig:
+    """Everything that decides a training run; the ``train`` command's options."""
+
+    scenario: str = 'factory'
+    """Scenario (factory, racetrack, drone): token alphabet, downsampling hierarchy and,
+    without --map-file, the example map to learn."""
+    map_file: str = ''
+    """Token text file to train on instead of the scenario's example map."""
+    output: str = ''
+    """Checkpoint file (.pt; the .json metadata goes next to it). Empty: <scenario>.pt."""
+    iterations: int = 0
+    """Training iterations per scale; 0 picks the scenario's default."""
+    channels: int = 0
+    """Convolution channels of every layer; 0 picks the scenario's default."""
+    scale_factor: float = 0.5
+    """Side ratio between consecutive scales."""
+    coarsest_coverage: float = 2.0
+    """Longest side of the coarsest scale in receptive fields (7 cells): sets the number
+    of scales so the coarsest GAN sees the whole layout."""
+    noise_update: float = 0.1
+    """Noise amplitude of a scale per unit RMSE of the coarser scales' reconstruction."""
+    discriminator_steps: int = 3
+    """Discriminator updates per iteration."""
+    generator_steps: int = 3
+    """Generator updates per iteration."""
+    learning_rate: float = 5e-4
+    """Adam learning rate of generators and discriminators."""
+    beta1: float = 0.5
+    """Adam beta1."""
+    beta2: float = 0.999
+    """Adam beta2."""
+    lr_decay: float = 0.1
+    """Learning-rate factor applied at 40 % and 62.5 % of a scale's iterations."""
+    gradient_penalty_weight: float = 0.1
+    """WGAN-GP lambda."""
+    reconstruction_weight: float = 100.0
+    """Weight alpha of the reconstruction loss."""
+    init_from_previous_scale: bool = True
+    """Start each scale's networks from the previous scale's weights (SinGAN); faster."""
+    seed: int = 1
+    """Seed of every random choice of the run."""
+    device: str = 'auto'
+    """Torch device: auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
+    threads: int = 1
+    """Torch CPU threads; 0 keeps torch's default (one per core). One is the robust choice on
+    a shared machine: with 2 threads on a busy 2-core machine an iteration ran 100x slower
+    (OpenMP threads wait for each other); raise it on idle cores for large maps."""
+    deterministic: bool = True
+    """Use deterministic torch algorithms (same seed, device and threads: same weights)."""
+    resume: bool = False
+    """Continue the partial checkpoint at --output after its last finished scale."""
+    progress: bool = True
+    """Print a progress line (rate, ETA) to stderr."""
+
+
+SCENARIO_DEFAULTS: dict[str, dict[str, int]] = {
+    'factory': {'iterations': 1000, 'channels': 32},
+    'drone': {'iterations': 1000, 'channels': 32},
+    'racetrack': {'iterations': 600, 'channels': 32},
+}
+"""Per-scenario iterations and channels, chosen to meet the training-time targets on a
+2-core CPU (factory within 5 min, race track within 30 min)."""
+FALLBACK_DEFAULTS = {'iterations': 600, 'channels': 32}
+
+RESULT_FIELDS = ('output', 'resume', 'progress', 'threads', 'device')
+"""Config fields that do not change the trained weights (resume may differ in them)."""
+
+
+def resolve_config(config: TrainConfig) -> TrainConfig:
+    """Fill the derived defaults (iterations, channels, output) in one place."""
+    defaults = SCENARIO_DEFAULTS.get(config.scenario, FALLBACK_DEFAULTS)
+    return dataclasses.replace(
+        config,
+        iterations=config.iterations or defaults['iterations'],
+        channels=config.channels or defaults['channels'],
+        output=config.output or f'{config.scenario}.pt',
+    )
+
+
+def validate_config(config: TrainConfig) -> None:
+    """Raise ValueError naming the first option that is out of range."""
+    checks = [
+        (config.iterations >= 1, 'iterations must be at least 1'),
+        (config.channels >= 1, 'channels must be at least 1'),
+        (0.0 < config.scale_factor < 1.0, 'scale_factor must lie in (0, 1)'),
+        (config.coarsest_coverage > 0, 'coarsest_coverage must be positive'),
+        (config.noise_update >= 0, 'noise_update must not be negative'),
+        (config.discriminator_steps >= 1, 'discriminator_steps must be at least 1'),
+        (config.generator_steps >= 1, 'generator_steps must be at least 1'),
+        (config.learning_rate > 0, 'learning_rate must be positive'),
+        (config.threads >= 0, 'threads must not be negative'),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(message)
+
+
+def config_dict(config: TrainConfig) -> dict[str, Any]:
+    return dataclasses.asdict(config)
+
+
+def same_training(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """Names of the config fields that differ between two runs and change the result."""
+    names = set(a) | set(b)
+    return sorted(name for name in names
+                  if name not in RESULT_FIELDS and a.get(name) != b.get(name))
+
+
+@dataclass
+class ScaleResult:
+    """What one finished scale reports."""
+
+    scale: int
+    shape: tuple[int, int]
+    noise_amplitude: float
+    seconds: float
+    reconstruction_accuracy: float
+    """Fraction of cells whose token the pyramid reconstructs from z_rec at this scale."""
+
+
+@dataclass
+class TrainingState:
+    """Everything besides the pyramid needed to resume after a finished scale."""
+
+    trained_scales: int = 0
+    rng_state: torch.Tensor | None = None
+    discriminator: dict[str, torch.Tensor] | None = None
+    seconds: float = 0.0
+    scale_results: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self) | {
+            'rng_state': self.rng_state, 'discriminator': self.discriminator}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainingState:
+        return cls(
+            trained_scales=int(data.get('trained_scales', 0)),
+            rng_state=data.get('rng_state'),
+            discriminator=data.get('discriminator'),
+            seconds=float(data.get('seconds', 0.0)),
+            scale_results=list(data.get('scale_results', [])),
+        )
+
+
+ProgressCallback = Callable[[int, int, int, int], None]
+"""progress(scale, num_scales, iteration, iterations): called after every iteration."""
+ScaleCallback = Callable[[GeneratorPyramid, TrainingState], None]
+"""on_scale_done(pyramid, state): called after every finished scale (to checkpoint)."""
+
+
+def gradient_penalty(
+    discriminator: nn.Module, real: torch.Tensor, fake: torch.Tensor, weight: float
+) -> torch.Tensor:
+    """WGAN-GP: weight * mean over cells of (|grad D| - 1)^2 on a random real/fake mix."""
+    mix = torch.rand(1, 1, 1, 1, device=real.device)
+    blend = (mix * real + (1 - mix) * fake).requires_grad_(True)
+    score = discriminator(blend)
+    (grads,) = torch.autograd.grad(score, blend, grad_outputs=torch.ones_like(score),
+                                   create_graph=True)
+    return weight * ((grads.norm(2, dim=1) - 1) ** 2).mean()
+
+
+def build_pyramid(
+    cells: np.ndarray, scenario: Scenario, config: TrainConfig
+) -> tuple[GeneratorPyramid, list[torch.Tensor]]:
+    """An untrained pyramid for ``cells`` and the real map at every scale."""
+    height, width = (int(side) for side in np.asarray(cells).shape)
+    shapes = pyramid_scale_shapes(height, width, config.scale_factor, config.coarsest_coverage)
+    pyramid = GeneratorPyramid(scenario.num_tokens, shapes, config.channels)
+    reals = downsample_pyramid(one_hot(cells, scenario.num_tokens), shapes, scenario.hierarchy)
+    return pyramid, reals
+
+
+class Trainer:
+    """Trains a pyramid scale by scale; :meth:`run` continues from ``state``."""
+
+    def __init__(
+        self,
+        cells: np.ndarray,
+        scenario: Scenario,
+        config: TrainConfig,
+        pyramid: GeneratorPyramid | None = None,
+        state: TrainingState | None = None,
+    ) -> None:
+        validate_config(config)
+        self.config = config
+        self.scenario = scenario
+        self.device = resolve_device(config.device)
+        fresh, reals = build_pyramid(cells, scenario, config)
+        self.pyramid = (pyramid if pyramid is not None else fresh).to(self.device)
+        self.reals = [real.to(self.device) for real in reals]
+        self.state = state if state is not None else TrainingState()
+
+    @property
+    def finished(self) -> bool:
+        return self.state.trained_scales >= self.pyramid.num_scales
+
+    def run(
+        self,
+        progress: ProgressCallback | None = None,
+        on_scale_done: ScaleCallback | None = None,
+        stop_after_scale: int | None = None,
+    ) -> GeneratorPyramid:
+        """Train the remaining scales (up to ``stop_after_scale`` scales in all, if given)."""
+        if self.state.rng_state is not None:
+            torch.set_rng_state(self.state.rng_state)
+        last = self.pyramid.num_scales if stop_after_scale is None else stop_after_scale
+        while self.state.trained_scales < min(last, self.pyramid.num_scales):
+            result, discriminator = self.train_scale(self.state.trained_scales, progress)
+            self.state.trained_scales += 1
+            self.state.seconds += result.seconds
+            self.state.scale_results.append(dataclasses.asdict(result))
+            self.state.discriminator = {k: v.detach().cpu().clone()
+                                        for k, v in discriminator.state_dict().items()}
+            self.state.rng_state = torch.get_rng_state()
+            if on_scale_done is not None:
+                on_scale_done(self.pyramid, self.state)
+        self.pyramid.eval()
+        return self.pyramid
+
+    def _discriminator(self, scale: int) -> PatchDiscriminator:
+        config = self.config
+        discriminator = PatchDiscriminator(self.scenario.num_tokens, config.channels)
+        discriminator.apply(init_weights)
+        if scale > 0 and config.init_from_previous_scale and self.state.discriminator:
+            discriminator.load_state_dict(self.state.discriminator)
+        return discriminator.to(self.device)
+
+    def train_scale(
+        self, scale: int, progress: ProgressCallback | None = None
+    ) -> tuple[ScaleResult, PatchDiscriminator]:
+        """Train scale ``scale`` (all coarser ones must be trained)."""
+        config, pyramid, device = self.config, self.pyramid, self.device
+        started = time.perf_counter()
+        real = self.reals[scale]
+        shape = (int(real.shape[-2]), int(real.shape[-1]))
+        generator = pyramid.generators[scale]
+        if scale > 0 and config.init_from_previous_scale:
+            generator.load_state_dict(pyramid.generators[scale - 1].state_dict())
+        discriminator = self._discriminator(scale)
+        for coarser in pyramid.generators[:scale]:
+            coarser.eval()
+            coarser.requires_grad_(False)
+        generator.train()
+        generator.requires_grad_(True)
+
+        # Reconstruction input of this scale and the noise amplitude it implies.
+        with torch.no_grad():
+            if scale == 0:
+                pyramid.reconstruction_noise.copy_(
+                    torch.randn(pyramid.reconstruction_noise.shape).to(device))
+                reconstruction_previous: torch.Tensor | None = None
+                amplitude = 1.0
+                reconstruction_noise = pyramid.reconstruction_noise
+            else:
+                coarse = pyramid.generate(pyramid.reconstruction_noises(scale))
+                reconstruction_previous = upsample(coarse, shape)
+                amplitude = config.noise_update * math.sqrt(
+                    F.mse_loss(reconstruction_previous, real).item())
+                reconstruction_noise = torch.zeros_like(real)
+            pyramid.noise_amplitudes[scale] = amplitude
+        reconstruction_input = pad(amplitude * reconstruction_noise
+                                   + _or_zero(reconstruction_previous))
+
+        betas = (config.beta1, config.beta2)
+        optimizer_d = torch.optim.Adam(discriminator.parameters(), config.learning_rate,
+                                       betas=betas)
+        optimizer_g = torch.optim.Adam(generator.parameters(), config.learning_rate, betas=betas)
+        milestones = [max(1, round(config.iterations * f)) for f in LR_DECAY_FRACTIONS]
+        schedulers = [torch.optim.lr_scheduler.MultiStepLR(opt, milestones, config.lr_decay)
+                      for opt in (optimizer_d, optimizer_g)]
+        coarse_shapes = pyramid.scale_shapes[:scale]
+
+        def random_previous() -> torch.Tensor | None:
+            if scale == 0:
+                return None
+            with torch.no_grad():
+                noises = pyramid.draw_noise(torch.default_generator, coarse_shapes, batch=1)
+                return upsample(pyramid.generate(noises), shape)
+
+        for iteration in range(config.iterations):
+            noise = torch.randn(real.shape).to(device)
+            for _ in range(config.discriminator_steps):
+                previous = random_previous()
+                optimizer_d.zero_grad(set_to_none=True)
+                fake = generator(pad(amplitude * noise + _or_zero(previous)), previous).detach()
+                loss_d = (discriminator(fake).mean() - discriminator(real).mean()
+                          + gradient_penalty(discriminator, real, fake,
+                                             config.gradient_penalty_weight))
+                loss_d.backward()
+                optimizer_d.step()
+            for _ in range(config.generator_steps):
+                optimizer_g.zero_grad(set_to_none=True)
+                fake = generator(pad(amplitude * noise + _or_zero(previous)), previous)
+                reconstruction = generator(reconstruction_input, reconstruction_previous)
+                loss_g = (-discriminator(fake).mean()
+                          + config.reconstruction_weight * F.mse_loss(reconstruction, real))
+                loss_g.backward()
+                optimizer_g.step()
+            for scheduler in schedulers:
+                scheduler.step()
+            if progress is not None:
+                progress(scale, pyramid.num_scales, iteration + 1, config.iterations)
+
+        generator.eval()
+        generator.requires_grad_(False)
+        with torch.no_grad():
+            rebuilt = pyramid.generate(pyramid.reconstruction_noises(scale + 1))
+            accuracy = (rebuilt.argmax(dim=1) == real.argmax(dim=1)).float().mean().item()
+        result = ScaleResult(scale=scale, shape=(int(shape[0]), int(shape[1])),
+                             noise_amplitude=float(amplitude),
+                             seconds=time.perf_counter() - started,
+                             reconstruction_accuracy=accuracy)
+        return result, discriminator
+
+
+def _or_zero(previous: torch.Tensor | None) -> torch.Tensor | float:
+    """The coarser output to add to a generator's noise (none at the coarsest scale)."""
+    return 0.0 if previous is None else previous
+
+
+def training_metadata(
+    scenario: Scenario,
+    config: TrainConfig,
+    pyramid: GeneratorPyramid,
+    state: TrainingState,
+    map_source: str,
+) -> dict[str, Any]:
+    """The JSON metadata of a (possibly partial) training checkpoint."""
+    return {
+        'scenario': scenario.name,
+        'tokens': list(scenario.tokens),
+        'map_source': map_source,
+        'map_shape': list(pyramid.size),
+        'seed': config.seed,
+        'training_config': config_dict(config),
+        'trained_scales': state.trained_scales,
+        'complete': state.trained_scales >= pyramid.num_scales,
+        'training_seconds': round(state.seconds, 3),
+        'scale_results': state.scale_results,
+        'software_version': __version__,
+        'torch_version': str(torch.__version__),
+    }

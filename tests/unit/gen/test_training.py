@@ -1,0 +1,132 @@
+"""Training: losses run, noise amplitudes are set, runs repeat for a seed, resume is exact."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from sessgan_gen.checkpoint import checkpoint_bytes, load_training_checkpoint, save_checkpoint
+from sessgan_gen.config_cli import build_parser, parse_config
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.seeding import seed_everything
+from sessgan_gen.training import (
+    TrainConfig,
+    Trainer,
+    TrainingState,
+    gradient_penalty,
+    resolve_config,
+    same_training,
+    training_metadata,
+    validate_config,
+)
+
+pytestmark = pytest.mark.unit
+torch.set_num_threads(1)
+
+FACTORY = get_scenario('factory')
+
+
+def tiny_map() -> np.ndarray:
+    cells = np.zeros((16, 16), dtype=np.int64)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 1
+    cells[5, 2:10] = 1
+    cells[9:14, 11] = 1
+    return cells
+
+
+def tiny_config(**changes) -> TrainConfig:
+    config = TrainConfig(scenario='factory', iterations=2, channels=4, discriminator_steps=1,
+                         generator_steps=1, seed=7, progress=False)
+    for key, value in changes.items():
+        setattr(config, key, value)
+    return resolve_config(config)
+
+
+def train(config: TrainConfig, stop_after_scale: int | None = None) -> Trainer:
+    seed_everything(config.seed)
+    trainer = Trainer(tiny_map(), FACTORY, config)
+    trainer.run(stop_after_scale=stop_after_scale)
+    return trainer
+
+
+def test_training_sets_noise_amplitudes_and_reports_each_scale():
+    calls = []
+    seed_everything(1)
+    trainer = Trainer(tiny_map(), FACTORY, tiny_config())
+    trainer.run(progress=lambda *args: calls.append(args),
+                on_scale_done=lambda pyramid, state: calls.append(('done', state.trained_scales)))
+    pyramid = trainer.pyramid
+    assert pyramid.scale_shapes == ((8, 8), (16, 16))
+    assert trainer.finished and not pyramid.training
+    amplitudes = pyramid.noise_amplitudes.tolist()
+    assert amplitudes[0] == 1.0 and 0.0 < amplitudes[1] < 1.0
+    assert pyramid.reconstruction_noise.abs().sum() > 0  # z_rec was drawn
+    assert ('done', 1) in calls and ('done', 2) in calls
+    assert (0, 2, 2, 2) in calls  # progress(scale, num_scales, iteration, iterations)
+    results = trainer.state.scale_results
+    assert [r['shape'] for r in results] == [(8, 8), (16, 16)]
+    assert 0.0 <= results[-1]['reconstruction_accuracy'] <= 1.0
+
+
+def test_same_seed_same_weights_other_seed_other_weights():
+    first = train(tiny_config()).pyramid.state_dict()
+    second = train(tiny_config()).pyramid.state_dict()
+    for key in first:
+        assert torch.equal(first[key], second[key]), key
+    other = train(tiny_config(seed=8)).pyramid.state_dict()
+    assert not torch.equal(first['generators.1.tail.weight'], other['generators.1.tail.weight'])
+
+
+def test_resume_after_a_scale_equals_an_uninterrupted_run(tmp_path):
+    config = tiny_config()
+    full = train(config).pyramid.state_dict()
+    partial = train(config, stop_after_scale=1)
+    path = tmp_path / 'partial.pt'
+    save_checkpoint(path, partial.pyramid,
+                    training_metadata(FACTORY, config, partial.pyramid, partial.state, 'test'),
+                    partial.state.to_dict())
+    pyramid, metadata, raw_state = load_training_checkpoint(path)
+    assert metadata['trained_scales'] == 1 and metadata['complete'] is False
+    seed_everything(config.seed)  # as the CLI does; the saved RNG state then takes over
+    resumed = Trainer(tiny_map(), FACTORY, config, pyramid, TrainingState.from_dict(raw_state))
+    resumed.run()
+    for key, value in resumed.pyramid.state_dict().items():
+        assert torch.equal(value, full[key]), key
+
+
+def test_gradient_penalty_is_zero_for_unit_gradients_and_positive_otherwise():
+    linear = torch.nn.Conv2d(2, 1, 1, bias=False)
+    with torch.no_grad():
+        linear.weight.copy_(torch.tensor([1.0, 0.0]).view(1, 2, 1, 1))
+    real, fake = torch.rand(1, 2, 4, 4), torch.rand(1, 2, 4, 4)
+    assert gradient_penalty(linear, real, fake, 0.1).item() == pytest.approx(0.0, abs=1e-6)
+    with torch.no_grad():
+        linear.weight.mul_(3.0)
+    assert gradient_penalty(linear, real, fake, 0.1).item() == pytest.approx(0.4, rel=1e-4)
+
+
+def test_config_defaults_validation_and_resume_comparison():
+    config = resolve_config(TrainConfig(scenario='racetrack'))
+    assert config.output == 'racetrack.pt' and config.iterations > 0 and config.channels > 0
+    with pytest.raises(ValueError, match='scale_factor'):
+        validate_config(tiny_config(scale_factor=1.0))
+    a = vars(tiny_config())
+    assert same_training(a, a | {'threads': 2, 'progress': True, 'output': 'x.pt'}) == []
+    assert same_training(a, a | {'seed': 9}) == ['seed']
+
+
+def test_config_fields_become_documented_options():
+    help_text = build_parser(TrainConfig).format_help()
+    assert '--map-file' in help_text and '--no-deterministic' in help_text
+    assert 'Training iterations per scale' in help_text
+    parsed = parse_config(TrainConfig, ['--scenario', 'drone', '--iterations', '5', '--resume'])
+    assert parsed.scenario == 'drone' and parsed.iterations == 5 and parsed.resume is True
+
+
+def test_checkpoint_metadata_of_a_trained_pyramid():
+    trainer = train(tiny_config())
+    metadata = training_metadata(FACTORY, trainer.config, trainer.pyramid, trainer.state, 'x')
+    assert metadata['complete'] is True and metadata['tokens'] == ['G', 'W']
+    assert metadata['training_config']['iterations'] == 2
+    assert len(checkpoint_bytes(trainer.pyramid, metadata)) < 200_000

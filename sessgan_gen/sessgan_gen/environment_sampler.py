@@ -11,13 +11,12 @@ from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
-import torch
-
 from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
 from sessgan_gen.errors import CheckpointError, SessganGenError
 from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.navigation import make_environment
+from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.scenarios import get_scenario
 
 MAX_SEEDS_PER_REQUEST = 4096
@@ -92,8 +91,7 @@ class EnvironmentSampler:
             raise SamplingRequestError(
                 f'size {height}x{width} cells is outside {min_side}..{MAX_CELLS_PER_SIDE} per side '
                 f'for this {scenario_name} generator')
-        with torch.no_grad():
-            maps = pyramid.sample(seeds=[int(s) for s in seeds], size=(height, width)).numpy()
+        maps = sample_token_maps(pyramid, [int(s) for s in seeds], size=(height, width))
         return [
             make_environment(cells, spec, environment_id(spec.name, generation, member, int(seed)),
                              seed=int(seed), generation=generation, member=member)

@@ -263,6 +263,15 @@ def _route_in_free(free: np.ndarray) -> Route | None:
     return Route(_to_cell(grid, start), _to_cell(grid, goal), path)
 
 
+MIN_ROUTE_FRACTION = 0.5
+"""A feasible map's route is at least this fraction of the grid's shorter side long."""
+
+
+def min_route_cells(shape: tuple[int, ...]) -> int:
+    """Fewest route steps (cells) of a feasible map of ``shape`` (height, width)."""
+    return max(2, int(MIN_ROUTE_FRACTION * min(shape[0], shape[1])))
+
+
 def plan_route(cells: np.ndarray, scenario: ScenarioLike) -> Route | None:
     """Start, goal and shortest path as the module docstring describes.
 
@@ -376,8 +385,9 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
     Resolution is the scenario's cell size (metres per cell) and the origin (0, 0),
     so cell (row, col) spans x in [col*res, (col+1)*res). Start and goal sit at cell
     centres chosen by :func:`plan_route`; their yaw points along the route's first
-    and last steps. Without any route (the footprint fits nowhere), ``feasible`` is
-    False and start and goal both sit at :func:`most_open_cell`, yaw 0.
+    and last steps. ``feasible`` is True when the route has at least
+    :func:`min_route_cells` steps. Without any route (the footprint fits nowhere),
+    ``feasible`` is False and start and goal both sit at :func:`most_open_cell`, yaw 0.
     ``extra['path_length_m']`` holds the route length in metres (0 when infeasible).
     """
     spec: Scenario = resolve_scenario(scenario_name)
@@ -397,8 +407,10 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
     else:
         start = centre(route.start, _heading(route.path, at_start=True))
         goal = centre(route.goal, _heading(route.path, at_start=False))
-        feasible = True
         length = (len(route.path) - 1) * resolution
+        # A start next to its goal tests nothing: a map only counts as feasible if its
+        # route crosses a fair part of it.
+        feasible = len(route.path) - 1 >= min_route_cells(array.shape)
     return Environment(
         id=env_id, scenario=spec.name, occupancy=occupancy, resolution=resolution,
         start=start, goal=goal, origin=(0.0, 0.0), seed=seed, generation=generation,

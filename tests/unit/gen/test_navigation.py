@@ -205,3 +205,14 @@ def test_environment_is_feasible_checks_the_poses():
     assert not environment_is_feasible(environment)
     environment.goal = Pose2D(9.0, 0.25)
     assert not environment_is_feasible(environment)
+
+
+def test_a_short_route_is_not_feasible():
+    from sessgan_gen.navigation import min_route_cells
+
+    cells = np.ones((32, 32), dtype=np.int64)  # factory: all wall...
+    cells[10, 10:14] = 0                        # ...but a 4-cell pocket
+    environment = make_environment(cells, 'factory', 'pocket')
+    assert environment.extra['path_length_m'] > 0  # a route exists
+    assert not environment.feasible                 # but crosses too little of the map
+    assert min_route_cells((32, 32)) == 16

@@ -5,8 +5,6 @@ from __future__ import annotations
 import os
 import random
 
-import pytest
-
 # Every test run keeps DDS traffic on this machine, in a domain of its own, so parallel runs
 # (and other ROS users of the machine) never see each other. Child processes inherit this.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

@@ -69,7 +69,8 @@ class NodeProcesses:
     def start(self, command: list[str], name: str | None = None,
               env: dict[str, str] | None = None, cwd: Path | None = None) -> NodeProcess:
         name = name or command[min(2, len(command) - 1)]
-        log_path = self.log_dir / f'{len(self.processes):02d}-{re.sub(r"[^A-Za-z0-9_.-]", "_", name)}.log'
+        safe_name = re.sub(r'[^A-Za-z0-9_.-]', '_', name)
+        log_path = self.log_dir / f'{len(self.processes):02d}-{safe_name}.log'
         log_file = open(log_path, 'wb')
         try:
             process = subprocess.Popen(

@@ -35,12 +35,18 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
-    DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
 )
 from sensor_msgs.msg import LaserScan
 
 from sessgan_controllers.messages import (
-    goal_from_pose, scan_from_msg, state_from_odom, twist_from_command,
+    goal_from_pose,
+    scan_from_msg,
+    state_from_odom,
+    twist_from_command,
     twist_stamped_from_command,
 )
 from sessgan_controllers.registry import ControllerSpec, get_controller

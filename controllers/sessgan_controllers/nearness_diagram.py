@@ -56,7 +56,13 @@ import numpy as np
 
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.types import (
-    STOP, Goal, RobotState, ScanData, VelocityCommand, parameter, wrap_angle,
+    STOP,
+    Goal,
+    RobotState,
+    ScanData,
+    VelocityCommand,
+    parameter,
+    wrap_angle,
 )
 
 FAR_TARGET = 1e6

@@ -37,7 +37,12 @@ import numpy as np
 
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.types import (
-    STOP, Goal, RobotState, ScanData, VelocityCommand, parameter,
+    STOP,
+    Goal,
+    RobotState,
+    ScanData,
+    VelocityCommand,
+    parameter,
 )
 
 

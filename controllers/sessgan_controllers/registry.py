@@ -12,12 +12,14 @@ from typing import Any
 
 from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.nearness_diagram import (
-    NearnessDiagramConfig, NearnessDiagramController,
+    NearnessDiagramConfig,
+    NearnessDiagramController,
 )
 from sessgan_controllers.race_controller import RaceController, RaceControllerConfig
 from sessgan_controllers.types import Controller
 from sessgan_controllers.velocity_projection import (
-    VelocityProjectionConfig, VelocityProjectionController,
+    VelocityProjectionConfig,
+    VelocityProjectionController,
 )
 
 

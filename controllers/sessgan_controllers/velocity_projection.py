@@ -36,7 +36,13 @@ import numpy as np
 
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.types import (
-    STOP, Goal, RobotState, ScanData, VelocityCommand, parameter, wrap_angle,
+    STOP,
+    Goal,
+    RobotState,
+    ScanData,
+    VelocityCommand,
+    parameter,
+    wrap_angle,
 )
 
 

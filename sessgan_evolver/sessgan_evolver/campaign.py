@@ -22,8 +22,13 @@ import numpy as np
 
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import SessganEvolverError
-from sessgan_evolver.fitness import (FitnessConfig, generation_summary, map_diversity,
-                                     member_fitness, tpkl_reference_from)
+from sessgan_evolver.fitness import (
+    FitnessConfig,
+    generation_summary,
+    map_diversity,
+    member_fitness,
+    tpkl_reference_from,
+)
 from sessgan_evolver.genome import Genome
 from sessgan_evolver.operators import OperatorConfig
 from sessgan_evolver.report import report_generations, write_report
@@ -300,17 +305,19 @@ class Campaign:
         tpkl_table, uniqueness_table = {}, {}
         for member, maps in enumerate(last_population):
             per_k = tile_pattern_kl_per_k(self.example, maps)
-            tpkl_table[f'member {member}'] = {
-                **{f'k={k}': v for k, v in per_k.items()}, 'mean': float(np.mean(list(per_k.values())))}
+            tpkl_table[f'member {member}'] = {**{f'k={k}': v for k, v in per_k.items()},
+                                              'mean': float(np.mean(list(per_k.values())))}
         pooled = [m for maps in last_population for m in maps]
         if pooled:
             unique = uniqueness(pooled)
             uniqueness_table['last population'] = {
-                **{f'{s}x{s}': v for s, v in unique.items()}, 'mean': float(np.mean(list(unique.values())))}
+                **{f'{s}x{s}': v for s, v in unique.items()},
+                'mean': float(np.mean(list(unique.values())))}
         notes = [f'Failure bags: `{self.bags_dir}` (replay one with '
                  '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
         return write_report(self.store.run_dir, maps_by_generation, tpkl_table, uniqueness_table,
-                            title=f'SESS-GAN campaign {self.store.run_name} ({self.config.scenario})',
+                            title=f'SESS-GAN campaign {self.store.run_name} '
+                                  f'({self.config.scenario})',
                             token_names=self.scenario.token_names, notes=notes)
 
 

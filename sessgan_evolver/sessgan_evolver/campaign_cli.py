@@ -112,6 +112,7 @@ class RosEvaluator:
     def __init__(self, node, config: CampaignConfig, record_directory: Path, controller: str,
                  supervisor: ProcessSupervisor, log: Callable[[str], None]) -> None:
         from rclpy.action import ActionClient
+
         from sessgan_interfaces.srv import GenerateEnvironments
 
         self.node = node
@@ -189,9 +190,8 @@ class RosEvaluator:
                             f'{timeout:.0f} s')
 
     def sample(self, weights: bytes, seeds, generation: int, member: int):
-        from sessgan_interfaces.srv import GenerateEnvironments
-
         from sessgan_gen.ros_conversion import environment_from_msg
+        from sessgan_interfaces.srv import GenerateEnvironments
 
         request = GenerateEnvironments.Request(
             scenario=self.config.scenario, seeds=[int(s) for s in seeds],
@@ -209,9 +209,8 @@ class RosEvaluator:
         return [environment_from_msg(msg) for msg in response.environments]
 
     def goal_for(self, job: EpisodeJob):
-        from sessgan_interfaces.action import EvaluateEnvironment
-
         from sessgan_gen.ros_conversion import environment_to_msg
+        from sessgan_interfaces.action import EvaluateEnvironment
 
         goal = EvaluateEnvironment.Goal()
         goal.environment = environment_to_msg(job.environment)

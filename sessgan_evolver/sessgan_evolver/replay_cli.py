@@ -33,7 +33,7 @@ def parse_args(argv):
                         help='namespace to republish under (replay; default /)')
     parser.add_argument('--loop', action='store_true', help='replay until interrupted')
     parser.add_argument('--resimulate', action='store_true',
-                        help='run the bag\'s map again against a live controller and compare')
+                        help="run the bag's map again against a live controller and compare")
     parser.add_argument('--worker', default='',
                         help='namespace of a running simulator worker to use (e.g. /w0); '
                              'default: start a simulator and the recorded built-in controller')
@@ -81,7 +81,8 @@ def replay(args, episode) -> int:
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                 else DurabilityPolicy.VOLATILE)
             name = republished_topic(topic.topic, recorded_namespace, args.namespace)
-            publishers[topic.topic] = node.create_publisher(message_class(topic.msgtype), name, qos)
+            publishers[topic.topic] = node.create_publisher(
+                message_class(topic.msgtype), name, qos)
         total = sum(topic.message_count for topic in topics)
         node.get_logger().info(f'replaying {total} messages of {args.bag} at rate {args.rate}')
         time.sleep(0.5)  # let subscribers match before the first message
@@ -124,11 +125,11 @@ def bag_environment(bag: Path, episode: dict):
 def resimulate(args, episode: dict) -> int:
     import rclpy
     from rclpy.action import ActionClient
-    from sessgan_interfaces.action import EvaluateEnvironment
 
     from sessgan_evolver.process_supervisor import ProcessSupervisor
     from sessgan_gen.ros_conversion import environment_to_msg
     from sessgan_gen.scenarios import get_scenario
+    from sessgan_interfaces.action import EvaluateEnvironment
 
     environment = bag_environment(args.bag, episode)
     recorded = episode['metrics']
@@ -174,11 +175,13 @@ def resimulate(args, episode: dict) -> int:
     print(f'{"":14}{"recorded":>14}{"re-simulated":>14}')
     for label, old, now in (('outcome', recorded['outcome'], new.outcome),
                             ('collisions', recorded['collisions'], new.collisions),
-                            ('risk score', f'{recorded["risk_score"]:.3f}', f'{new.risk_score:.3f}'),
+                            ('risk score', f'{recorded["risk_score"]:.3f}',
+                             f'{new.risk_score:.3f}'),
                             ('sim time', f'{recorded["simulation_time"]:.2f}',
                              f'{new.simulation_time:.2f}')):
         print(f'{label:14}{str(old):>14}{str(now):>14}')
-    same = new.outcome == recorded['outcome'] and int(new.collisions) == int(recorded['collisions'])
+    same = (new.outcome == recorded['outcome']
+            and int(new.collisions) == int(recorded['collisions']))
     failed = new.collisions > 0 or (new.feasible and new.outcome in ('timeout', 'stuck'))
     ok = same if args.expect == 'same' else not failed
     print('as expected' if ok else f'NOT as expected (--expect {args.expect})')

@@ -33,7 +33,6 @@ import math
 import os
 import re
 import shutil
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +43,7 @@ import torch
 
 from sessgan_evolver import __version__
 from sessgan_evolver.errors import RunStoreError
+from sessgan_gen.atomic_files import atomic_write_bytes
 
 CHECKPOINT_FORMAT = 'sessgan_evolver.checkpoint/1'
 """Tag stored in every population checkpoint."""
@@ -293,39 +293,6 @@ class RunStore:
 
 
 # -- file helpers ---------------------------------------------------------------------------
-
-
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so readers see the old file or the new one, never a part:
-    a temporary file in the same directory, fsync, ``os.replace``, fsync of the directory.
-    """
-    path = Path(path)
-    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.tmp-')
-    try:
-        with os.fdopen(descriptor, 'wb') as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-    fsync_directory(path.parent)
-
-
-def fsync_directory(directory: str | Path) -> None:
-    """fsync a directory so a rename inside it survives a power loss (no-op where the OS
-    cannot open directories)."""
-    try:
-        descriptor = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(descriptor)
-    except OSError:
-        pass
-    finally:
-        os.close(descriptor)
 
 
 def _append_text(path: Path, text: str) -> None:

@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import io
 import json
-import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import torch
 
+from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_gen.errors import CheckpointError, UnknownScenarioError
 from sessgan_gen.model import GeneratorPyramid, pyramid_from_state_dict, resolve_device
 from sessgan_gen.scenarios import get_scenario
@@ -84,21 +83,6 @@ def checkpoint_bytes(
     return buffer.getvalue()
 
 
-def _write_atomically(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(handle, 'wb') as stream:
-            stream.write(data)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.chmod(temporary, 0o644)  # mkstemp creates 0600; checkpoints are shared files
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-
-
 def save_checkpoint(
     path: str | Path,
     pyramid: GeneratorPyramid,
@@ -116,9 +100,9 @@ def save_checkpoint(
     payload = _payload(pyramid, metadata, training_state)
     buffer = io.BytesIO()
     torch.save(payload, buffer)
-    _write_atomically(path, buffer.getvalue())
+    atomic_write_bytes(path, buffer.getvalue())
     text = json.dumps(payload['metadata'], indent=2, sort_keys=True) + '\n'
-    _write_atomically(metadata_path(path), text.encode())
+    atomic_write_bytes(metadata_path(path), text.encode())
     return path
 
 

@@ -84,7 +84,8 @@ class Environment:
                 f'environment {self.id!r}: resolution must be a positive finite number of '
                 f'metres per cell, got {self.resolution}')
         if not all(math.isfinite(v) for v in self.origin):
-            raise InvalidEnvironmentError(f'environment {self.id!r}: origin {self.origin} is not finite')
+            raise InvalidEnvironmentError(
+                f'environment {self.id!r}: origin {self.origin} is not finite')
         bad = ~np.isin(grid, OCCUPANCY_VALUES)
         if bad.any():
             row, col = np.argwhere(bad)[0]
@@ -93,9 +94,11 @@ class Environment:
                 f'expected one of {OCCUPANCY_VALUES}')
         for label, pose in (('start', self.start), ('goal', self.goal)):
             if not all(math.isfinite(v) for v in (pose.x, pose.y, pose.yaw)):
-                raise InvalidEnvironmentError(f'environment {self.id!r}: {label} {pose} is not finite')
+                raise InvalidEnvironmentError(
+                    f'environment {self.id!r}: {label} {pose} is not finite')
             row, col = self.cell_of(pose.x, pose.y)
             if not (0 <= row < height and 0 <= col < width):
                 raise InvalidEnvironmentError(
-                    f'environment {self.id!r}: {label} ({pose.x:.2f}, {pose.y:.2f}) m lies outside '
+                    f'environment {self.id!r}: {label} ({pose.x:.2f}, {pose.y:.2f}) m lies '
+                    f'outside '
                     f'the {width}x{height} grid')

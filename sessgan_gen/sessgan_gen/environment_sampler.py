@@ -87,9 +87,10 @@ class EnvironmentSampler:
             size = spec.default_size
         height, width = (int(v) for v in size)
         min_side = min_sample_side(pyramid)
-        if not (min_side <= height <= MAX_CELLS_PER_SIDE and min_side <= width <= MAX_CELLS_PER_SIDE):
+        if not all(min_side <= side <= MAX_CELLS_PER_SIDE for side in (height, width)):
             raise SamplingRequestError(
-                f'size {height}x{width} cells is outside {min_side}..{MAX_CELLS_PER_SIDE} per side '
+                f'size {height}x{width} cells is outside {min_side}..{MAX_CELLS_PER_SIDE} per '
+                f'side '
                 f'for this {scenario_name} generator')
         maps = sample_token_maps(pyramid, [int(s) for s in seeds], size=(height, width))
         return [

@@ -10,16 +10,16 @@ Serves ``generate_environments`` (sessgan_interfaces/GenerateEnvironments).
 from __future__ import annotations
 
 import rclpy
+from nav_msgs.msg import OccupancyGrid
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from nav_msgs.msg import OccupancyGrid
-from sessgan_interfaces.msg import Environment as EnvironmentMsg
-from sessgan_interfaces.srv import GenerateEnvironments
 
 from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.ros_conversion import environment_to_msg
+from sessgan_interfaces.msg import Environment as EnvironmentMsg
+from sessgan_interfaces.srv import GenerateEnvironments
 
 MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -35,12 +35,18 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
+from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
 from sessgan_gen.errors import MapFormatError
 from sessgan_gen.scenarios import BLOCKED, FREE
 from sessgan_gen.token_map import (
-    UNKNOWN, ScenarioLike, TokenMap, atomic_write_bytes, check_cells, occupancy_to_tokens,
-    resolve_scenario, tokens_to_occupancy,
+    UNKNOWN,
+    ScenarioLike,
+    TokenMap,
+    check_cells,
+    occupancy_to_tokens,
+    resolve_scenario,
+    tokens_to_occupancy,
 )
 
 DEFAULT_OCCUPIED_THRESH = 0.65

@@ -7,10 +7,10 @@ import math
 import numpy as np
 from geometry_msgs.msg import Pose
 from nav_msgs.msg import OccupancyGrid
-from sessgan_interfaces.msg import Environment as EnvironmentMsg
 
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment, Pose2D
 from sessgan_gen.errors import InvalidEnvironmentError
+from sessgan_interfaces.msg import Environment as EnvironmentMsg
 
 
 def pose_to_msg(pose: Pose2D) -> Pose:
@@ -28,7 +28,8 @@ def pose_from_msg(msg: Pose) -> Pose2D:
     return Pose2D(float(msg.position.x), float(msg.position.y), yaw)
 
 
-def occupancy_grid_msg(environment: Environment, frame_id: str = 'map', stamp=None) -> OccupancyGrid:
+def occupancy_grid_msg(environment: Environment, frame_id: str = 'map',
+                       stamp=None) -> OccupancyGrid:
     """The environment's map as a nav_msgs/OccupancyGrid (row-major, row 0 at the origin)."""
     grid = OccupancyGrid()
     grid.header.frame_id = frame_id
@@ -51,7 +52,8 @@ def occupancy_from_grid_msg(grid: OccupancyGrid) -> tuple[np.ndarray, float, tup
     resolution = float(grid.info.resolution)
     if not (1 <= width <= MAX_CELLS_PER_SIDE and 1 <= height <= MAX_CELLS_PER_SIDE):
         raise InvalidEnvironmentError(
-            f'occupancy grid of {width}x{height} cells is outside 1..{MAX_CELLS_PER_SIDE} per side')
+            f'occupancy grid of {width}x{height} cells is outside 1..{MAX_CELLS_PER_SIDE} per '
+            f'side')
     if len(grid.data) != width * height:
         raise InvalidEnvironmentError(
             f'occupancy grid data has {len(grid.data)} cells but info says '

@@ -77,7 +77,8 @@ def register_scenario(scenario: Scenario) -> Scenario:
     if len(scenario.tokens) != len(scenario.occupancy) or len(scenario.tokens) != len(
         scenario.token_names
     ):
-        raise ValueError(f'scenario {scenario.name!r}: tokens, names and occupancy differ in length')
+        raise ValueError(
+            f'scenario {scenario.name!r}: tokens, names and occupancy differ in length')
     if sorted(scenario.hierarchy) != list(range(len(scenario.tokens))):
         raise ValueError(f'scenario {scenario.name!r}: hierarchy must list every token once')
     SCENARIOS[scenario.name] = scenario

@@ -22,13 +22,13 @@ Blank lines are allowed only before the first and after the last row.
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_gen.errors import MapFormatError, UnknownScenarioError
 from sessgan_gen.scenarios import BLOCKED, FREE, LOW_OBSTACLE, SCENARIOS, Scenario, get_scenario
 
@@ -196,25 +196,6 @@ def format_token_map(token_map: TokenMap) -> str:
     ]
     lines.extend(''.join(row) for row in chars[cells[::-1]])
     return '\n'.join(lines) + '\n'
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and os.replace (no torn files)."""
-    target = Path(path)
-    handle, temp_name = tempfile.mkstemp(prefix=f'.{target.name}.', dir=target.parent or '.')
-    try:
-        with os.fdopen(handle, 'wb') as stream:
-            stream.write(data)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.chmod(temp_name, 0o644)
-        os.replace(temp_name, target)
-    except BaseException:
-        try:
-            os.unlink(temp_name)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 def write_token_map(path: str | os.PathLike, token_map: TokenMap) -> None:

@@ -43,6 +43,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from sessgan_gen.atomic_files import fsync_directory, fsync_tree
 from sessgan_gen.map_server_io import write_map_server
 from sessgan_sim import __version__
 from sessgan_sim.errors import SessganSimError
@@ -176,13 +177,13 @@ def write_episode_bag(directory: str | Path,
                                'first_timestamp_ns': first_ns, 'last_timestamp_ns': last_ns}
         (bag_path / EPISODE_FILE).write_text(
             json.dumps(episode, indent=2, sort_keys=True, allow_nan=False) + '\n')
-        _fsync_tree(bag_path)
+        fsync_tree(bag_path)
         if final.exists():
             if not overwrite:
                 raise BagWriteError(f'{final} appeared while the bag was being written')
             os.replace(final, staging / 'replaced')
         os.replace(bag_path, final)
-        _fsync_directory(final.parent)
+        fsync_directory(final.parent)
     except BaseException as err:
         shutil.rmtree(staging, ignore_errors=True)
         if isinstance(err, (WriterError, OSError, TypeError, ValueError)):
@@ -280,27 +281,6 @@ def _json_ready(value: Any) -> Any:
         return value
     raise BagWriteError(f'episode metadata value {value!r:.80} ({type(value).__name__}) '
                         'is not JSON data')
-
-
-def _fsync_tree(directory: Path) -> None:
-    for path in directory.rglob('*'):
-        if path.is_file():
-            with path.open('rb') as handle:
-                os.fsync(handle.fileno())
-    _fsync_directory(directory)
-
-
-def _fsync_directory(directory: Path) -> None:
-    try:
-        descriptor = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(descriptor)
-    except OSError:
-        pass
-    finally:
-        os.close(descriptor)
 
 
 def _process_exists(pid: int) -> bool:

@@ -382,7 +382,7 @@ class Episode:
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
                            np.random.default_rng(agent_seed))
         lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
-        lidar.attach(client, robot)
+        lidar.attach(client, robot, layout, self._agents)
         passable = np.isin(environment.occupancy, robot.passable_values)
         live = _Live(
             robot=robot, lidar=lidar,

@@ -31,17 +31,20 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
-from sessgan_interfaces.action import EvaluateEnvironment
-from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from tf2_msgs.msg import TFMessage
 
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.navigation import make_environment
-from sessgan_gen.ros_conversion import (environment_from_msg, occupancy_from_grid_msg,
-                                        occupancy_grid_msg)
+from sessgan_gen.ros_conversion import (
+    environment_from_msg,
+    occupancy_from_grid_msg,
+    occupancy_grid_msg,
+)
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import occupancy_to_tokens
+from sessgan_interfaces.action import EvaluateEnvironment
+from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from sessgan_sim import ros_messages as rm
 from sessgan_sim.bag_recording import BagRecord, BagWriteError, write_episode_bag
 from sessgan_sim.episode import Episode, EpisodeConfig
@@ -268,8 +271,9 @@ class SimulatorNode(Node):
         per_tick['messaging'] = max(0.0, loop_seconds / ticks - sum(per_tick.values()))
         factor = metrics.simulation_time / loop_seconds if loop_seconds > 0 else 0.0
         self.get_logger().info(
-            f'episode {environment_id}: {metrics.outcome.value} after {metrics.simulation_time:.2f}'
-            f' sim s in {loop_seconds:.2f} wall s (x{factor:.1f} real time); per tick ms: ' +
+            f'episode {environment_id}: {metrics.outcome.value} after '
+            f'{metrics.simulation_time:.2f} sim s in {loop_seconds:.2f} wall s '
+            f'(x{factor:.1f} real time); per tick ms: ' +
             ' '.join(f'{name}={value * 1e3:.3f}' for name, value in per_tick.items()))
 
     def publish_episode_start(self, environment, episode, observation, recording) -> None:
@@ -277,7 +281,8 @@ class SimulatorNode(Node):
         self.publish(self.map_publisher, 'map', 'nav_msgs/msg/OccupancyGrid',
                      occupancy_grid_msg(environment, stamp=stamp), observation.time, recording)
         self.publish(self.tf_static_publisher, 'tf_static', 'tf2_msgs/msg/TFMessage',
-                     rm.static_tf_msg(stamp, episode.robot.ride_height, episode.robot.sensor_height),
+                     rm.static_tf_msg(stamp, episode.robot.ride_height,
+                                      episode.robot.sensor_height),
                      observation.time, recording)
         goal = environment.goal
         self.publish(self.goal_publisher, 'goal_pose', 'geometry_msgs/msg/PoseStamped',

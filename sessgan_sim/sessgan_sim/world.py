@@ -12,11 +12,13 @@ Geometry (all static, z up, the map frame is pybullet's world frame):
   neighbouring boxes share a static compound body (up to 16 each: 4 bodies for
   the factory map). Solid boxes keep contacts robust: a car at 12 m/s cannot
   tunnel through a barrier, as it can through a hollow triangle mesh.
-* The lidar does not see the boxes: Bullet's ray cast against a box is costly
-  (a convex cast per box the ray crosses). It sees a separate, ray-only
-  triangle mesh instead: the vertical faces between cells of different heights,
-  merged along grid lines (146 quads for the factory map), which casts about
-  three times faster. The mesh has no top faces: the scan plane is horizontal.
+* The default lidar casts its rays analytically from the layout's ``heights``
+  (sessgan_sim.sensors). The pybullet lidar does not see the boxes either:
+  Bullet's ray cast against a box is costly (a convex cast per box the ray
+  crosses). It sees a separate, ray-only triangle mesh instead: the vertical
+  faces between cells of different heights, merged along grid lines (146 quads
+  for the factory map), which casts about three times faster. The mesh has no
+  top faces: the scan plane is horizontal.
 * A ground slab (a thin box under the map, top at z = 0) is scenery: gravity is
   off and every body rides at a fixed height, so nothing touches it.
 
@@ -174,6 +176,13 @@ class WorldLayout:
     """float array (n, 4): x_min, y_min, x_max, y_max of each body's boxes together."""
     body_kinds: tuple[ObstacleKind, ...]
     """Kind of each body's boxes (a body holds boxes of one kind)."""
+    resolution: float
+    """m, side of a cell of ``heights``."""
+    origin: tuple[float, float]
+    """(x, y) in m of the corner of cell (0, 0) of ``heights`` (its lowest x and y)."""
+    border_height: float
+    """m, height of the one-cell ring closing the map (the blocked cells' kind); beyond the
+    ring lies nothing (height 0)."""
     _bounds_list: list[tuple[int, list[float]]] | None = field(default=None, repr=False)
 
     def kind_of(self, body_id: int) -> ObstacleKind | None:
@@ -497,5 +506,8 @@ class World:
             body_ids=np.array(body_ids, dtype=np.int64),
             body_bounds=np.array(body_bounds, dtype=float).reshape(-1, 4),
             body_kinds=tuple(body_kinds),
+            resolution=resolution,
+            origin=(float(environment.origin[0]), float(environment.origin[1])),
+            border_height=style.height_of(kind_masks[0][0]),
         )
         return self._layout

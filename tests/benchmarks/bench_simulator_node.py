@@ -80,6 +80,7 @@ def run_episodes(node, namespaces: list[str], environment_msg, episodes: int) ->
     """Run ``episodes`` reference episodes spread over the workers; return wall seconds."""
     import rclpy
     from rclpy.action import ActionClient
+
     from sessgan_interfaces.action import EvaluateEnvironment
 
     clients = [ActionClient(node, EvaluateEnvironment, f'{ns}/evaluate') for ns in namespaces]

@@ -49,7 +49,8 @@ def test_generate_environments_service(node_processes, ros_node):
     generator = start_generator(node_processes, '/gen_b', 'scenario:=drone')
     client = ros_node.create_client(GenerateEnvironments, '/gen_b/generate_environments')
 
-    request = GenerateEnvironments.Request(scenario='drone', seeds=[3, 4, 5], generation=2, member=1)
+    request = GenerateEnvironments.Request(scenario='drone', seeds=[3, 4, 5], generation=2,
+                                           member=1)
     response = call_service(ros_node, client, request)
     assert response.success, response.message
     assert [env.seed for env in response.environments] == [3, 4, 5]

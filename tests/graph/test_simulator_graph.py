@@ -44,6 +44,7 @@ def start_controller(node_processes, namespace: str, name: str):
 def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0, seed: int = 1,
              timeout: float = 120.0, record_directory: str = ''):
     from rclpy.action import ActionClient
+
     from sessgan_interfaces.action import EvaluateEnvironment
 
     client = ActionClient(ros_node, EvaluateEnvironment, f'{namespace}/evaluate')

@@ -70,7 +70,8 @@ def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, 
     bags = sorted((tmp_path / 'bags' / 'bags').iterdir())
     assert bags, 'no failure bag was written'
     bag = bags[0]
-    assert {'episode.json', 'map.pgm', 'map.yaml', 'metadata.yaml'} <= {p.name for p in bag.iterdir()}
+    files = {path.name for path in bag.iterdir()}
+    assert {'episode.json', 'map.pgm', 'map.yaml', 'metadata.yaml'} <= files
     assert not list((tmp_path / 'bags' / 'bags').glob('*.tmp-*'))
 
     replay = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag), '--rate',

@@ -15,15 +15,14 @@ import pytest
 
 pytest.importorskip('pybullet')
 
+from sessgan_controllers.registry import get_controller  # noqa: E402
+from sessgan_controllers.types import Controller, Goal, RobotState, ScanData  # noqa: E402
 from sessgan_gen.environment import Environment  # noqa: E402
 from sessgan_gen.navigation import make_environment  # noqa: E402
 from sessgan_gen.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.token_map import load_example_map, read_token_map  # noqa: E402
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation  # noqa: E402
 from sessgan_sim.metrics import EpisodeMetrics, Outcome  # noqa: E402
-
-from sessgan_controllers.registry import get_controller  # noqa: E402
-from sessgan_controllers.types import Controller, Goal, RobotState, ScanData  # noqa: E402
 
 pytestmark = pytest.mark.unit
 

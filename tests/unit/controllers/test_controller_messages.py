@@ -12,7 +12,10 @@ from nav_msgs.msg import Odometry  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
 from sessgan_controllers.messages import (  # noqa: E402
-    scan_from_msg, state_from_odom, twist_from_command, twist_stamped_from_command,
+    scan_from_msg,
+    state_from_odom,
+    twist_from_command,
+    twist_stamped_from_command,
     yaw_from_quaternion,
 )
 from sessgan_controllers.types import VelocityCommand  # noqa: E402

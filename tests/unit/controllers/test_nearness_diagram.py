@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from sessgan_controllers.nearness_diagram import (
-    NearnessDiagramConfig, NearnessDiagramController, Situation,
+    NearnessDiagramConfig,
+    NearnessDiagramController,
+    Situation,
 )
 from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
 

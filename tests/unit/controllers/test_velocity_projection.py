@@ -9,7 +9,8 @@ import pytest
 
 from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
 from sessgan_controllers.velocity_projection import (
-    VelocityProjectionConfig, VelocityProjectionController,
+    VelocityProjectionConfig,
+    VelocityProjectionController,
 )
 
 pytestmark = pytest.mark.unit

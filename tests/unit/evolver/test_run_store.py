@@ -19,8 +19,9 @@ from sessgan_evolver.fitness import (
     tpkl_reference_from,
 )
 from sessgan_evolver.genome import Genome
-from sessgan_evolver.run_store import RunStore, atomic_write_bytes
+from sessgan_evolver.run_store import RunStore
 from sessgan_evolver.seeding import shared_seeds
+from sessgan_gen.atomic_files import atomic_write_bytes
 
 pytestmark = pytest.mark.unit
 

@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 
 from sessgan_gen.environment_metrics import (
-    TPKL_EPSILON, tile_pattern_kl, tile_pattern_kl_per_k, uniqueness, uniqueness_report,
+    TPKL_EPSILON,
+    tile_pattern_kl,
+    tile_pattern_kl_per_k,
+    uniqueness,
+    uniqueness_report,
 )
 
 pytestmark = pytest.mark.unit

@@ -9,8 +9,13 @@ import yaml
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.errors import MapFormatError
 from sessgan_gen.map_server_io import (
-    export_environment, export_token_map, import_map_server, read_map_server, read_pgm,
-    resample_tokens, write_map_server,
+    export_environment,
+    export_token_map,
+    import_map_server,
+    read_map_server,
+    read_pgm,
+    resample_tokens,
+    write_map_server,
 )
 from sessgan_gen.token_map import TokenMap
 

@@ -7,9 +7,19 @@ import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.navigation import (
-    choose_start_goal, environment_is_feasible, footprint_free_mask, inflate, is_feasible,
-    make_environment, most_open_cell, occupancy_passable_mask, passable_mask, plan_route,
-    reachable_regions, shortest_path, shortest_path_in_free,
+    choose_start_goal,
+    environment_is_feasible,
+    footprint_free_mask,
+    inflate,
+    is_feasible,
+    make_environment,
+    most_open_cell,
+    occupancy_passable_mask,
+    passable_mask,
+    plan_route,
+    reachable_regions,
+    shortest_path,
+    shortest_path_in_free,
 )
 from sessgan_gen.token_map import parse_token_map
 

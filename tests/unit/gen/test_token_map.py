@@ -8,8 +8,16 @@ import pytest
 from sessgan_gen.errors import MapFormatError, UnknownScenarioError
 from sessgan_gen.scenarios import SCENARIOS, get_scenario
 from sessgan_gen.token_map import (
-    EXAMPLE_MAP_DIR, TokenMap, format_token_map, load_example_map, occupancy_to_tokens,
-    parse_token_map, read_token_map, to_common_encoding, tokens_to_occupancy, write_token_map,
+    EXAMPLE_MAP_DIR,
+    TokenMap,
+    format_token_map,
+    load_example_map,
+    occupancy_to_tokens,
+    parse_token_map,
+    read_token_map,
+    to_common_encoding,
+    tokens_to_occupancy,
+    write_token_map,
 )
 
 pytestmark = pytest.mark.unit

@@ -11,7 +11,7 @@ from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError, WorldError
-from sessgan_sim.sensors import LidarConfig
+from sessgan_sim.sensors import LidarConfig, RayCaster
 from sessgan_sim.world import (
     BOXES_PER_BODY,
     SCAN_RAY_MASK,
@@ -139,8 +139,10 @@ def test_rays_see_low_obstacles_only_below_their_height():
 def test_every_world_style_gives_the_same_scans_and_motion(style):
     env = make_environment(load_example_map('factory').cells, 'factory', 'factory')
     trajectories = []
+    # The pybullet lidar, whose rays meet the bodies the style builds.
+    lidar = LidarConfig(noise_std=0.0, caster=RayCaster.PYBULLET)
     for world in (WorldStyle(), style):
-        config = EpisodeConfig(lidar=LidarConfig(noise_std=0.0), dummy_agents=0, world=world)
+        config = EpisodeConfig(lidar=lidar, dummy_agents=0, world=world)
         with Episode() as episode:
             scans = [episode.reset(env, config).scan]
             for _ in range(40):

@@ -172,14 +172,14 @@ def resimulate(args, episode: dict) -> int:
         finally:
             node.destroy_node()
             rclpy.try_shutdown()
-    print(f'{"":14}{"recorded":>14}{"re-simulated":>14}')
+    print(f'{"":12}{"recorded":>18}{"re-simulated":>18}')
     for label, old, now in (('outcome', recorded['outcome'], new.outcome),
                             ('collisions', recorded['collisions'], new.collisions),
                             ('risk score', f'{recorded["risk_score"]:.3f}',
                              f'{new.risk_score:.3f}'),
                             ('sim time', f'{recorded["simulation_time"]:.2f}',
                              f'{new.simulation_time:.2f}')):
-        print(f'{label:14}{str(old):>14}{str(now):>14}')
+        print(f'{label:12}{str(old):>18}{str(now):>18}')
     same = (new.outcome == recorded['outcome']
             and int(new.collisions) == int(recorded['collisions']))
     failed = new.collisions > 0 or (new.feasible and new.outcome in ('timeout', 'stuck'))

@@ -43,7 +43,11 @@ def test_racetrack_is_a_closed_circuit_with_the_goal_half_a_lap_away():
     # 3 to 7 cells wide: every track cell lies within 4 cells of out-of-bounds.
     track = cells == 0
     assert not inflate(track, 4.0).any()
-    assert 0.1 < track.mean() < 0.35
+    assert 0.1 < track.mean() < 0.5
+    # Dense: the circuit winds over the whole square, so few 8x8 windows are all out of
+    # bounds (identical empty patches cap the uniqueness a faithful generator can reach).
+    windows = np.lib.stride_tricks.sliding_window_view(track, (8, 8))
+    assert (~windows.any(axis=(2, 3))).mean() < 0.15
 
 
 def test_factory_has_narrow_passages():

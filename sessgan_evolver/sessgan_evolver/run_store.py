@@ -29,7 +29,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import os
 import re
 import shutil
@@ -38,12 +37,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from sessgan_evolver import __version__
 from sessgan_evolver.errors import RunStoreError
 from sessgan_gen.atomic_files import atomic_write_bytes
+from sessgan_gen.json_data import to_json_data
 
 CHECKPOINT_FORMAT = 'sessgan_evolver.checkpoint/1'
 """Tag stored in every population checkpoint."""
@@ -369,26 +368,11 @@ def _csv_value(value: Any) -> Any:
 
 
 def _plain(value: Any) -> Any:
-    """JSON-ready plain data: numpy scalars/arrays to Python, non-finite floats to None,
-    paths to strings, tuples to lists."""
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, Path):
-        return str(value)
-    if value is None or isinstance(value, str):
-        return value
-    raise RunStoreError(f'cannot store a {type(value).__name__} in metrics or config: '
-                        f'{value!r}')
+    """JSON-ready plain data (see sessgan_gen.json_data)."""
+    try:
+        return to_json_data(value)
+    except TypeError as err:
+        raise RunStoreError(f'cannot store it in metrics or config: {err}') from err
 
 
 def _differences(old: Any, new: Any, prefix: str = '') -> list[str]:

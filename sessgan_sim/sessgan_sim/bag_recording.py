@@ -25,7 +25,7 @@ import math
 import os
 import shutil
 from collections.abc import Iterable, Mapping
-from enum import Enum, StrEnum
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, Final, Literal, NamedTuple
 
@@ -44,6 +44,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from sessgan_gen.atomic_files import fsync_directory, fsync_tree
+from sessgan_gen.json_data import to_json_data
 from sessgan_gen.map_server_io import write_map_server
 from sessgan_sim import __version__
 from sessgan_sim.errors import SessganSimError
@@ -260,27 +261,11 @@ def _checked_record(index: int, record: BagRecord | tuple[str, str, int, bytes]
 
 
 def _json_ready(value: Any) -> Any:
-    """Plain JSON data: numpy scalars and arrays converted, non-finite floats to None."""
-    if isinstance(value, Enum):
-        return _json_ready(value.value)
-    if isinstance(value, Mapping):
-        return {str(k): _json_ready(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_ready(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _json_ready(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, Path):
-        return str(value)
-    if value is None or isinstance(value, str):
-        return value
-    raise BagWriteError(f'episode metadata value {value!r:.80} ({type(value).__name__}) '
-                        'is not JSON data')
+    """Plain JSON data (see sessgan_gen.json_data)."""
+    try:
+        return to_json_data(value)
+    except TypeError as err:
+        raise BagWriteError(f'episode metadata: {err}') from err
 
 
 def _process_exists(pid: int) -> bool:

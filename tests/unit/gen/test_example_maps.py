@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 
 from sessgan_gen.navigation import (
-    footprint_free_mask, inflate, make_environment, plan_route, reachable_regions,
+    footprint_free_mask,
+    inflate,
+    make_environment,
+    plan_route,
+    reachable_regions,
     shortest_path_in_free,
 )
 from sessgan_gen.scenarios import get_scenario

@@ -60,6 +60,7 @@ from sessgan_controllers.types import (
     Goal,
     RobotState,
     ScanData,
+    StatelessController,
     VelocityCommand,
     parameter,
     wrap_angle,
@@ -155,7 +156,7 @@ class NearnessDiagramDecision:
     command: VelocityCommand
 
 
-class NearnessDiagramController:
+class NearnessDiagramController(StatelessController):
     """ND navigation; see the module docstring. Stateless between steps."""
 
     def __init__(self, config: NearnessDiagramConfig | None = None) -> None:
@@ -168,17 +169,6 @@ class NearnessDiagramController:
         self._beam_map_key: tuple[int, float, float] | None = None
         self._beam_sector = np.zeros(0, dtype=int)
         self._fill_beam = np.zeros(0, dtype=int)
-
-    def reset(self) -> None:
-        """ND keeps no state between steps; present for the Controller protocol."""
-
-    def goal_reached(self, state: RobotState, goal: Goal) -> bool:
-        return goal.distance_from(state) <= self.config.goal_tolerance
-
-    def compute_command(
-        self, scan: ScanData, state: RobotState, goal: Goal
-    ) -> VelocityCommand:
-        return self.decide(scan, state, goal).command
 
     # ----------------------------------------------------------------------------------------
     # The ND step

@@ -41,6 +41,7 @@ from sessgan_controllers.types import (
     Goal,
     RobotState,
     ScanData,
+    StatelessController,
     VelocityCommand,
     parameter,
 )
@@ -107,23 +108,12 @@ class RaceDecision:
     command: VelocityCommand
 
 
-class RaceController:
+class RaceController(StatelessController):
     """Follow-the-gap race controller; see the module docstring. Stateless between steps."""
 
     def __init__(self, config: RaceControllerConfig | None = None) -> None:
         self.config = config or RaceControllerConfig()
         self.config.validate()
-
-    def reset(self) -> None:
-        """The controller keeps no state between steps; present for the Controller protocol."""
-
-    def goal_reached(self, state: RobotState, goal: Goal) -> bool:
-        return goal.distance_from(state) <= self.config.goal_tolerance
-
-    def compute_command(
-        self, scan: ScanData, state: RobotState, goal: Goal
-    ) -> VelocityCommand:
-        return self.decide(scan, state, goal).command
 
     def decide(self, scan: ScanData, state: RobotState, goal: Goal) -> RaceDecision:
         """Run one step and return the full decision."""

@@ -152,3 +152,25 @@ class Controller(Protocol):
     def reset(self) -> None:
         """Forget any state kept between steps (call on a new goal or episode)."""
         ...
+
+
+class StatelessController:
+    """Base of the built-in controllers: no state between steps, the goal counts as reached
+    within ``config.goal_tolerance``, and a command is the one of ``decide``'s full decision."""
+
+    config: Any
+
+    def reset(self) -> None:
+        """Nothing is kept between steps; present for the Controller protocol."""
+
+    def goal_reached(self, state: RobotState, goal: Goal) -> bool:
+        return goal.distance_from(state) <= self.config.goal_tolerance
+
+    def compute_command(
+        self, scan: ScanData, state: RobotState, goal: Goal
+    ) -> VelocityCommand:
+        return self.decide(scan, state, goal).command
+
+    def decide(self, scan: ScanData, state: RobotState, goal: Goal) -> Any:
+        """One step's full decision (its ``command`` field is the command)."""
+        raise NotImplementedError

@@ -40,6 +40,7 @@ from sessgan_controllers.types import (
     Goal,
     RobotState,
     ScanData,
+    StatelessController,
     VelocityCommand,
     parameter,
     wrap_angle,
@@ -109,7 +110,7 @@ class ProjectionDecision:
     command: VelocityCommand
 
 
-class VelocityProjectionController:
+class VelocityProjectionController(StatelessController):
     """Velocity-projection avoidance; see the module docstring. Stateless between steps."""
 
     def __init__(self, config: VelocityProjectionConfig | None = None) -> None:
@@ -117,17 +118,6 @@ class VelocityProjectionController:
         self.config.validate()
         count = self.config.candidate_count
         self._ring = -math.pi + (2.0 * math.pi / count) * np.arange(count)
-
-    def reset(self) -> None:
-        """The method keeps no state between steps; present for the Controller protocol."""
-
-    def goal_reached(self, state: RobotState, goal: Goal) -> bool:
-        return goal.distance_from(state) <= self.config.goal_tolerance
-
-    def compute_command(
-        self, scan: ScanData, state: RobotState, goal: Goal
-    ) -> VelocityCommand:
-        return self.decide(scan, state, goal).command
 
     def decide(self, scan: ScanData, state: RobotState, goal: Goal) -> ProjectionDecision:
         """Run one step and return the full decision."""

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
 from sessgan_controllers.types import Goal, RobotState, ScanData, VelocityCommand
@@ -40,6 +42,35 @@ def state_from_odom(msg: Odometry) -> RobotState:
         vy=float(twist.linear.y),
         wz=float(twist.angular.z),
     )
+
+
+_CDR_LITTLE_ENDIAN, _CDR_BIG_ENDIAN = b'\x00\x01', b'\x00\x00'
+
+
+def odom_from_cdr(data: bytes) -> tuple[int, RobotState]:
+    """(header stamp in ns, state) of a serialized nav_msgs/Odometry, as a raw subscription
+    hands it over, read without building the message: rclpy's conversion of its two
+    36-double covariance arrays costs ten times the rest (about 40 us a message).
+
+    Classic CDR (the encapsulation Fast DDS and Cyclone DDS use for ROS 2 messages) is read
+    in place; any other encapsulation goes through rclpy's deserialization.
+    """
+    kind = data[:2]
+    if kind not in (_CDR_LITTLE_ENDIAN, _CDR_BIG_ENDIAN):
+        msg = deserialize_message(data, Odometry)
+        stamp = msg.header.stamp
+        return stamp.sec * 1_000_000_000 + stamp.nanosec, state_from_odom(msg)
+    order = '<' if kind == _CDR_LITTLE_ENDIAN else '>'
+    body = memoryview(data)[4:]  # CDR aligns relative to the end of the encapsulation header
+    sec, nanosec, frame_id_length = struct.unpack_from(order + 'iII', body, 0)
+    offset = (12 + frame_id_length + 3) & ~3  # child_frame_id's length, 4-aligned
+    (child_frame_id_length,) = struct.unpack_from(order + 'I', body, offset)
+    offset = (offset + 4 + child_frame_id_length + 7) & ~7  # pose.pose, 8-aligned doubles
+    x, y, _, qx, qy, qz, qw = struct.unpack_from(order + '7d', body, offset)
+    offset += 8 * (7 + 36)  # past pose.pose and pose.covariance: twist.twist
+    vx, vy, _, _, _, wz = struct.unpack_from(order + '6d', body, offset)
+    state = RobotState(x=x, y=y, yaw=yaw_from_quaternion(qx, qy, qz, qw), vx=vx, vy=vy, wz=wz)
+    return sec * 1_000_000_000 + nanosec, state
 
 
 def goal_from_pose(msg: PoseStamped) -> Goal:

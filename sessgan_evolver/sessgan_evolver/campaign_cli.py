@@ -23,7 +23,7 @@ from pathlib import Path
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError, EpisodeJob
 from sessgan_evolver.errors import SessganEvolverError
 from sessgan_evolver.fitness import FitnessConfig
-from sessgan_evolver.process_supervisor import ProcessSupervisor
+from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.scenarios import get_scenario
 
@@ -303,15 +303,15 @@ def start_graph(supervisor: ProcessSupervisor, config: CampaignConfig, controlle
             '-p', 'rate:=0.0'])
     if external:
         return
-    for worker in range(config.workers):
+    for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'
         ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
         supervisor.start(f'simulator_w{worker}', [
             'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args, '-p', f'mode:={mode}',
-            '-p', f'bag_storage:={config.bag_storage}'])
+            '-p', f'bag_storage:={config.bag_storage}'], core=core, batch=True)
         supervisor.start(f'{controller}_w{worker}', [
             'ros2', 'run', 'sessgan_controllers', controller, *ros_args,
-            '-p', 'use_sim_time:=true'])
+            '-p', 'use_sim_time:=true'], core=core, batch=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -126,7 +126,7 @@ def resimulate(args, episode: dict) -> int:
     import rclpy
     from rclpy.action import ActionClient
 
-    from sessgan_evolver.process_supervisor import ProcessSupervisor
+    from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
     from sessgan_gen.ros_conversion import environment_to_msg
     from sessgan_gen.scenarios import get_scenario
     from sessgan_interfaces.action import EvaluateEnvironment
@@ -139,9 +139,12 @@ def resimulate(args, episode: dict) -> int:
     with ProcessSupervisor(Path(tempfile.mkdtemp(prefix='sessgan-replay-'))) as supervisor:
         if not args.worker:
             ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
-            supervisor.start('simulator', ['ros2', 'run', 'sessgan_sim', 'simulator', *ros_args])
+            core = worker_cores(1)[0]
+            supervisor.start('simulator', ['ros2', 'run', 'sessgan_sim', 'simulator', *ros_args],
+                             core=core, batch=True)
             supervisor.start('controller', ['ros2', 'run', 'sessgan_controllers', controller,
-                                            *ros_args, '-p', 'use_sim_time:=true'])
+                                            *ros_args, '-p', 'use_sim_time:=true'],
+                             core=core, batch=True)
         rclpy.init()
         node = rclpy.create_node('sessgan_resimulate')
         try:

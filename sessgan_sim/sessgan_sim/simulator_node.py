@@ -55,6 +55,8 @@ from sessgan_sim.sensors import LidarConfig
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+"""cmd_vel: matches reliable and best-effort controllers; see CommandReceiver."""
 
 FAILURE_OUTCOMES = ('timeout', 'stuck')
 
@@ -63,12 +65,21 @@ class CommandReceiver:
     """Takes ``cmd_vel`` messages straight from a wait set, without an executor.
 
     Lockstep waits for one command per tick; an executor's Python overhead per wake-up costs
-    more than the whole round trip, and the subscription's node is spun by nobody else.
+    more than the whole round trip, and the subscription's node is spun by nobody else. The
+    reader is best effort: reliability's acknowledgements cost more per tick than the command
+    itself, and a command lost on one host (not seen in lockstep) ends the episode
+    controller_unresponsive after the timeout.
     """
 
     def __init__(self, node, msg_type, topic: str) -> None:
-        self.subscription = node.create_subscription(msg_type, topic, lambda _: None, 10)
-        self.wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, node.context.handle)
+        self.subscription = node.create_subscription(msg_type, topic, lambda _: None,
+                                                     COMMAND_QOS)
+        self.context = node.context
+        # A wait on a shut-down context never returns (seen with rclpy 7.1.6): shutdown (a
+        # SIGTERM, say) wakes the waiting episode instead, as rclpy's executors wake theirs.
+        self.shutdown = node.create_guard_condition(lambda: None)
+        self.context.on_shutdown(self.shutdown.trigger)
+        self.wait_set = _rclpy.WaitSet(1, 1, 0, 0, 0, 0, self.context.handle)
 
     def take(self):
         """The oldest received command, or None."""
@@ -81,11 +92,16 @@ class CommandReceiver:
             commands.append(command)
         return commands
 
-    def wait(self, timeout: float) -> None:
-        """Block until a command is ready or ``timeout`` seconds pass."""
+    def wait(self, timeout: float) -> bool:
+        """Block until a command is ready or ``timeout`` seconds pass; False once ROS is shut
+        down (no command will come)."""
+        if not self.context.ok():
+            return False
         self.wait_set.clear_entities()
         self.wait_set.add_subscription(self.subscription.handle)
+        self.wait_set.add_guard_condition(self.shutdown.handle)
         self.wait_set.wait(max(0, int(timeout * 1e9)))
+        return self.context.ok()
 
 
 @dataclass
@@ -346,7 +362,8 @@ class SimulatorNode(Node):
             if republish is not None and now >= next_republish:
                 republish()  # covers a controller that matched our publishers only now
                 next_republish = now + 1.0
-            self.commands.wait(min(deadline, next_republish) - now)
+            if not self.commands.wait(min(deadline, next_republish) - now):
+                return None
 
     def step_loop(self, episode, observation, recording, goal_handle):
         lockstep = self.get_parameter('mode').value != 'clocked'
@@ -365,6 +382,9 @@ class SimulatorNode(Node):
             if goal_handle is not None and goal_handle.is_cancel_requested:
                 episode.abort(Outcome.TIMEOUT, 'cancelled by the evaluate client')
                 break
+            if not self.context.ok():  # shutting down (SIGTERM): end at once, no more ticks
+                episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, 'the simulator was shut down')
+                break
             self.publish_tick(episode, observation, recording)
             if lockstep:
                 limit = startup_timeout if first else timeout
@@ -379,7 +399,8 @@ class SimulatorNode(Node):
             else:
                 tick_deadline = wall_origin + (observation.time + dt) / rtf
                 while (remaining := tick_deadline - time.monotonic()) > 0:
-                    self.commands.wait(remaining)
+                    if not self.commands.wait(remaining):
+                        break
                     received = self.commands.take_all()
                     if received:
                         command = received[-1]
@@ -478,6 +499,9 @@ def main(args=None) -> None:
         pass
     finally:
         if node is not None:
+            # A running episode ends at its next tick once ROS is shut down; closing its world
+            # and nodes under it would crash the process instead of letting it exit.
+            node.busy.acquire(timeout=5.0)
             node.episode.close()
             node.command_node.destroy_node()
             node.destroy_node()

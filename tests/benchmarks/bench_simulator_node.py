@@ -1,11 +1,17 @@
 """Benchmark: the simulator node in lockstep with a controller in a separate process.
 
-Prints, for the factory reference episode (example map, 360-beam scan, 20 Hz control, Nearness
-Diagram controller in its own process):
-* the sim-time / wall-time factor of the node (simulator pinned to one core, the controller on
-  the other when there are two), with the time per tick split into physics, sensors, metrics
-  and messaging (the node's own log line);
-* throughput of 2 workers (each with its own controller) against 1, in episodes per minute.
+The factory reference episode (example map, 360-beam scan, 20 Hz control, the Nearness-Diagram
+controller in its own process with use_sim_time, so clock, odom and scan reach it every tick).
+Prints:
+* the floor: bare rclpy processes exchanging the same messages per tick with no simulation and
+  no controller logic (lockstep_floor.py), on one core, measured first in the same run;
+* the simulator and its controller on one core as batch processes (how campaigns start them):
+  the sim-time / wall-time factor, and the time per tick split into physics, sensors, metrics
+  (the node's own timing), the controller's computation (the same episode run in-process) and
+  messaging (the rest: ROS 2 publishing, delivery and callbacks on both sides, against the
+  floor);
+* the same pair with default scheduling, and on two cores (one process per core);
+* throughput of 2 workers against 1, each worker's pair on its own core, in episodes per minute.
 
 Run after `source setup.bash`:  python tests/benchmarks/bench_simulator_node.py [--episodes N]
 """
@@ -17,63 +23,48 @@ import os
 import random
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
+
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randrange(10, 100)))
 
+HERE = Path(__file__).resolve().parent
 TIMING = re.compile(r'\(x([\d.]+) real time\); per tick ms: physics=([\d.]+) sensors=([\d.]+) '
                     r'metrics=([\d.]+) messaging=([\d.]+)')
+REFERENCE_PARAMETERS = ['-p', 'lidar_beams:=360', '-p', 'control_rate:=20.0']
 
 
-def pinned(command: list[str], core: int | None) -> list[str]:
-    if core is None or shutil.which('taskset') is None:
-        return command
-    return ['taskset', '-c', str(core)] + command
+def measure_floor(graph: ProcessSupervisor, core: int, ticks: int) -> float:
+    """Lockstep ticks per second of bare rclpy with the reference messages, on ``core``, as
+    batch processes (like the campaign's workers)."""
+    script = str(HERE / 'lockstep_floor.py')
+    ns = ['--ros-args', '-r', '__ns:=/floor']
+    graph.start('floor_controller', [sys.executable, script, '--role', 'controller', *ns],
+                core=core, batch=True)
+    sim = graph.start('floor_sim', [sys.executable, script, '--role', 'sim', '--ticks',
+                                    str(ticks), *ns], core=core, batch=True)
+    sim.process.wait(timeout=300)
+    found = re.search(r'ticks_per_second=([\d.]+)', sim.log_tail())
+    graph.stop_all()
+    if not found:
+        sys.exit(f'the lockstep floor failed:\n{sim.log_tail()}')
+    return float(found.group(1))
 
 
-class Graph:
-    """Simulator workers and controllers, each its own process group."""
-
-    def __init__(self, log_dir: Path) -> None:
-        self.log_dir = log_dir
-        self.processes: list[subprocess.Popen] = []
-
-    def start(self, name: str, command: list[str]) -> Path:
-        log = self.log_dir / f'{name}.log'
-        with open(log, 'wb') as handle:
-            self.processes.append(subprocess.Popen(command, stdout=handle,
-                                                   stderr=subprocess.STDOUT,
-                                                   start_new_session=True))
-        return log
-
-    def stop(self) -> None:
-        for process in self.processes:
-            try:
-                os.killpg(process.pid, 2)
-            except ProcessLookupError:
-                pass
-        for process in self.processes:
-            try:
-                process.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, 9)
-
-
-def start_worker(graph: Graph, index: int, sim_core: int | None,
-                 controller_core: int | None) -> Path:
-    namespace = f'/bench{index}'
-    args = ['--ros-args', '-r', f'__ns:={namespace}']
-    log = graph.start(f'sim{index}', pinned(['ros2', 'run', 'sessgan_sim', 'simulator', *args,
-                                             '-p', 'lidar_beams:=360', '-p', 'control_rate:=20.0'],
-                                            sim_core))
-    graph.start(f'ctl{index}', pinned(['ros2', 'run', 'sessgan_controllers', 'nearness_diagram',
-                                       *args, '-p', 'use_sim_time:=true'], controller_core))
-    return log
+def start_worker(graph: ProcessSupervisor, index: int, sim_core: int, controller_core: int,
+                 batch: bool = True) -> Path:
+    """A simulator worker /bench<index> and its ND controller; returns the simulator's log."""
+    args = ['--ros-args', '-r', f'__ns:=/bench{index}']
+    simulator = graph.start(f'sim{index}', ['ros2', 'run', 'sessgan_sim', 'simulator', *args,
+                                            *REFERENCE_PARAMETERS], core=sim_core, batch=batch)
+    graph.start(f'ctl{index}', ['ros2', 'run', 'sessgan_controllers', 'nearness_diagram', *args,
+                                '-p', 'use_sim_time:=true'], core=controller_core, batch=batch)
+    return simulator.log_path
 
 
 def run_episodes(node, namespaces: list[str], environment_msg, episodes: int) -> float:
@@ -88,7 +79,7 @@ def run_episodes(node, namespaces: list[str], environment_msg, episodes: int) ->
         if not client.wait_for_server(timeout_sec=60):
             sys.exit('a simulator worker did not come up')
     remaining = episodes
-    running: dict[int, object] = {}
+    running: dict[int, list] = {}
     start = time.monotonic()
     while remaining or running:
         for index, client in enumerate(clients):
@@ -101,14 +92,73 @@ def run_episodes(node, namespaces: list[str], environment_msg, episodes: int) ->
             if state[1] is None and state[0].done():
                 state[1] = state[0].result().get_result_async()
             if state[1] is not None and state[1].done():
+                outcome = state[1].result().result.metrics.outcome
+                if outcome != 'goal_reached':
+                    sys.exit(f'a reference episode ended {outcome!r}, not goal_reached')
                 del running[index]
+    for client in clients:
+        client.destroy()
     return time.monotonic() - start
+
+
+def episode_timings(log: Path, skip: int) -> list[tuple[float, ...]]:
+    """(factor, physics, sensors, metrics, messaging ms) of the node's episodes after ``skip``."""
+    return [tuple(map(float, m)) for m in TIMING.findall(log.read_text())][skip:]
+
+
+def mean(rows: list[tuple[float, ...]], column: int) -> float:
+    return sum(row[column] for row in rows) / len(rows)
+
+
+def controller_compute_ms(environment) -> float:
+    """CPU ms per tick of the ND controller's own computation on the reference episode,
+    run in-process (the simulator core stepping, the controller deciding, no ROS)."""
+    import numpy as np
+
+    from sessgan_controllers.registry import get_controller
+    from sessgan_controllers.types import Goal, RobotState, ScanData
+    from sessgan_sim.episode import Episode, EpisodeConfig
+    from sessgan_sim.sensors import LidarConfig
+
+    spec = get_controller('nearness_diagram')
+    controller = spec.make(spec.config_type())
+    goal = Goal(environment.goal.x, environment.goal.y)
+    episode = Episode().open()
+    try:
+        observation = episode.reset(environment, EpisodeConfig(
+            lidar=LidarConfig(beams=360), control_rate_hz=20.0, seed=1))
+        spent, ticks = 0.0, 0
+        while not episode.done:
+            started = time.thread_time()
+            info = observation.lidar
+            scan = ScanData(np.asarray(observation.scan, dtype=float), info.angle_min,
+                            info.angle_increment, info.range_min, info.range_max)
+            pose = observation.pose
+            state = RobotState(pose.x, pose.y, pose.yaw, *observation.twist)
+            command = controller.compute_command(scan, state, goal)
+            spent += time.thread_time() - started
+            ticks += 1
+            observation = episode.step((command.vx, command.vy, command.wz)).observation
+    finally:
+        episode.close()
+    return spent / ticks * 1e3
+
+
+def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_core: int,
+                 controller_core: int, batch: bool) -> tuple[float, list[tuple[float, ...]]]:
+    """Wall seconds of ``episodes`` reference episodes on one worker, and the node's timings."""
+    log = start_worker(graph, 0, sim_core, controller_core, batch)
+    run_episodes(node, ['/bench0'], message, 1)  # warm-up: imports, discovery, first build
+    wall = run_episodes(node, ['/bench0'], message, episodes)
+    graph.stop_all()
+    return wall, episode_timings(log, 1)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--episodes', type=int, default=4)
+    parser.add_argument('--floor-ticks', type=int, default=3000)
     args = parser.parse_args()
 
     import rclpy
@@ -119,36 +169,51 @@ def main() -> None:
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'reference')
     message = environment_to_msg(environment)
-    cores = os.cpu_count() or 1
+    cores = worker_cores(2)
+    first = cores[0] if cores[0] is not None else 0
+    two_cores = cores[1] is not None and cores[1] != cores[0]
+    if two_cores:  # keep this client's spinning off the measured core
+        os.sched_setaffinity(0, {cores[1]})
     log_dir = Path(tempfile.mkdtemp(prefix='sessgan-bench-'))
     rclpy.init()
     node = rclpy.create_node('bench_client')
-    graph = Graph(log_dir)
+    graph = ProcessSupervisor(log_dir)
     try:
-        # One worker: the simulator on core 0, its controller on core 1.
-        log = start_worker(graph, 0, 0, 1 if cores > 1 else 0)
-        run_episodes(node, ['/bench0'], message, 1)  # warm-up: imports, discovery
-        single = run_episodes(node, ['/bench0'], message, args.episodes)
-        timings = [tuple(map(float, m)) for m in TIMING.findall(log.read_text())][1:]
-        factor = sum(t[0] for t in timings) / len(timings)
-        split = [sum(t[i] for t in timings) / len(timings) for i in range(1, 5)]
-        print(f'factory reference episode, lockstep, simulator on one core, '
-              f'{len(timings)} episodes (after one warm-up)')
-        print(f'  sim-time / wall-time factor: x{factor:.1f}')
-        print('  per tick: physics {:.3f} ms, sensors {:.3f} ms, metrics {:.3f} ms, '
-              'messaging {:.3f} ms'.format(*split))
-        core_only = 50.0 / (split[0] + split[1] + split[2])
-        print(f'  physics + sensors + metrics alone: x{core_only:.1f} real time')
+        print(f'machine: {os.cpu_count()} cores; factory reference episode, 360-beam scan, '
+              f'20 Hz control, ND controller with use_sim_time; {args.episodes} episodes per '
+              f'figure after a warm-up')
+        floor_ms = 1e3 / measure_floor(graph, first, args.floor_ticks)
+        print(f'lockstep floor, bare rclpy (clock + odom + scan out, Twist back), one core: '
+              f'{floor_ms:.3f} ms per tick, at most x{50.0 / floor_ms:.0f} real time')
+        compute_ms = controller_compute_ms(environment)
 
-        # Two workers against one, on the same machine.
-        start_worker(graph, 1, None, None)
-        double = run_episodes(node, ['/bench0', '/bench1'], message, 2 * args.episodes)
-        rate_one = args.episodes / single * 60.0
-        rate_two = 2 * args.episodes / double * 60.0
-        print(f'throughput: 1 worker {rate_one:.1f} episodes/min, 2 workers {rate_two:.1f} '
-              f'episodes/min (x{rate_two / rate_one:.2f}) on {cores} cores')
+        single, rows = measure_pair(graph, node, message, args.episodes, first, first, True)
+        physics, sensors, metrics, rest = (mean(rows, i) for i in range(1, 5))
+        messaging = max(0.0, rest - compute_ms)
+        print('simulator + controller on one core, batch scheduling (as campaigns run them):')
+        print(f'  sim-time / wall-time factor: x{mean(rows, 0):.1f}')
+        print(f'  per tick: physics {physics:.3f} ms, sensors {sensors:.3f} ms, metrics '
+              f'{metrics:.3f} ms, controller {compute_ms:.3f} ms, messaging {messaging:.3f} ms '
+              f'(x{messaging / floor_ms:.2f} the floor)')
+        print(f'  physics + sensors alone: x{50.0 / (physics + sensors):.1f} real time '
+              f'(+ metrics: x{50.0 / (physics + sensors + metrics):.1f})')
+        _, rows = measure_pair(graph, node, message, args.episodes, first, first, False)
+        print(f'same, default scheduling: x{mean(rows, 0):.1f}')
+        if two_cores:
+            _, rows = measure_pair(graph, node, message, args.episodes, cores[0], cores[1], True)
+            print(f'simulator and controller on two cores: x{mean(rows, 0):.1f}')
+
+            start_worker(graph, 0, cores[0], cores[0])
+            start_worker(graph, 1, cores[1], cores[1])
+            run_episodes(node, ['/bench0', '/bench1'], message, 2)
+            double = run_episodes(node, ['/bench0', '/bench1'], message, 2 * args.episodes)
+            rate_one = args.episodes / single * 60.0
+            rate_two = 2 * args.episodes / double * 60.0
+            print(f'throughput: 1 worker {rate_one:.1f} episodes/min, 2 workers '
+                  f'{rate_two:.1f} episodes/min (x{rate_two / rate_one:.2f}), each worker and '
+                  f'its controller on its own core')
     finally:
-        graph.stop()
+        graph.stop_all()
         node.destroy_node()
         rclpy.try_shutdown()
         shutil.rmtree(log_dir, ignore_errors=True)

@@ -9,9 +9,11 @@ import pytest
 pytest.importorskip('geometry_msgs')
 
 from nav_msgs.msg import Odometry  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
 from sessgan_controllers.messages import (  # noqa: E402
+    odom_from_cdr,
     scan_from_msg,
     state_from_odom,
     twist_from_command,
@@ -37,6 +39,24 @@ def test_odometry_to_state():
         (1.0, 2.0, 0.4, 0.1, -0.2))
     assert state.yaw == pytest.approx(0.5)
     assert yaw_from_quaternion(0.0, 0.0, 1.0, 0.0) == pytest.approx(math.pi)
+
+
+@pytest.mark.parametrize('frames', [('', ''), ('odom', 'base_footprint'), ('o', 'abcdefgh')])
+def test_serialized_odometry_reads_like_the_message(frames):
+    """The in-place CDR reader agrees with rclpy's deserialization, whatever string lengths
+    shift the alignment of the doubles after them."""
+    msg = Odometry()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345_678_901
+    msg.header.frame_id, msg.child_frame_id = frames
+    msg.pose.pose.position.x, msg.pose.pose.position.y = -3.25, 7.5
+    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(-1.1), math.cos(-1.1)
+    msg.pose.covariance[0] = 99.0
+    msg.twist.twist.linear.x, msg.twist.twist.linear.y = 0.8, -0.05
+    msg.twist.twist.angular.z = 1.25
+    msg.twist.covariance[35] = -99.0
+    stamp, state = odom_from_cdr(serialize_message(msg))
+    assert stamp == 12_345_678_901
+    assert state == state_from_odom(msg)
 
 
 def test_scan_keeps_its_geometry_and_no_returns():

@@ -166,6 +166,8 @@ class NearnessDiagramController(StatelessController):
         self._sector_width = 2.0 * math.pi / count
         # Sector i is centred on -pi + (i + 0.5) * width: index grows counter-clockwise.
         self._sector_angles = -math.pi + (np.arange(count) + 0.5) * self._sector_width
+        self._sector_directions = np.stack(
+            (np.cos(self._sector_angles), np.sin(self._sector_angles)), axis=1)
         self._beam_map_key: tuple[int, float, float] | None = None
         self._beam_sector = np.zeros(0, dtype=int)
         self._fill_beam = np.zeros(0, dtype=int)
@@ -246,18 +248,18 @@ class NearnessDiagramController(StatelessController):
         The valley side is the free or deeper one (the discontinuity is rising seen
         from there); the outer side holds the nearer obstacle.
         """
-        count = self.config.sector_count
-        following = np.roll(nearness, -1)
+        following = np.concatenate((nearness[1:], nearness[:1]))
         free, free_next = np.isnan(nearness), np.isnan(following)
         with np.errstate(invalid='ignore'):
             jump = np.abs(nearness - following) >= self.config.effective_gap_threshold
+            deeper = nearness > following  # False where either side is free
         is_disc = (free != free_next) | (~free & ~free_next & jump)
-        result = []
-        for i in np.flatnonzero(is_disc):
-            i = int(i)
-            deeper_here = bool(free[i]) or (not free_next[i] and nearness[i] > following[i])
-            result.append((i, (i + 1) % count) if deeper_here else ((i + 1) % count, i))
-        return result
+        here = np.flatnonzero(is_disc)
+        after = (here + 1) % self.config.sector_count
+        valley_here = free[here] | (~free_next[here] & deeper[here])
+        valleys = np.where(valley_here, here, after).tolist()
+        outers = np.where(valley_here, after, here).tolist()
+        return list(zip(valleys, outers, strict=True))
 
     def _region_around(self, sector: int, disc_indices: list[int]) -> Region:
         """The region containing ``sector``, given sorted discontinuity indices."""
@@ -322,9 +324,8 @@ class NearnessDiagramController(StatelessController):
 
     def _obstacle_points(self, nearness: np.ndarray) -> np.ndarray:
         occupied = ~np.isnan(nearness)
-        angles = self._sector_angles[occupied]
         distances = nearness[occupied]
-        return np.stack([distances * np.cos(angles), distances * np.sin(angles)], axis=1)
+        return self._sector_directions[occupied] * distances[:, None]
 
     def _reachable(self, points: np.ndarray, distance: float, angle: float) -> bool:
         """Whether a straight path of the robot's width leads to the target (ND's check).

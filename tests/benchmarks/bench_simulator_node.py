@@ -11,7 +11,8 @@ Prints:
   messaging (the rest: ROS 2 publishing, delivery and callbacks on both sides, against the
   floor);
 * the same pair with default scheduling, and on two cores (one process per core);
-* throughput of 2 workers against 1, each worker's pair on its own core, in episodes per minute.
+* throughput of 2 workers against 1, each worker's pair on its own core, in episodes per minute,
+  next to the same ratio for a pure-Python busy loop (the machine's own scaling).
 
 Run after `source setup.bash`:  python tests/benchmarks/bench_simulator_node.py [--episodes N]
 """
@@ -144,6 +145,29 @@ def controller_compute_ms(environment) -> float:
     return spent / ticks * 1e3
 
 
+BUSY_LOOP = ('import time\nstart = time.perf_counter()\ntotal = 0\n'
+             'for i in range(15_000_000):\n    total += i\nprint(time.perf_counter() - start)')
+
+
+def cpu_scaling(graph: ProcessSupervisor, cores: list[int]) -> float:
+    """Throughput of a pure-Python busy loop on ``cores`` at once against on the first alone:
+    what this machine's cores give two workers before any messaging (virtual CPUs may share a
+    physical one)."""
+    def run(on: list[int]) -> float:
+        children = [graph.start(f'busy{index}', [sys.executable, '-c', BUSY_LOOP], core=core)
+                    for index, core in enumerate(on)]
+        for child in children:
+            child.process.wait(timeout=300)
+        seconds = max(float(child.log_tail().split()[-1]) for child in children)
+        graph.stop_all()
+        for child in children:
+            child.log_path.unlink()
+        return seconds
+
+    # Best of three: a core of a virtual machine is sometimes slowed by its host.
+    return len(cores) * min(run(cores[:1]) for _ in range(3)) / min(run(cores) for _ in range(3))
+
+
 def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_core: int,
                  controller_core: int, batch: bool) -> tuple[float, list[tuple[float, ...]]]:
     """Wall seconds of ``episodes`` reference episodes on one worker, and the node's timings."""
@@ -211,7 +235,8 @@ def main() -> None:
             rate_two = 2 * args.episodes / double * 60.0
             print(f'throughput: 1 worker {rate_one:.1f} episodes/min, 2 workers '
                   f'{rate_two:.1f} episodes/min (x{rate_two / rate_one:.2f}), each worker and '
-                  f'its controller on its own core')
+                  f'its controller on its own core; a busy loop on both cores against one: '
+                  f'x{cpu_scaling(graph, cores):.2f}')
     finally:
         graph.stop_all()
         node.destroy_node()

@@ -45,6 +45,7 @@ from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
+from sessgan_sim import cdr
 from sessgan_sim import ros_messages as rm
 from sessgan_sim.bag_recording import BagRecord, BagWriteError, write_episode_bag
 from sessgan_sim.episode import Episode, EpisodeConfig
@@ -106,7 +107,8 @@ class CommandReceiver:
 
 @dataclass
 class Recording:
-    """Every message of an episode, in order, kept as messages until a bag is wanted."""
+    """Every message of an episode, in order, kept as messages (or already serialized bytes)
+    until a bag is wanted."""
 
     entries: list = field(default_factory=list)
 
@@ -115,7 +117,8 @@ class Recording:
 
     def records(self):
         for topic, msgtype, stamp_ns, message in self.entries:
-            yield BagRecord(topic, msgtype, stamp_ns, serialize_message(message))
+            data = message if isinstance(message, bytes) else serialize_message(message)
+            yield BagRecord(topic, msgtype, stamp_ns, data)
 
 
 class SimulatorNode(Node):
@@ -184,6 +187,8 @@ class SimulatorNode(Node):
         request = goal_handle.request
         result = EvaluateEnvironment.Result()
         with self.busy:
+            if not self.context.ok():  # shut down while waiting: the world is closed
+                return result
             try:
                 environment = environment_from_msg(request.environment)
             except (SessganGenError, SessganSimError, ValueError) as err:
@@ -215,6 +220,8 @@ class SimulatorNode(Node):
             self.get_logger().warning('ignoring a map on environment: an episode is running')
             return
         try:
+            if not self.context.ok():  # shutting down: the world is closed
+                return
             self.free_seed += 1
             metrics = self.run_episode(
                 environment, robot='', time_limit=0.0, seed=environment.seed,
@@ -333,21 +340,24 @@ class SimulatorNode(Node):
             recording.add(self.topics[topic], msgtype, int(round(sim_time * 1e9)), message)
 
     def publish_tick(self, episode, observation, recording) -> None:
-        stamp = rm.time_msg(observation.time)
+        """clock, odom, tf (when anyone listens or records) and scan of one tick; the
+        messages of every tick are published serialized (sessgan_sim.cdr)."""
         t = observation.time
-        self.publish(self.clock_publisher, 'clock', 'rosgraph_msgs/msg/Clock', rm.clock_msg(stamp),
+        stamp = cdr.stamp(t)
+        self.publish(self.clock_publisher, 'clock', 'rosgraph_msgs/msg/Clock', cdr.clock(stamp),
                      t, recording)
         pose = observation.pose
-        odom = rm.odom_msg(stamp, pose.x, pose.y, pose.yaw, *observation.twist)
+        odom = cdr.odometry(stamp, rm.ODOM_FRAME, rm.BASE_FOOTPRINT, pose.x, pose.y, pose.yaw,
+                            *observation.twist)
         self.publish(self.odom_publisher, 'odom', 'nav_msgs/msg/Odometry', odom, t, recording)
         if recording is not None or self.tf_publisher.get_subscription_count() > 0:
             # Building tf costs more than the check; most controllers under test use odom.
-            self.publish(self.tf_publisher, 'tf', 'tf2_msgs/msg/TFMessage',
-                         rm.dynamic_tf_msg(stamp, odom), t, recording)
+            self.publish(self.tf_publisher, 'tf', 'tf2_msgs/msg/TFMessage', rm.dynamic_tf_msg(
+                rm.time_msg(t), pose.x, pose.y, pose.yaw), t, recording)
         lidar = observation.lidar
-        self.publish(self.scan_publisher, 'scan', 'sensor_msgs/msg/LaserScan', rm.scan_msg(
-            stamp, observation.scan, lidar.angle_min, lidar.angle_increment, lidar.range_min,
-            lidar.range_max, lidar.scan_time), t, recording)
+        self.publish(self.scan_publisher, 'scan', 'sensor_msgs/msg/LaserScan', cdr.laser_scan(
+            stamp, rm.SCAN_FRAME, observation.scan, lidar.angle_min, lidar.angle_increment,
+            lidar.range_min, lidar.range_max, lidar.scan_time), t, recording)
 
     def wait_for_command(self, deadline: float, republish) -> object | None:
         """The next command received before the wall-clock ``deadline``, else None."""
@@ -500,9 +510,12 @@ def main(args=None) -> None:
     finally:
         if node is not None:
             # A running episode ends at its next tick once ROS is shut down; closing its world
-            # and nodes under it would crash the process instead of letting it exit.
-            node.busy.acquire(timeout=5.0)
+            # and nodes under it would crash the process instead of letting it exit. A goal
+            # still waiting for the lock finds ROS shut down and returns at once.
+            idle = node.busy.acquire(timeout=5.0)
             node.episode.close()
             node.command_node.destroy_node()
             node.destroy_node()
+            if idle:
+                node.busy.release()
         rclpy.try_shutdown()

@@ -175,7 +175,9 @@ def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_cor
     run_episodes(node, ['/bench0'], message, 1)  # warm-up: imports, discovery, first build
     wall = run_episodes(node, ['/bench0'], message, episodes)
     graph.stop_all()
-    return wall, episode_timings(log, 1)
+    timings = episode_timings(log, 1)
+    log.unlink()  # logs are appended to: the next measurement starts a fresh one
+    return wall, timings
 
 
 def main() -> None:

@@ -111,6 +111,12 @@ def mean(rows: list[tuple[float, ...]], column: int) -> float:
     return sum(row[column] for row in rows) / len(rows)
 
 
+def factor(rows: list[tuple[float, ...]]) -> str:
+    """Mean sim/wall factor and the spread over the episodes (this VM's speed drifts)."""
+    factors = [row[0] for row in rows]
+    return f'x{mean(rows, 0):.1f} (episodes x{min(factors):.1f}-{max(factors):.1f})'
+
+
 def controller_compute_ms(environment) -> float:
     """CPU ms per tick of the ND controller's own computation on the reference episode,
     run in-process (the simulator core stepping, the controller deciding, no ROS)."""
@@ -183,7 +189,7 @@ def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_cor
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--episodes', type=int, default=4)
+    parser.add_argument('--episodes', type=int, default=6)
     parser.add_argument('--floor-ticks', type=int, default=3000)
     args = parser.parse_args()
 
@@ -217,17 +223,17 @@ def main() -> None:
         physics, sensors, metrics, rest = (mean(rows, i) for i in range(1, 5))
         messaging = max(0.0, rest - compute_ms)
         print('simulator + controller on one core, batch scheduling (as campaigns run them):')
-        print(f'  sim-time / wall-time factor: x{mean(rows, 0):.1f}')
+        print(f'  sim-time / wall-time factor: {factor(rows)}')
         print(f'  per tick: physics {physics:.3f} ms, sensors {sensors:.3f} ms, metrics '
               f'{metrics:.3f} ms, controller {compute_ms:.3f} ms, messaging {messaging:.3f} ms '
               f'(x{messaging / floor_ms:.2f} the floor)')
         print(f'  physics + sensors alone: x{50.0 / (physics + sensors):.1f} real time '
               f'(+ metrics: x{50.0 / (physics + sensors + metrics):.1f})')
         _, rows = measure_pair(graph, node, message, args.episodes, first, first, False)
-        print(f'same, default scheduling: x{mean(rows, 0):.1f}')
+        print(f'same, default scheduling: {factor(rows)}')
         if two_cores:
             _, rows = measure_pair(graph, node, message, args.episodes, cores[0], cores[1], True)
-            print(f'simulator and controller on two cores: x{mean(rows, 0):.1f}')
+            print(f'simulator and controller on two cores: {factor(rows)}')
 
             start_worker(graph, 0, cores[0], cores[0])
             start_worker(graph, 1, cores[1], cores[1])

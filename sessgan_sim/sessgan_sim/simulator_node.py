@@ -313,19 +313,38 @@ class SimulatorNode(Node):
                      rm.goal_msg(stamp, goal.x, goal.y, goal.yaw), observation.time, recording)
 
     def wait_for_controller(self, timeout: float) -> bool:
-        """Wait until a controller reads our scan and publishes cmd_vel.
+        """Wait until a controller reads our scan and publishes cmd_vel, with every endpoint of
+        the tick's topics that discovery shows matched to ours.
 
-        A reliable publisher delivers every message to readers it has matched, so once it
-        sees the controller no tick is ever published twice (a repeated tick would earn a
-        second answer and shift every later command by one tick).
+        Only matched endpoints exchange messages: a tick published before the controller's odom
+        reader matched our writer, or an answer sent before our best-effort cmd_vel reader
+        matched its writer, would be lost and stall the episode until the startup timeout. A
+        tick is never published twice (a repeated one would earn a second answer and shift
+        every later command by a tick). An endpoint that never matches (incompatible QoS) holds
+        the start up for at most a second.
         """
         deadline = time.monotonic() + timeout
-        while (self.scan_publisher.get_subscription_count() == 0
-               or self.command_node.count_publishers(self.topics['cmd_vel']) == 0):
+        settle_deadline = None
+        waited = False
+        while True:
+            commands = self.commands.subscription.get_publisher_count()
+            if self.scan_publisher.get_subscription_count() > 0 and commands > 0:
+                complete = commands >= self.command_node.count_publishers(
+                    self.topics['cmd_vel']) and all(
+                    publisher.get_subscription_count() >= self.count_subscribers(
+                        self.topics[name]) for name, publisher in (
+                        ('clock', self.clock_publisher), ('odom', self.odom_publisher),
+                        ('scan', self.scan_publisher)))
+                now = time.monotonic()
+                settle_deadline = settle_deadline or now + 1.0
+                if complete or now >= settle_deadline:
+                    if waited:  # just matched: let the controller's side catch up too
+                        time.sleep(0.1)
+                    return True
             if time.monotonic() > deadline:
                 return False
-            time.sleep(0.02)
-        return True
+            waited = True
+            time.sleep(0.01)
 
     def republish_goal(self, episode, observation) -> None:
         """Resend the goal to a controller whose volatile goal_pose reader (Nav2's is) joined

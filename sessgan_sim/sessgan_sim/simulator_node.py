@@ -67,10 +67,11 @@ class CommandReceiver:
 
     Lockstep waits for one command per tick; an executor's Python overhead per wake-up costs
     more than the whole round trip, and the subscription's node is spun by nobody else. The
-    reader is best effort: reliability's acknowledgements cost a fifth of a lockstep tick, and
-    the controller's first answer comes after it has heard from us, so its writer has matched
-    this reader by then. A command lost on one host (none in bench_lockstep_under_load.py)
-    would end the episode controller_unresponsive after the timeout, never hang or shift it.
+    reader is best effort: reliability's acknowledgements cost a fifth of a lockstep tick. An
+    episode starts only once this reader has matched the controller's writer (a best-effort
+    reader drops what comes before; wait_for_controller). A command lost on one host (none in
+    bench_lockstep_under_load.py) would end the episode controller_unresponsive after the
+    timeout, never hang it or shift later commands.
     """
 
     def __init__(self, node, msg_type, topic: str) -> None:

@@ -6,9 +6,10 @@ why a worker died.
 
 A simulator worker and its lockstep controller take turns on the CPU: they run fastest on one
 core together (a wake-up across cores can cost as much as the messages themselves: it doubled a
-bare rclpy lockstep tick on the machines measured) and as batch processes (a woken process then does not preempt the one that woke it
-until that one waits: the simulator publishes a whole tick before the controller reads it).
-``worker_cores`` spreads worker pairs over the cores this process may use.
+bare rclpy lockstep tick on the machines measured) and as batch processes (a woken process then
+does not preempt the one that woke it until that one waits: the simulator publishes a whole
+tick before the controller reads it). ``worker_cores`` spreads worker pairs over the cores this
+process may use.
 """
 
 from __future__ import annotations

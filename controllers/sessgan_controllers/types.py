@@ -136,6 +136,16 @@ STOP = VelocityCommand()
 """The zero command."""
 
 
+def observed(observation: Any) -> tuple[ScanData, RobotState]:
+    """The controller's view of a sessgan_sim Observation (``scan``, ``lidar``, ``pose``,
+    ``twist``), as the controller node gets it from scan and odom: for running a controller
+    in-process on the simulator core, without ROS."""
+    lidar, pose, twist = observation.lidar, observation.pose, observation.twist
+    scan = ScanData(np.asarray(observation.scan, dtype=float), lidar.angle_min,
+                    lidar.angle_increment, lidar.range_min, lidar.range_max)
+    return scan, RobotState(pose.x, pose.y, pose.yaw, twist.vx, twist.vy, twist.wz)
+
+
 class Controller(Protocol):
     """What every controller core offers; nodes and in-process runners rely on it."""
 

@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import argparse
 import collections
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
-from pathlib import Path
 
-from bench_simulator_node import ProcessSupervisor, start_worker, worker_cores
+from bench_simulator_node import bench_graph, reference_episode, run_episodes, start_worker
+
+from sessgan_evolver.process_supervisor import worker_cores
 
 
 def main() -> None:
@@ -33,51 +32,27 @@ def main() -> None:
                         help='default scheduling instead of batch')
     args = parser.parse_args()
 
-    import rclpy
-    from rclpy.action import ActionClient
-
-    from sessgan_gen.navigation import make_environment
-    from sessgan_gen.ros_conversion import environment_to_msg
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_interfaces.action import EvaluateEnvironment
-
-    message = environment_to_msg(
-        make_environment(load_example_map('factory').cells, 'factory', 'reference'))
-    log_dir = Path(tempfile.mkdtemp(prefix='sessgan-load-'))
-    rclpy.init()
-    node = rclpy.create_node('load_client')
-    graph = ProcessSupervisor(log_dir)
+    _, message = reference_episode()
     busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
             for _ in range(args.load)]
     try:
-        core = worker_cores(1)[0] or 0
-        start_worker(graph, 0, core, core, batch=not args.default)
-        client = ActionClient(node, EvaluateEnvironment, '/bench0/evaluate')
-        if not client.wait_for_server(timeout_sec=60):
-            sys.exit('the simulator worker did not come up')
-        outcomes: collections.Counter = collections.Counter()
-        ticks = 0
-        start = time.monotonic()
-        for seed in range(args.episodes):
-            sent = client.send_goal_async(EvaluateEnvironment.Goal(environment=message, seed=seed))
-            rclpy.spin_until_future_complete(node, sent)
-            result = sent.result().get_result_async()
-            rclpy.spin_until_future_complete(node, result)
-            metrics = result.result().result.metrics
-            outcomes[metrics.outcome] += 1
-            ticks += metrics.ticks
-            if metrics.outcome == 'controller_unresponsive':
-                print(f'episode {seed}: {metrics.detail}', flush=True)
-        print(f'{args.episodes} episodes with {args.load} busy loops, '
-              f'{"default" if args.default else "batch"} scheduling: {dict(outcomes)}, '
-              f'{ticks} ticks in {time.monotonic() - start:.1f} s')
+        with bench_graph('sessgan-load-') as (node, graph):
+            core = worker_cores(1)[0] or 0
+            start_worker(graph, 0, core, core, batch=not args.default)
+            results: list = []
+            start = time.monotonic()
+            run_episodes(node, ['/bench0'], message, args.episodes, results, expect=None)
+            wall = time.monotonic() - start
     finally:
         for process in busy:
             process.kill()
-        graph.stop_all()
-        node.destroy_node()
-        rclpy.try_shutdown()
-        shutil.rmtree(log_dir, ignore_errors=True)
+    for metrics in results:
+        if metrics.outcome == 'controller_unresponsive':
+            print(f'{metrics.environment_id}: {metrics.detail}')
+    outcomes = collections.Counter(metrics.outcome for metrics in results)
+    print(f'{args.episodes} episodes with {args.load} busy loops, '
+          f'{"default" if args.default else "batch"} scheduling: {dict(outcomes)}, '
+          f'{sum(metrics.ticks for metrics in results)} ticks in {wall:.1f} s')
 
 
 if __name__ == '__main__':

@@ -20,6 +20,7 @@ Run after `source setup.bash`:  python tests/benchmarks/bench_simulator_node.py 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import random
 import re
@@ -68,8 +69,11 @@ def start_worker(graph: ProcessSupervisor, index: int, sim_core: int, controller
     return simulator.log_path
 
 
-def run_episodes(node, namespaces: list[str], environment_msg, episodes: int) -> float:
-    """Run ``episodes`` reference episodes spread over the workers; return wall seconds."""
+def run_episodes(node, namespaces: list[str], environment_msg, episodes: int,
+                 results: list | None = None, expect: str | None = 'goal_reached') -> float:
+    """Run ``episodes`` reference episodes (seeds ``episodes`` down to 1) spread over the
+    workers; return wall seconds. Each episode's metrics go to ``results``; an outcome other
+    than ``expect`` ends the benchmark."""
     import rclpy
     from rclpy.action import ActionClient
 
@@ -93,9 +97,11 @@ def run_episodes(node, namespaces: list[str], environment_msg, episodes: int) ->
             if state[1] is None and state[0].done():
                 state[1] = state[0].result().get_result_async()
             if state[1] is not None and state[1].done():
-                outcome = state[1].result().result.metrics.outcome
-                if outcome != 'goal_reached':
-                    sys.exit(f'a reference episode ended {outcome!r}, not goal_reached')
+                metrics = state[1].result().result.metrics
+                if expect is not None and metrics.outcome != expect:
+                    sys.exit(f'a reference episode ended {metrics.outcome!r}, not {expect}')
+                if results is not None:
+                    results.append(metrics)
                 del running[index]
     for client in clients:
         client.destroy()
@@ -120,34 +126,24 @@ def factor(rows: list[tuple[float, ...]]) -> str:
 def controller_compute_ms(environment) -> float:
     """CPU ms per tick of the ND controller's own computation on the reference episode,
     run in-process (the simulator core stepping, the controller deciding, no ROS)."""
-    import numpy as np
-
     from sessgan_controllers.registry import get_controller
-    from sessgan_controllers.types import Goal, RobotState, ScanData
+    from sessgan_controllers.types import Goal, observed
     from sessgan_sim.episode import Episode, EpisodeConfig
     from sessgan_sim.sensors import LidarConfig
 
     spec = get_controller('nearness_diagram')
     controller = spec.make(spec.config_type())
     goal = Goal(environment.goal.x, environment.goal.y)
-    episode = Episode().open()
-    try:
+    spent, ticks = 0.0, 0
+    with Episode() as episode:
         observation = episode.reset(environment, EpisodeConfig(
             lidar=LidarConfig(beams=360), control_rate_hz=20.0, seed=1))
-        spent, ticks = 0.0, 0
         while not episode.done:
             started = time.thread_time()
-            info = observation.lidar
-            scan = ScanData(np.asarray(observation.scan, dtype=float), info.angle_min,
-                            info.angle_increment, info.range_min, info.range_max)
-            pose = observation.pose
-            state = RobotState(pose.x, pose.y, pose.yaw, *observation.twist)
-            command = controller.compute_command(scan, state, goal)
+            command = controller.compute_command(*observed(observation), goal)
             spent += time.thread_time() - started
             ticks += 1
             observation = episode.step((command.vx, command.vy, command.wz)).observation
-    finally:
-        episode.close()
     return spent / ticks * 1e3
 
 
@@ -186,6 +182,34 @@ def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_cor
     return wall, timings
 
 
+def reference_episode():
+    """The factory reference environment and its Environment message."""
+    from sessgan_gen.navigation import make_environment
+    from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_gen.token_map import load_example_map
+
+    environment = make_environment(load_example_map('factory').cells, 'factory', 'reference')
+    return environment, environment_to_msg(environment)
+
+
+@contextlib.contextmanager
+def bench_graph(prefix: str):
+    """(client node, supervisor of the processes started); everything stopped on exit."""
+    import rclpy
+
+    log_dir = Path(tempfile.mkdtemp(prefix=prefix))
+    rclpy.init()
+    node = rclpy.create_node('bench_client')
+    graph = ProcessSupervisor(log_dir)
+    try:
+        yield node, graph
+    finally:
+        graph.stop_all()
+        node.destroy_node()
+        rclpy.try_shutdown()
+        shutil.rmtree(log_dir, ignore_errors=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -193,24 +217,13 @@ def main() -> None:
     parser.add_argument('--floor-ticks', type=int, default=3000)
     args = parser.parse_args()
 
-    import rclpy
-
-    from sessgan_gen.navigation import make_environment
-    from sessgan_gen.ros_conversion import environment_to_msg
-    from sessgan_gen.token_map import load_example_map
-
-    environment = make_environment(load_example_map('factory').cells, 'factory', 'reference')
-    message = environment_to_msg(environment)
+    environment, message = reference_episode()
     cores = worker_cores(2)
     first = cores[0] if cores[0] is not None else 0
     two_cores = cores[1] is not None and cores[1] != cores[0]
     if two_cores:  # keep this client's spinning off the measured core
         os.sched_setaffinity(0, {cores[1]})
-    log_dir = Path(tempfile.mkdtemp(prefix='sessgan-bench-'))
-    rclpy.init()
-    node = rclpy.create_node('bench_client')
-    graph = ProcessSupervisor(log_dir)
-    try:
+    with bench_graph('sessgan-bench-') as (node, graph):
         print(f'machine: {os.cpu_count()} cores; factory reference episode, 360-beam scan, '
               f'20 Hz control, ND controller with use_sim_time; {args.episodes} episodes per '
               f'figure after a warm-up')
@@ -245,11 +258,6 @@ def main() -> None:
                   f'{rate_two:.1f} episodes/min (x{rate_two / rate_one:.2f}), each worker and '
                   f'its controller on its own core; a busy loop on both cores against one: '
                   f'x{cpu_scaling(graph, cores):.2f}')
-    finally:
-        graph.stop_all()
-        node.destroy_node()
-        rclpy.try_shutdown()
-        shutil.rmtree(log_dir, ignore_errors=True)
 
 
 if __name__ == '__main__':

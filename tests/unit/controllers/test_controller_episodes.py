@@ -16,27 +16,17 @@ import pytest
 pytest.importorskip('pybullet')
 
 from sessgan_controllers.registry import get_controller  # noqa: E402
-from sessgan_controllers.types import Controller, Goal, RobotState, ScanData  # noqa: E402
+from sessgan_controllers.types import Controller, Goal, observed  # noqa: E402
 from sessgan_gen.environment import Environment  # noqa: E402
 from sessgan_gen.navigation import make_environment  # noqa: E402
 from sessgan_gen.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.token_map import load_example_map, read_token_map  # noqa: E402
-from sessgan_sim.episode import Episode, EpisodeConfig, Observation  # noqa: E402
+from sessgan_sim.episode import Episode, EpisodeConfig  # noqa: E402
 from sessgan_sim.metrics import EpisodeMetrics, Outcome  # noqa: E402
 
 pytestmark = pytest.mark.unit
 
 NARROW_DOG_LEG = Path(__file__).parents[2] / 'data' / 'narrow_dog_leg.txt'
-
-
-def observed(observation: Observation) -> tuple[ScanData, RobotState]:
-    """The controller's view of a simulator observation (what the node gets from messages)."""
-    lidar = observation.lidar
-    scan = ScanData(ranges=observation.scan, angle_min=lidar.angle_min,
-                    angle_increment=lidar.angle_increment, range_min=lidar.range_min,
-                    range_max=lidar.range_max)
-    pose, twist = observation.pose, observation.twist
-    return scan, RobotState(pose.x, pose.y, pose.yaw, twist.vx, twist.vy, twist.wz)
 
 
 def run_episode(environment: Environment, controller: Controller,

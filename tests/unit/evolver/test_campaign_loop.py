@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from sessgan_controllers.registry import get_controller
-from sessgan_controllers.types import Goal, RobotState, ScanData
+from sessgan_controllers.types import Goal, observed
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError
 from sessgan_gen.checkpoint import save_checkpoint
 from sessgan_gen.environment_sampler import EnvironmentSampler
@@ -48,11 +48,7 @@ class InProcessEvaluator:
             observation = episode.reset(job.environment,
                                         EpisodeConfig(seed=job.seed, time_limit=4.0))
             while not episode.done:
-                lidar, pose, twist = observation.lidar, observation.pose, observation.twist
-                command = controller.compute_command(
-                    ScanData(observation.scan, lidar.angle_min, lidar.angle_increment,
-                             lidar.range_min, lidar.range_max),
-                    RobotState(pose.x, pose.y, pose.yaw, twist.vx, twist.vy, twist.wz), goal)
+                command = controller.compute_command(*observed(observation), goal)
                 observation = episode.step((command.vx, command.vy, command.wz)).observation
             metrics = episode.metrics().to_dict()
         return metrics

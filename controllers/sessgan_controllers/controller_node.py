@@ -17,6 +17,19 @@ the same position: a new episode may reuse a goal.
 
 The goal is read in its own frame; the simulator's map->odom transform is
 the identity (perfect localisation), so map and odom coordinates agree.
+
+Controllers that plan on a map (a ``set_map`` method, see
+:class:`~sessgan_controllers.types.MapAwareController`) also subscribe ``map``
+(nav_msgs/OccupancyGrid, reliable and transient local, depth 1, as the simulator
+publishes it) and get every map that arrives; the others never subscribe it.
+
+``control_mode`` chooses when commands are published:
+
+* ``scan`` (default): one command per scan, as above; for a lockstep simulator.
+* ``timer``: a command every ``1 / control_rate_hz`` seconds of the node's clock (sim
+  time with ``use_sim_time``), computed from the latest scan, odometry and goal, the way
+  Nav2's controller_server runs (20 Hz by default); for a clocked simulator. Scans are
+  not answered one by one.
 """
 
 from __future__ import annotations
@@ -28,7 +41,7 @@ from typing import Any
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import OccupancyGrid, Odometry
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
@@ -44,19 +57,35 @@ from sensor_msgs.msg import LaserScan
 
 from sessgan_controllers.messages import (
     goal_from_pose,
+    map_from_msg,
     odom_from_cdr,
     scan_from_msg,
     twist_from_command,
     twist_stamped_from_command,
 )
 from sessgan_controllers.registry import ControllerSpec, get_controller
-from sessgan_controllers.types import STOP, Goal, RobotState, VelocityCommand, config_help
+from sessgan_controllers.types import (
+    STOP,
+    Goal,
+    MapData,
+    RobotState,
+    VelocityCommand,
+    accepts_map,
+    config_help,
+)
 
 GOAL_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=1,
     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 """Matches reliable publishers, volatile or transient-local (a latched goal from a
 transient-local publisher that started earlier is not replayed to a volatile reader)."""
+
+MAP_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1,
+    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""As the simulator publishes ``map``: a controller started later still gets the last map."""
+
+CONTROL_MODES = ('scan', 'timer')
 
 CMD_VEL_QOS_DEPTH = 10
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
@@ -89,6 +118,24 @@ class ControllerNode(Node):
         self._base_frame = str(self.declare_parameter(
             'base_frame_id', 'base_footprint', ParameterDescriptor(
                 description='frame_id of TwistStamped commands.', read_only=True)).value)
+        self._control_mode = str(self.declare_parameter(
+            'control_mode', 'scan', ParameterDescriptor(
+                description="'scan': one command per scan (lockstep); 'timer': a command every "
+                            '1 / control_rate_hz s of the node clock from the latest scan '
+                            '(clocked simulation, like Nav2).', read_only=True)).value)
+        control_rate = self.declare_parameter(
+            'control_rate_hz', 20.0, ParameterDescriptor(
+                description="Commands per second of the node clock in 'timer' mode.",
+                read_only=True)).value
+        if self._control_mode not in CONTROL_MODES:
+            raise ValueError(f'control_mode must be one of {", ".join(CONTROL_MODES)}, got '
+                             f'{self._control_mode!r}')
+        if not (isinstance(control_rate, (int, float)) and math.isfinite(control_rate)
+                and control_rate > 0.0):
+            raise ValueError(f'control_rate_hz must be a positive number, got {control_rate!r}')
+        self._timer_mode = self._control_mode == 'timer'
+        self._latest_scan: LaserScan | None = None
+        self._map: MapData | None = None
         self._state: RobotState | None = None
         self._odom_stamp: int | None = None
         self._waiting_scan: tuple[int, LaserScan] | None = None
@@ -105,6 +152,10 @@ class ControllerNode(Node):
         self.create_subscription(LaserScan, 'scan', self._on_scan, SENSOR_QOS)
         self.create_subscription(Odometry, 'odom', self._on_odom, SENSOR_QOS, raw=True)
         self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, GOAL_QOS)
+        if accepts_map(self._controller):
+            self.create_subscription(OccupancyGrid, 'map', self._on_map, MAP_QOS)
+        if self._timer_mode:
+            self.create_timer(1.0 / float(control_rate), self._on_timer)
 
     # ----------------------------------------------------------------------------------------
     # Parameters: one per config field, validated as a whole before they are applied.
@@ -142,6 +193,8 @@ class ControllerNode(Node):
         if config is not None:
             self._config = config
             self._controller = self._spec.make(config)
+            if self._map is not None and accepts_map(self._controller):
+                self._controller.set_map(self._map)
             self.get_logger().info(f'Parameters updated: {config}')
 
     # ----------------------------------------------------------------------------------------
@@ -149,7 +202,31 @@ class ControllerNode(Node):
 
     def _on_odom(self, data: bytes) -> None:
         self._odom_stamp, self._state = odom_from_cdr(data)
-        self._answer_if_ready()
+        if not self._timer_mode:
+            self._answer_if_ready()
+
+    def _on_map(self, msg: OccupancyGrid) -> None:
+        try:
+            grid = map_from_msg(msg)
+            self._controller.set_map(grid)
+        except ValueError as err:
+            self.get_logger().error(f'Ignoring an unusable map: {err}')
+            return
+        self._map = grid
+        self.get_logger().info(
+            f'New map: {grid.occupancy.shape[1]}x{grid.occupancy.shape[0]} cells of '
+            f'{grid.resolution:g} m')
+
+    def _on_timer(self) -> None:
+        """Timer mode: a command from the latest scan, odometry and goal."""
+        if self._latest_scan is None:
+            return
+        command = self._command_for(self._latest_scan)
+        if self._stamped:
+            stamp = self.get_clock().now().to_msg()
+            self._cmd_vel.publish(twist_stamped_from_command(command, stamp, self._base_frame))
+        else:
+            self._cmd_vel.publish(twist_from_command(command))
 
     def _on_scan(self, msg: LaserScan) -> None:
         stamp = _nanoseconds(msg.header.stamp)
@@ -162,6 +239,9 @@ class ControllerNode(Node):
                 self._goal = None
         self._last_scan_stamp = stamp
         self._goal_since_last_scan = False
+        if self._timer_mode:
+            self._latest_scan = msg
+            return
         # A newer scan replaces one still waiting: answer only the latest tick.
         self._waiting_scan = (stamp, msg)
         self._answer_if_ready()
@@ -195,7 +275,8 @@ class ControllerNode(Node):
         self._controller.reset()
         self.get_logger().info(
             f'New goal ({goal.x:.2f}, {goal.y:.2f}) in frame {msg.header.frame_id!r}')
-        self._answer_if_ready()
+        if not self._timer_mode:
+            self._answer_if_ready()
 
     def _answer(self, msg: LaserScan) -> None:
         self._waiting_scan = None

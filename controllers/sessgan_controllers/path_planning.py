@@ -11,7 +11,9 @@
   replaces a run of the path when every point of it keeps at least the smaller of
   ``wanted_clearance`` and the least clearance of the run it replaces), resampling
   at ``spacing`` and a few rounds of Nav2's simple smoother, each point moved only
-  where it keeps that clearance.
+  where it keeps that clearance less ``smoothing_allowance`` (rounding a corner
+  brings the path nearer to what it bends around), never less than the inscribed
+  radius or than the point had.
 * :class:`Path`: points with arc length, heading and curvature.
 """
 
@@ -80,22 +82,27 @@ class Path:
 
 
 def _curvature(points: np.ndarray, arc: np.ndarray, window: float) -> np.ndarray:
+    """Heading change over about ``window`` metres of arc around each point, per metre.
+
+    Headings are those of the steps between points, each taken at its step's middle (exact
+    for a polyline through points of a circle)."""
     count = len(points)
     if count < 3:
         return np.zeros(count)
     steps = np.diff(points, axis=0)
     headings = np.unwrap(np.arctan2(steps[:, 1], steps[:, 0]))
-    # Heading of point i: its outgoing step (the incoming one at the end).
-    point_heading = np.concatenate((headings, headings[-1:]))
+    middles = 0.5 * (arc[:-1] + arc[1:])
     spacing = max(float(arc[-1]) / (count - 1), 1e-9)
     half = max(1, int(round(0.5 * window / spacing)))
-    ahead = np.minimum(np.arange(count) + half, count - 1)
-    behind = np.maximum(np.arange(count) - half, 0)
-    span = arc[ahead] - arc[behind]
-    turn = point_heading[ahead] - point_heading[behind]
+    index = np.arange(count)
+    first = np.clip(index - half, 0, count - 2)
+    last = np.clip(index + half - 1, 0, count - 2)
+    last = np.maximum(last, np.minimum(first + 1, count - 2))
+    first = np.minimum(first, np.maximum(last - 1, 0))
+    span = middles[last] - middles[first]
+    turn = headings[last] - headings[first]
     with np.errstate(invalid='ignore', divide='ignore'):
-        curvature = np.where(span > 1e-9, turn / span, 0.0)
-    return curvature
+        return np.where(span > 1e-9, turn / span, 0.0)
 
 
 # ------------------------------------------------------------------------------------------
@@ -184,6 +191,10 @@ class PlannerConfig:
     wanted_clearance: float
     """Shortcuts and smoothing never bring the path closer than this to an obstacle, nor
     closer than the A* path already was."""
+    smoothing_allowance: float = 0.0
+    """Clearance smoothing may give up below the shortcuts' (never below ``inscribed``)."""
+    inscribed: float = 0.0
+    """Clearance (m) smoothing never goes below, unless a point had less already."""
     smoothing_iterations: int = 60
     smooth_weight: float = 0.3
     data_weight: float = 0.15
@@ -305,13 +316,16 @@ def resample(points: np.ndarray, spacing: float) -> np.ndarray:
 
 def smooth(costmap: Costmap, points: np.ndarray, config: PlannerConfig) -> np.ndarray:
     """Nav2's simple smoother (gradient steps towards the neighbours' midpoint, held to the
-    original path by ``data_weight``); ends fixed; a point moves only where it keeps
-    min(wanted clearance, its clearance before smoothing)."""
+    original path by ``data_weight``); ends fixed; a point moves only where it keeps the
+    clearance the module docstring states."""
     if len(points) < 3 or config.smoothing_iterations <= 0:
         return points
     original = points.copy()
     smoothed = points.copy()
-    floor = np.minimum(costmap.clearance_at(points), config.wanted_clearance) - 1e-6
+    before = costmap.clearance_at(points)
+    floor = np.maximum(config.inscribed, np.minimum(before, config.wanted_clearance)
+                       - config.smoothing_allowance)
+    floor = np.minimum(before, floor) - 1e-6
     for _ in range(config.smoothing_iterations):
         inner = smoothed[1:-1]
         moved = (inner + config.data_weight * (original[1:-1] - inner)

@@ -88,9 +88,9 @@ ROBOT_PRESETS: dict[str, dict[str, float]] = {
         blocked_horizon=3.0, replan_deviation=0.5),
     'car': dict(
         robot_radius=0.6, safety_margin=0.15, inflation_radius=2.0, cost_scaling_factor=1.5,
-        planning_resolution=0.5, path_spacing=0.25, clearance_target=1.2,
-        curvature_window=2.0, max_speed=10.0, max_angular_speed=0.0,
-        lateral_acceleration=4.0, deceleration=4.0, min_speed=1.0, lookahead_min=2.0,
+        planning_resolution=0.5, path_spacing=0.25, clearance_target=0.8,
+        curvature_window=2.0, max_speed=12.0, max_angular_speed=0.0,
+        lateral_acceleration=6.0, deceleration=6.0, min_speed=1.0, lookahead_min=2.0,
         lookahead_max=8.0, lookahead_time=0.6, slowdown_distance=0.3, goal_tolerance=0.5,
         mark_range=10.0, blocked_horizon=20.0, replan_deviation=2.0),
     'flyer': dict(
@@ -134,7 +134,7 @@ class ReferenceNavigatorConfig:
         'A* path had, if less); 0: robot preset.')
     curvature_window: float = parameter(
         0.0, 'Arc length in m over which path curvature is measured; 0: robot preset.')
-    max_speed: float = parameter(0.0, 'Cruise speed in m/s; 0: robot preset (0.7/10/1.2).')
+    max_speed: float = parameter(0.0, 'Cruise speed in m/s; 0: robot preset (0.7/12/1.2).')
     max_angular_speed: float = parameter(
         0.0, 'Yaw-rate limit in rad/s (diff_drive: also caps speed on arcs; flyer: heading); '
         '0: robot preset.')
@@ -287,6 +287,8 @@ class ReferenceNavigator:
         self._planner_config = PlannerConfig(
             spacing=settings.path_spacing,
             wanted_clearance=settings.robot_radius + settings.clearance_target,
+            smoothing_allowance=0.5 * settings.clearance_target,
+            inscribed=settings.robot_radius + settings.safety_margin,
             curvature_window=settings.curvature_window,
             escape_radius=max(1.0, 3.0 * settings.robot_radius))
         self._diff_limits = DiffDriveLimits(

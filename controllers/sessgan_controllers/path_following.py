@@ -12,7 +12,9 @@ The pieces, each as Nav2 has it:
   to the next sharp turn), ending at ``end_speed`` at the goal.
 * :func:`free_distance`: how far along the path the robot can go before its footprint
   meets one of the given points (what the scan sees that the map does not have), for a
-  speed limit ``sqrt(2 * deceleration * (free distance - stop margin))``.
+  speed limit that stops in time (:func:`braking_speed`: ``sqrt(2 * deceleration *
+  (free distance - stop margin))`` for an obstacle that stands still and a robot that
+  reacts at once, less when it may move or the robot lags).
 * :func:`proximity_factor`: Nav2's cost-regulated scaling: speed times the distance from
   the footprint to the nearest return ahead over ``slowdown_distance``.
 * The followers turn a carrot and a target speed into a command:
@@ -117,7 +119,7 @@ def free_distance(path: Path, start_index: int, horizon: float, points: np.ndarr
     return float(arc[start_index + int(blocked[0])] - arc[start_index])
 
 
-PROXIMITY_HALF_ANGLE = math.radians(60.0)
+PROXIMITY_HALF_ANGLE = math.radians(35.0)
 """Returns within this angle of the direction of travel regulate the speed; walls beside a
 corridor (at 90 degrees) do not."""
 
@@ -136,9 +138,58 @@ def proximity_factor(scan: ScanData, robot_radius: float, direction: float,
     return min(1.0, max(min_factor, gap / slowdown_distance))
 
 
-def braking_speed(distance: float, deceleration: float, margin: float) -> float:
-    """Fastest speed (m/s) that still stops within ``distance - margin`` metres."""
-    return math.sqrt(2.0 * deceleration * max(0.0, distance - margin))
+def nearest_gap_ahead(points: np.ndarray, state: RobotState, direction: float,
+                      robot_radius: float) -> float:
+    """Gap (m) between the footprint and the nearest of map-frame ``points`` (N x 2) in the
+    half-plane ahead of body-frame ``direction`` (rad); inf when there is none."""
+    if not len(points):
+        return math.inf
+    dx, dy = points[:, 0] - state.x, points[:, 1] - state.y
+    heading = state.yaw + direction
+    ahead = dx * math.cos(heading) + dy * math.sin(heading) > 0.0
+    if not ahead.any():
+        return math.inf
+    return float(np.hypot(dx[ahead], dy[ahead]).min()) - robot_radius
+
+
+def swept_points(state: RobotState, command: VelocityCommand, length: float,
+                 step: float) -> np.ndarray:
+    """Map-frame positions (N x 2) the robot's centre passes in the first ``length`` metres of
+    ``command`` held constant: an arc of curvature wz / vx for a forward command without vy,
+    else the straight line along (vx, vy) (a holonomic robot's yaw does not bend its motion
+    much over a short check)."""
+    count = max(2, int(math.ceil(length / step)) + 1)
+    distance = np.linspace(0.0, length, count)
+    speed = math.hypot(command.vx, command.vy)
+    if command.vy == 0.0 and command.vx > 1e-9 and abs(command.wz) > 1e-9:
+        curvature = command.wz / command.vx
+        x = np.sin(curvature * distance) / curvature
+        y = (1.0 - np.cos(curvature * distance)) / curvature
+    elif speed > 1e-9:
+        x = distance * command.vx / speed
+        y = distance * command.vy / speed
+    else:
+        x = y = np.zeros(count)
+    cos_yaw, sin_yaw = math.cos(state.yaw), math.sin(state.yaw)
+    return np.stack((state.x + cos_yaw * x - sin_yaw * y, state.y + sin_yaw * x + cos_yaw * y),
+                    axis=1)
+
+
+def braking_speed(distance: float, deceleration: float, margin: float,
+                  reaction_time: float = 0.0, obstacle_speed: float = 0.0) -> float:
+    """Fastest speed v (m/s) that still stops ``margin`` short of something ``distance``
+    metres ahead: the robot keeps v for ``reaction_time`` s, then brakes at ``deceleration``,
+    while the obstacle closes in at ``obstacle_speed``::
+
+        v t_r + v^2 / (2 a) + u (t_r + v / a) <= distance - margin
+    """
+    room = distance - margin - obstacle_speed * reaction_time
+    if not room > 0.0:
+        return 0.0
+    if math.isinf(room):
+        return math.inf
+    linear = reaction_time + obstacle_speed / deceleration
+    return deceleration * (-linear + math.sqrt(linear * linear + 2.0 * room / deceleration))
 
 
 def to_body(state: RobotState, point: np.ndarray) -> tuple[float, float]:

@@ -31,7 +31,10 @@ generator finds in a competent planner-based navigator:
 
   For every robot the speed is also limited so that it can stop (at ``deceleration``)
   ``stop_margin`` before the first point of the path ahead that an unexplained return
-  blocks, and scaled down near any return ahead (``slowdown_distance``).
+  blocks (closer than ``robot_radius + collision_margin + dynamic_margin``: it may move),
+  so that it stops ``monitor_distance`` from the nearest unexplained return ahead of it
+  (Nav2's collision monitor), and scaled down near any return ahead
+  (``slowdown_distance``).
 * **No path** (the goal is walled in, or an agent blocks the only passage): the robot
   stands still, keeps its marks clearing, and tries again every ``replan_interval``
   steps. Commands are always finite.
@@ -61,8 +64,10 @@ from sessgan_controllers.path_following import (
     follow_diff_drive,
     follow_holonomic,
     free_distance,
+    nearest_gap_ahead,
     proximity_factor,
     speed_profile,
+    swept_points,
     to_body,
 )
 from sessgan_controllers.path_planning import Path, PlannerConfig, PlanningError, plan_path
@@ -74,6 +79,7 @@ from sessgan_controllers.types import (
     ScanData,
     VelocityCommand,
     parameter,
+    wrap_angle,
 )
 
 ROBOTS = ('diff_drive', 'car', 'flyer')
@@ -85,21 +91,22 @@ ROBOT_PRESETS: dict[str, dict[str, float]] = {
         curvature_window=0.3, max_speed=0.7, max_angular_speed=1.8, lateral_acceleration=0.6,
         deceleration=0.8, min_speed=0.1, lookahead_min=0.3, lookahead_max=0.9,
         lookahead_time=1.5, slowdown_distance=0.5, goal_tolerance=0.15, mark_range=3.0,
-        blocked_horizon=3.0, replan_deviation=0.5),
+        blocked_horizon=3.0, replan_deviation=0.5, monitor_distance=0.3, reaction_time=0.1),
     'car': dict(
         robot_radius=0.6, safety_margin=0.15, inflation_radius=2.0, cost_scaling_factor=1.5,
         planning_resolution=0.5, path_spacing=0.25, clearance_target=0.8,
         curvature_window=2.0, max_speed=12.0, max_angular_speed=0.0,
         lateral_acceleration=6.0, deceleration=6.0, min_speed=1.0, lookahead_min=2.0,
         lookahead_max=8.0, lookahead_time=0.6, slowdown_distance=0.3, goal_tolerance=0.5,
-        mark_range=10.0, blocked_horizon=20.0, replan_deviation=2.0),
+        mark_range=10.0, blocked_horizon=20.0, replan_deviation=2.0, monitor_distance=0.5,
+        reaction_time=0.15),
     'flyer': dict(
         robot_radius=0.2, safety_margin=0.05, inflation_radius=0.5, cost_scaling_factor=6.0,
         planning_resolution=0.1, path_spacing=0.05, clearance_target=0.3,
         curvature_window=0.4, max_speed=1.2, max_angular_speed=1.5, lateral_acceleration=1.5,
         deceleration=1.5, min_speed=0.1, lookahead_min=0.4, lookahead_max=1.2,
         lookahead_time=0.8, slowdown_distance=0.5, goal_tolerance=0.15, mark_range=3.0,
-        blocked_horizon=3.0, replan_deviation=0.5),
+        blocked_horizon=3.0, replan_deviation=0.5, monitor_distance=0.3, reaction_time=0.35),
 }
 """Defaults per robot of the parameters that are 0 in :class:`ReferenceNavigatorConfig`."""
 
@@ -159,7 +166,20 @@ class ReferenceNavigatorConfig:
     stop_margin: float = parameter(
         0.15, 'Gap in m kept when braking for something the scan sees on the path.')
     collision_margin: float = parameter(
-        0.05, 'A return closer than radius + this to a path point blocks the path (m).')
+        0.05, 'A return the map does not explain closer than radius + this + dynamic_margin to '
+        'a path point blocks the path (m).')
+    dynamic_margin: float = parameter(
+        0.3, 'Extra gap in m kept from returns the map does not explain (they may move) when '
+        'checking the path ahead.')
+    reaction_time: float = parameter(
+        0.0, "Seconds before a commanded slow-down takes hold (control period, the robot's "
+        'response lag), allowed for when braking; 0: robot preset (0.1/0.15/0.35).')
+    obstacle_speed: float = parameter(
+        0.5, 'Speed in m/s at which returns the map does not explain may close in, allowed for '
+        'when braking for them.')
+    monitor_distance: float = parameter(
+        0.0, 'Collision monitor: the speed is at most what stops the robot this far (m) from '
+        'the nearest unexplained return ahead of it; 0: robot preset.')
     rotate_start_angle: float = parameter(
         0.785, 'diff_drive: heading error in rad to the carrot above which it turns in place.')
     rotate_stop_angle: float = parameter(
@@ -203,6 +223,7 @@ class ReferenceNavigatorConfig:
                      'planning_resolution', 'path_spacing', 'curvature_window', 'max_speed',
                      'lateral_acceleration', 'deceleration', 'min_speed', 'lookahead_min',
                      'lookahead_max', 'slowdown_distance', 'goal_tolerance', 'mark_range',
+                     'monitor_distance',
                      'blocked_horizon', 'replan_deviation', 'rotate_speed',
                      'angular_deceleration', 'wheelbase', 'max_steering_angle'):
             value = getattr(config, name)
@@ -210,7 +231,9 @@ class ReferenceNavigatorConfig:
                 raise InvalidConfigError(f'{name} must be a positive number, got {value!r}')
         for name in ('safety_margin', 'cost_weight', 'inscribed_penalty', 'clearance_target',
                      'max_angular_speed', 'lookahead_time', 'min_speed_factor', 'stop_margin',
-                     'collision_margin', 'rotate_start_angle', 'rotate_stop_angle',
+                     'collision_margin', 'dynamic_margin', 'reaction_time', 'obstacle_speed',
+                     'rotate_start_angle',
+                     'rotate_stop_angle',
                      'yaw_gain'):
             value = getattr(config, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
@@ -423,8 +446,9 @@ class ReferenceNavigator:
                         max(settings.lookahead_min, speed * settings.lookahead_time))
         carrot = tracker.carrot(lookahead)
         # The profile a little ahead: the robot takes a moment to slow down.
-        window = int(np.searchsorted(path.arc_length, tracker.travelled + 0.3 * speed,
-                                     side='right'))
+        window = int(np.searchsorted(
+            path.arc_length, tracker.travelled + (settings.reaction_time + 0.2) * speed,
+            side='right'))
         profile = float(self._profile[index:max(window, index + 1)].min())
         carrot_x, carrot_y = to_body(state, carrot)
         direction = math.atan2(carrot_y, carrot_x)
@@ -433,22 +457,83 @@ class ReferenceNavigator:
             settings.min_speed_factor)
         dynamic = self.costmap.unexplained_points(scan, state, settings.blocked_horizon)
         free = free_distance(path, index, settings.blocked_horizon, dynamic,
-                             settings.robot_radius + settings.collision_margin)
-        obstacle = braking_speed(free, settings.deceleration, settings.stop_margin)
+                             settings.robot_radius + settings.collision_margin
+                             + settings.dynamic_margin)
+        obstacle = braking_speed(free, settings.deceleration, settings.stop_margin,
+                                 settings.reaction_time, settings.obstacle_speed)
+        monitor = braking_speed(
+            nearest_gap_ahead(dynamic, state, direction, settings.robot_radius),
+            settings.deceleration, settings.monitor_distance, settings.reaction_time,
+            settings.obstacle_speed)
         regulated = max(settings.min_speed, min(profile, proximity))
-        target = min(regulated, obstacle, settings.max_speed)
-        limits = {'profile': profile, 'proximity': proximity, 'obstacle': obstacle}
-        if settings.robot == 'diff_drive':
-            command, self._rotating = follow_diff_drive(
-                state, carrot, target, self._diff_limits, self._rotating)
-            mode = Mode.ROTATE if self._rotating else Mode.FOLLOW
-        elif settings.robot == 'car':
-            command = follow_car(state, carrot, target, self._car_limits)
-            mode = Mode.FOLLOW
-        else:
-            command = follow_holonomic(state, carrot, target, self._holonomic_limits)
-            mode = Mode.FOLLOW
+        target = min(regulated, obstacle, monitor, settings.max_speed)
+        limits = {'profile': profile, 'proximity': proximity, 'obstacle': obstacle,
+                  'monitor': monitor}
+        command, mode = self._command_towards(state, carrot, target)
+        # Like RPP's collision detection: the motion up to the carrot must keep clearance; a
+        # nearer carrot bends the motion back to the path, a turn in place is always safe for
+        # a round robot.
+        if mode is Mode.FOLLOW and settings.robot != 'car':
+            reach = math.hypot(carrot_x, carrot_y)
+            for share in (0.5, 0.25):
+                if self._motion_clear(state, command, max(reach, speed)):
+                    break
+                reach = share * lookahead
+                command, mode = self._command_towards(state, tracker.carrot(reach), target)
+            else:
+                if not self._motion_clear(state, command, max(reach, speed)):
+                    command, mode = self._recover(state, tracker)
+                    detail = detail or 'motion towards the path blocked: turning to the path'
         if not command.is_finite():
             return NavigatorDecision(Mode.NO_PATH, STOP, path, replanned, limits,
                                      'non-finite command: stopping')
         return NavigatorDecision(mode, command, path, replanned, limits, detail)
+
+    def _command_towards(self, state: RobotState, carrot: np.ndarray,
+                         speed: float) -> tuple[VelocityCommand, Mode]:
+        robot = self.settings.robot
+        if robot == 'diff_drive':
+            command, self._rotating = follow_diff_drive(
+                state, carrot, speed, self._diff_limits, self._rotating)
+            return command, Mode.ROTATE if self._rotating else Mode.FOLLOW
+        if robot == 'car':
+            return follow_car(state, carrot, speed, self._car_limits), Mode.FOLLOW
+        return follow_holonomic(state, carrot, speed, self._holonomic_limits), Mode.FOLLOW
+
+    def _motion_clear(self, state: RobotState, command: VelocityCommand, length: float,
+                      margin: float | None = None) -> bool:
+        """Whether ``command`` keeps the footprint ``margin`` (default ``collision_margin``)
+        off every obstacle of the costmap over ``length`` metres; where the robot is closer
+        than that already, whether it loses no more than half the margin (and never touches)."""
+        assert self.costmap is not None
+        settings = self.settings
+        if math.hypot(command.vx, command.vy) < 1e-6:
+            return True
+        margin = settings.collision_margin if margin is None else margin
+        points = swept_points(state, command, length, 0.5 * self.costmap.resolution)
+        clearance = self.costmap.clearance_at(points)
+        radius = settings.robot_radius
+        needed = max(radius + 0.2 * margin,
+                     min(radius + margin, float(clearance[0]) - 0.5 * margin))
+        return bool(clearance[1:].min() >= needed - 1e-6)
+
+    def _recover(self, state: RobotState, tracker: PathTracker) -> tuple[VelocityCommand, Mode]:
+        """No safe motion towards the path ahead: a diff_drive turns in place to the path's
+        heading, then creeps along it; a flyer creeps straight back onto the path's nearest
+        point; each stops where even that would touch."""
+        settings = self.settings
+        creep_target = tracker.carrot(0.5 * settings.lookahead_min)
+        if settings.robot == 'diff_drive':
+            error = wrap_angle(tracker.path.heading(tracker.index) - state.yaw)
+            if abs(error) > settings.rotate_stop_angle:
+                rate = math.copysign(min(settings.rotate_speed, 0.5 + abs(error)), error)
+                return VelocityCommand(0.0, 0.0, rate), Mode.ROTATE
+            command, _ = follow_diff_drive(state, creep_target, settings.min_speed,
+                                           self._diff_limits, rotating=False)
+        else:
+            creep_target = tracker.path.points[tracker.index]
+            command = follow_holonomic(state, creep_target, settings.min_speed,
+                                       self._holonomic_limits)
+        if not self._motion_clear(state, command, 0.1, margin=0.0):
+            return STOP, Mode.FOLLOW
+        return command, Mode.FOLLOW

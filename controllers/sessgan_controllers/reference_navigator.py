@@ -86,14 +86,14 @@ ROBOTS = ('diff_drive', 'car', 'flyer')
 
 ROBOT_PRESETS: dict[str, dict[str, float]] = {
     'diff_drive': dict(
-        robot_radius=0.2, safety_margin=0.05, inflation_radius=0.5, cost_scaling_factor=6.0,
+        robot_radius=0.2, safety_margin=0.1, inflation_radius=0.5, cost_scaling_factor=6.0,
         planning_resolution=0.1, path_spacing=0.05, clearance_target=0.3,
         curvature_window=0.3, max_speed=0.7, max_angular_speed=1.8, lateral_acceleration=0.6,
         deceleration=0.8, min_speed=0.1, lookahead_min=0.3, lookahead_max=0.9,
         lookahead_time=1.5, slowdown_distance=0.5, goal_tolerance=0.15, mark_range=3.0,
         blocked_horizon=3.0, replan_deviation=0.5, monitor_distance=0.3, reaction_time=0.1),
     'car': dict(
-        robot_radius=0.6, safety_margin=0.15, inflation_radius=2.0, cost_scaling_factor=1.5,
+        robot_radius=0.6, safety_margin=0.3, inflation_radius=2.0, cost_scaling_factor=1.5,
         planning_resolution=0.5, path_spacing=0.25, clearance_target=0.8,
         curvature_window=2.0, max_speed=12.0, max_angular_speed=0.0,
         lateral_acceleration=6.0, deceleration=6.0, min_speed=1.0, lookahead_min=2.0,
@@ -101,7 +101,7 @@ ROBOT_PRESETS: dict[str, dict[str, float]] = {
         mark_range=10.0, blocked_horizon=20.0, replan_deviation=2.0, monitor_distance=0.5,
         reaction_time=0.15),
     'flyer': dict(
-        robot_radius=0.2, safety_margin=0.05, inflation_radius=0.5, cost_scaling_factor=6.0,
+        robot_radius=0.2, safety_margin=0.1, inflation_radius=0.5, cost_scaling_factor=6.0,
         planning_resolution=0.1, path_spacing=0.05, clearance_target=0.3,
         curvature_window=0.4, max_speed=1.2, max_angular_speed=1.5, lateral_acceleration=1.5,
         deceleration=1.5, min_speed=0.1, lookahead_min=0.4, lookahead_max=1.2,

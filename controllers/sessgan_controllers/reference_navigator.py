@@ -132,7 +132,8 @@ class ReferenceNavigatorConfig:
     cost_weight: float = parameter(
         3.0, 'Extra cost per metre at the inner edge of the inflation band (1 = double).')
     inscribed_penalty: float = parameter(
-        50.0, 'Extra cost per metre inside the inscribed band.')
+        1000.0, 'Extra cost per metre inside the inscribed band: so high that a path enters it '
+        'only where no way round exists (or to leave it).')
     planning_resolution: float = parameter(
         0.0, 'Planning cell size in m (map cells are split into whole sub-cells); 0: preset.')
     path_spacing: float = parameter(0.0, 'Distance in m between path points; 0: preset.')

@@ -27,9 +27,11 @@ publishes it) and get every map that arrives; the others never subscribe it.
 
 * ``scan`` (default): one command per scan, as above; for a lockstep simulator.
 * ``timer``: a command every ``1 / control_rate_hz`` seconds of the node's clock (sim
-  time with ``use_sim_time``), computed from the latest scan, odometry and goal, the way
-  Nav2's controller_server runs (20 Hz by default); for a clocked simulator. Scans are
-  not answered one by one.
+  time with ``use_sim_time``), computed from the latest scan, the odometry of that scan's
+  tick (the scan is read from where the robot was when it was taken: pairing it with a
+  newer pose would shift every return by the distance driven since) and the goal, the
+  way Nav2's controller_server runs (20 Hz by default); for a clocked simulator. Scans
+  are not answered one by one.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+from collections import deque
 from typing import Any
 
 import rclpy
@@ -87,6 +90,9 @@ MAP_QOS = QoSProfile(
 
 CONTROL_MODES = ('scan', 'timer')
 
+ODOM_HISTORY = 20
+"""Timer mode: odometry messages kept to find the one of the latest scan's tick."""
+
 CMD_VEL_QOS_DEPTH = 10
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                         reliability=ReliabilityPolicy.RELIABLE)
@@ -135,6 +141,7 @@ class ControllerNode(Node):
             raise ValueError(f'control_rate_hz must be a positive number, got {control_rate!r}')
         self._timer_mode = self._control_mode == 'timer'
         self._latest_scan: LaserScan | None = None
+        self._odom_history: deque[tuple[int, RobotState]] = deque(maxlen=ODOM_HISTORY)
         self._map: MapData | None = None
         self._state: RobotState | None = None
         self._odom_stamp: int | None = None
@@ -202,7 +209,9 @@ class ControllerNode(Node):
 
     def _on_odom(self, data: bytes) -> None:
         self._odom_stamp, self._state = odom_from_cdr(data)
-        if not self._timer_mode:
+        if self._timer_mode:
+            self._odom_history.append((self._odom_stamp, self._state))
+        else:
             self._answer_if_ready()
 
     def _on_map(self, msg: OccupancyGrid) -> None:
@@ -221,7 +230,7 @@ class ControllerNode(Node):
         """Timer mode: a command from the latest scan, odometry and goal."""
         if self._latest_scan is None:
             return
-        command = self._command_for(self._latest_scan)
+        command = self._command_for(self._latest_scan, self._state_at(self._latest_scan))
         if self._stamped:
             stamp = self.get_clock().now().to_msg()
             self._cmd_vel.publish(twist_stamped_from_command(command, stamp, self._base_frame))
@@ -235,6 +244,11 @@ class ControllerNode(Node):
             # that came before the previous episode's last scan, belong to the old episode.
             if self._odom_stamp is not None and self._odom_stamp > stamp:
                 self._state, self._odom_stamp = None, None
+            # Only odometry that came after the jump back belongs to the new episode.
+            history = list(self._odom_history)
+            newest_old = max((index for index, (odom_stamp, _) in enumerate(history)
+                              if odom_stamp > stamp), default=-1)
+            self._odom_history = deque(history[newest_old + 1:], maxlen=ODOM_HISTORY)
             if not self._goal_since_last_scan:
                 self._goal = None
         self._last_scan_stamp = stamp
@@ -287,20 +301,30 @@ class ControllerNode(Node):
         else:
             self._cmd_vel.publish(twist_from_command(command))
 
-    def _command_for(self, msg: LaserScan) -> VelocityCommand:
+    def _state_at(self, msg: LaserScan) -> RobotState | None:
+        """The odometry of the scan's tick: the newest not newer than the scan (the latest
+        state when all are newer)."""
+        stamp = _nanoseconds(msg.header.stamp)
+        for odom_stamp, state in reversed(self._odom_history):
+            if odom_stamp <= stamp:
+                return state
+        return self._state
+
+    def _command_for(self, msg: LaserScan, state: RobotState | None = None) -> VelocityCommand:
+        """The command for scan ``msg`` seen from ``state`` (default: the latest odometry)."""
+        state = state if state is not None else self._state
         if self._goal is None or self._goal_reached:
             return STOP
-        if self._state is None:
+        if state is None:
             if not self._warned_no_odom:
                 self.get_logger().warning('Scan received before any odometry: standing still')
                 self._warned_no_odom = True
             return STOP
-        if self._controller.goal_reached(self._state, self._goal):
+        if self._controller.goal_reached(state, self._goal):
             self._goal_reached = True
-            self.get_logger().info(
-                f'Goal reached at ({self._state.x:.2f}, {self._state.y:.2f})')
+            self.get_logger().info(f'Goal reached at ({state.x:.2f}, {state.y:.2f})')
             return STOP
-        command = self._controller.compute_command(scan_from_msg(msg), self._state, self._goal)
+        command = self._controller.compute_command(scan_from_msg(msg), state, self._goal)
         if not command.is_finite():
             self.get_logger().error(
                 f'Controller produced a non-finite command {command}; stopping')

@@ -15,7 +15,8 @@ generator finds in a competent planner-based navigator:
   ``replan_interval`` steps, when there is no path yet, when the goal changed, when the
   robot strayed more than ``replan_deviation`` from the path, when a mark makes the path
   ahead lethal (within ``blocked_horizon``), and every ``replan_period`` steps while marks
-  lie near the path (to go around an agent and come back once it is gone).
+  lie near the path (to go around an agent and come back once it is gone; such a plan
+  replaces the path only when it is ``replan_improvement`` shorter).
 * **Local controller** (:mod:`~sessgan_controllers.path_following`), chosen by ``robot``:
 
   - ``diff_drive``: Nav2's RotationShimController (turn in place while the carrot is more
@@ -110,7 +111,8 @@ ROBOT_PRESETS: dict[str, dict[str, float]] = {
 }
 """Defaults per robot of the parameters that are 0 in :class:`ReferenceNavigatorConfig`."""
 
-_PRESET = 'the robot preset'
+MARKS_NEAR_PATH = 'marks near the path'
+"""The reason of a periodic replan (kept only if it shortens the path enough)."""
 
 
 @dataclass
@@ -202,6 +204,9 @@ class ReferenceNavigatorConfig:
     replan_interval: int = parameter(10, 'Fewest steps between two plans.')
     replan_period: int = parameter(
         20, 'Steps between plans while scan marks lie near the path.')
+    replan_improvement: float = parameter(
+        0.1, 'A periodic replan replaces a path that is not blocked only when it is shorter '
+        'by this fraction of what remains (0..1).')
     goal_tolerance: float = parameter(
         0.0, 'Distance in m to the goal at which the robot stops; 0: robot preset.')
 
@@ -249,6 +254,9 @@ class ReferenceNavigatorConfig:
         if config.min_speed > config.max_speed:
             raise InvalidConfigError(f'min_speed {config.min_speed} exceeds max_speed '
                                      f'{config.max_speed}')
+        if not 0.0 <= config.replan_improvement <= 1.0:
+            raise InvalidConfigError(
+                f'replan_improvement must be in [0, 1], got {config.replan_improvement}')
         if config.min_speed_factor > 1.0:
             raise InvalidConfigError(
                 f'min_speed_factor must be in [0, 1], got {config.min_speed_factor}')
@@ -403,7 +411,7 @@ class ReferenceNavigator:
             near = np.any(clearance < self.costmap.config.max_distance)
             if near or self._planned_with_marks:
                 if self._steps - (self._last_plan_step or 0) >= self.settings.replan_period:
-                    return 'marks near the path'
+                    return MARKS_NEAR_PATH
         return ''
 
     def _may_plan(self, reason: str) -> bool:
@@ -424,6 +432,13 @@ class ReferenceNavigator:
             self.path, self._tracker = None, None
             return f'replanning ({reason}) failed: {err}'
         settings = self.settings
+        if reason == MARKS_NEAR_PATH and self.path is not None and self._tracker is not None:
+            # Hysteresis: an agent moving about the path must not flip the robot between two
+            # ways of similar length (each flip a turn on the spot).
+            remaining = self._tracker.remaining
+            if path.length > (1.0 - settings.replan_improvement) * remaining:
+                self._planned_with_marks = bool(self.costmap.marks)
+                return f'kept the path ({reason}): a new one would be {path.length:.2f} m'
         self.path = path
         self._tracker = PathTracker(path, search_distance=2.0 * settings.lookahead_max)
         self._profile = speed_profile(

@@ -8,6 +8,7 @@ covers x in [origin_x + col*res, origin_x + (col+1)*res), likewise for y.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,6 +18,33 @@ from sessgan_gen.scenarios import OCCUPANCY_VALUES, get_scenario
 
 MAX_CELLS_PER_SIDE = 4096
 """Grids larger than this per side are rejected as absurd (memory and build time)."""
+
+MAX_ENVIRONMENT_ID_LENGTH = 128
+ENVIRONMENT_ID_PATTERN = re.compile(r'[A-Za-z0-9][A-Za-z0-9._-]{0,127}')
+"""Environment ids name failure bag directories and files, so they are safe file names: a
+letter or digit, then up to 127 letters, digits, '.', '_' or '-'; never '..' (no path
+escapes) and never '.tmp-' (the staging name of a bag being written)."""
+
+
+def check_environment_id(environment_id: object) -> str:
+    """``environment_id`` if it is a safe id (:data:`ENVIRONMENT_ID_PATTERN`), else
+    InvalidEnvironmentError saying why."""
+    if not isinstance(environment_id, str):
+        raise InvalidEnvironmentError(
+            f'environment id must be a string, got {type(environment_id).__name__}')
+    if not environment_id:
+        raise InvalidEnvironmentError('environment id is empty')
+    if len(environment_id) > MAX_ENVIRONMENT_ID_LENGTH:
+        raise InvalidEnvironmentError(
+            f'environment id {environment_id[:40]!r}... has {len(environment_id)} characters; '
+            f'at most {MAX_ENVIRONMENT_ID_LENGTH}')
+    if (not ENVIRONMENT_ID_PATTERN.fullmatch(environment_id) or '..' in environment_id
+            or '.tmp-' in environment_id):
+        raise InvalidEnvironmentError(
+            f'environment id {environment_id!r} is not a safe name: it must start with a '
+            'letter or digit and hold only letters, digits, ".", "_" and "-" (no "..", no '
+            '".tmp-"), because it names the failure bag directory')
+    return environment_id
 
 
 @dataclass(frozen=True)
@@ -68,6 +96,7 @@ class Environment:
 
     def validate(self) -> None:
         """Raise InvalidEnvironmentError naming the first thing that is wrong."""
+        check_environment_id(self.id)
         get_scenario(self.scenario)  # raises UnknownScenarioError
         grid = self.occupancy
         if not isinstance(grid, np.ndarray) or grid.ndim != 2:

@@ -120,6 +120,35 @@ def test_bad_input_gets_clear_results_and_node_keeps_serving(node_processes, ros
     assert metrics.distance_travelled < 0.05
 
 
+def test_unsafe_environment_ids_are_refused_and_touch_no_files(node_processes, ros_node,
+                                                               tmp_path):
+    """Ids name bag directories: '../victim', an absolute path and '' are invalid_environment,
+    and no file under the record directory or beside it changes."""
+    files = tmp_path / 'files'  # tmp_path itself holds the processes' logs
+    record = files / 'bags' / 'run'
+    (record / 'earlier').mkdir(parents=True)
+    (record / 'earlier' / 'episode.json').write_text('{}')
+    victim = files / 'bags' / 'victim'
+    victim.mkdir()
+    (victim / 'precious.txt').write_text('keep me')
+    outside = files / 'outside'
+    outside.mkdir()
+
+    def snapshot():
+        return sorted((str(path), path.read_bytes() if path.is_file() else b'')
+                      for path in files.rglob('*'))
+
+    before = snapshot()
+    start_simulator(node_processes, '/ids', 'dummy_agents:=0', 'controller_startup_timeout:=2.0')
+    for unsafe in ('../victim', str(outside), ''):
+        metrics, _ = evaluate(ros_node, '/ids', environment_msg(room(), 'factory', unsafe),
+                              record_directory=str(record), timeout=30)
+        assert metrics.outcome == 'invalid_environment', (unsafe, metrics.outcome)
+        assert 'environment id' in metrics.detail, metrics.detail
+        assert not metrics.bag_path
+    assert snapshot() == before
+
+
 @pytest.mark.parametrize('scenario, controller', [
     ('factory', 'nearness_diagram'),
     ('drone', 'velocity_projection'),

@@ -15,9 +15,13 @@ from sessgan_evolver.bag_reading import (
     read_episode_bag,
 )
 from sessgan_evolver.errors import BagReadError
+from sessgan_gen.environment import check_environment_id
+from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_sim.bag_recording import (
     BagRecord,
     BagWriteError,
+    episode_bag_directory,
+    is_episode_bag,
     remove_stale_staging_directories,
     write_episode_bag,
 )
@@ -252,3 +256,87 @@ def test_episode_json_is_plain_json(tmp_path):
     write_episode_bag(target, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN)
     document = json.loads((target / 'episode.json').read_text())
     assert document['generation'] == 3 and document['map']['origin'] == list(ORIGIN)
+
+
+# ---- ids are safe names: a bag never escapes its record directory or replaces foreign data
+
+UNSAFE_IDS = ['', '../victim', '/tmp/elsewhere', 'a/b', '..', '.hidden', 'a..b', 'x' * 129,
+              'g1.tmp-123', 'with space', 'tab\tid', 'é', '-leading-dash']
+
+
+@pytest.mark.parametrize('episode_id', ['g003-m07-s12', 'factory-g000-m00-s5', 'free-3', 'A',
+                                        'a.b_c-d', 'x' * 128])
+def test_safe_ids_are_accepted(episode_id):
+    assert check_environment_id(episode_id) == episode_id
+
+
+@pytest.mark.parametrize('episode_id', UNSAFE_IDS + [None, 7])
+def test_unsafe_ids_are_rejected(episode_id):
+    with pytest.raises(InvalidEnvironmentError, match='environment id'):
+        check_environment_id(episode_id)
+
+
+def fill_record_directory(tmp_path):
+    """A record directory with an earlier bag, and a victim directory beside it."""
+    record = tmp_path / 'bags' / 'run'
+    write_episode_bag(record / 'earlier', serialized_records(), METADATA, OCCUPANCY,
+                      RESOLUTION, ORIGIN)
+    victim = tmp_path / 'bags' / 'victim'
+    victim.mkdir()
+    (victim / 'precious.txt').write_text('keep me')
+    return record, victim
+
+
+def snapshot(root):
+    return sorted((str(path.relative_to(root)), path.read_bytes() if path.is_file() else None)
+                  for path in root.rglob('*'))
+
+
+@pytest.mark.parametrize('episode_id', ['../victim', 'ABSOLUTE', ''])
+def test_the_issue_cases_touch_nothing(tmp_path, episode_id):
+    """An evaluate goal with id '../victim' replaced a sibling directory, an absolute path one
+    outside the record directory, an empty id the record directory itself: now each is refused
+    before the file system is touched."""
+    record, victim = fill_record_directory(tmp_path)
+    outside = tmp_path / 'outside'
+    write_episode_bag(outside, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN)
+    if episode_id == 'ABSOLUTE':
+        episode_id = str(outside)
+    before = snapshot(tmp_path)
+    with pytest.raises(BagWriteError, match='refusing'):
+        write_episode_bag(episode_bag_directory(record, episode_id), serialized_records(),
+                          METADATA, OCCUPANCY, RESOLUTION, ORIGIN, overwrite=True)
+    assert snapshot(tmp_path) == before
+    if episode_id != str(outside):
+        # The naive join the simulator used to make ('..' in the path, or the record
+        # directory itself, which is no failure bag) is refused by the writer, too.
+        with pytest.raises(BagWriteError):
+            write_episode_bag(record / episode_id, serialized_records(), METADATA, OCCUPANCY,
+                              RESOLUTION, ORIGIN, overwrite=True)
+        assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize('episode_id', UNSAFE_IDS)
+def test_episode_bag_directory_refuses_every_unsafe_id(tmp_path, episode_id):
+    with pytest.raises(BagWriteError, match='environment id'):
+        episode_bag_directory(tmp_path, episode_id)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_overwrite_replaces_only_a_failure_bag(tmp_path):
+    record, _ = fill_record_directory(tmp_path)
+    foreign = record / 'g003-m07-s12'
+    foreign.mkdir()
+    (foreign / 'notes.txt').write_text('not a bag')
+    (foreign / 'episode.json').write_text('{}')
+    (foreign / 'metadata.yaml').write_text('looks like a bag, but holds more')
+    assert not is_episode_bag(foreign) and is_episode_bag(record / 'earlier')
+    before = snapshot(tmp_path)
+    with pytest.raises(BagWriteError, match='not a failure bag'):
+        write_episode_bag(foreign, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN,
+                          overwrite=True)
+    assert snapshot(tmp_path) == before
+    # An earlier failure bag of the same episode (a resumed campaign) is replaced.
+    write_episode_bag(record / 'earlier', serialized_records()[:3], METADATA, OCCUPANCY,
+                      RESOLUTION, ORIGIN, storage='sqlite3', overwrite=True)
+    assert read_episode_bag(record / 'earlier').episode['messages']['count'] == 3

@@ -43,6 +43,10 @@ from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 
 SOFTWARE_VERSION = '0.1.0'
 
+EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
+"""Wall seconds per map cell added to the default episode timeout: a simulator built a
+4096 x 4096 map (16.8 M cells) in 262 s, 16 us a cell; three times that covers a busy host."""
+
 
 class CampaignError(SessganEvolverError):
     """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""
@@ -71,7 +75,8 @@ class CampaignConfig:
     time_limit: float = 0.0
     """[scenario's] Episode time limit in sim seconds."""
     episode_timeout: float = 0.0
-    """[max(30, 2 x time limit)] Wall seconds before an episode is retried elsewhere."""
+    """[max(30, 2 x time limit) + 50 us per map cell] Wall seconds before an episode is retried
+    elsewhere."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
     seed_schedule: str = 'fixed'
@@ -119,8 +124,15 @@ class CampaignConfig:
     def resolved_time_limit(self) -> float:
         return self.time_limit or get_scenario(self.scenario).time_limit
 
-    def resolved_episode_timeout(self) -> float:
-        return self.episode_timeout or max(30.0, 2.0 * self.resolved_time_limit())
+    def episode_timeout_for(self, cells: int) -> float:
+        """Wall seconds an episode on a map of ``cells`` cells may take before it is retried
+        on another worker: ``episode_timeout`` if set, else twice the time limit (a clocked
+        simulator runs at real time; at least 30 s) plus the world's build time, which grows
+        with the map (:data:`EPISODE_TIMEOUT_SECONDS_PER_CELL`)."""
+        if self.episode_timeout:
+            return self.episode_timeout
+        return (max(30.0, 2.0 * self.resolved_time_limit())
+                + EPISODE_TIMEOUT_SECONDS_PER_CELL * max(0, int(cells)))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -32,12 +32,18 @@ def episode_rows(run_dir: Path) -> list[dict]:
                 for row in csv.DictReader(handle)]
 
 
-def test_campaign_resumes_after_sigkill_with_identical_results(ros_workspace, tmp_path):
-    complete = subprocess.run(campaign(tmp_path, 'straight'), capture_output=True, text=True,
+@pytest.fixture(scope='module')
+def straight(ros_workspace, tmp_path_factory) -> Path:
+    """The run directory of an undisturbed TINY campaign, to compare disturbed runs with."""
+    root = tmp_path_factory.mktemp('straight')
+    complete = subprocess.run(campaign(root, 'straight'), capture_output=True, text=True,
                               timeout=600)
     assert complete.returncode == 0, complete.stderr[-3000:]
     assert 'report:' in complete.stdout and 'failure bags:' in complete.stdout
-    straight = tmp_path / 'runs' / 'straight'
+    return root / 'runs' / 'straight'
+
+
+def test_campaign_resumes_after_sigkill_with_identical_results(straight, tmp_path):
     report = straight / 'report'
     for name in ('report.md', 'generation_metrics.png', 'maps.png'):
         assert (report / name).stat().st_size > 0
@@ -61,6 +67,58 @@ def test_campaign_resumes_after_sigkill_with_identical_results(ros_workspace, tm
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     assert 'resuming' in resumed.stderr
     assert episode_rows(tmp_path / 'runs' / 'killed') == episode_rows(straight)
+
+
+def child_of(parent_pid: int, *markers: str) -> int:
+    """The pid of the child process of ``parent_pid`` whose command line has every marker."""
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / 'stat').read_text()
+            command = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode()
+        except OSError:
+            continue
+        parent = int(stat.rsplit(')', 1)[1].split()[1])
+        if parent == parent_pid and all(marker in command for marker in markers):
+            return int(entry.name)
+    raise AssertionError(f'no child of {parent_pid} runs {markers}')
+
+
+@pytest.mark.parametrize('victim', ['controller', 'simulator'])
+def test_a_worker_process_killed_mid_episode_is_restarted_and_the_episode_rerun(
+        straight, tmp_path, victim):
+    """SIGKILL of worker /w0's controller (or simulator) while it runs an episode: the campaign
+    sees the death at once (not after the episode timeout), restarts the pair, runs the
+    episode again, and ends with the rows of the undisturbed run: nothing of the dead pair's
+    episode reaches the metrics."""
+    stderr_path = tmp_path / 'campaign.err'
+    with open(stderr_path, 'wb') as stderr:
+        run = subprocess.Popen(campaign(tmp_path, 'disturbed'), stdout=subprocess.DEVNULL,
+                               stderr=stderr, start_new_session=True)
+    try:
+        controller_log = tmp_path / 'runs' / 'disturbed' / 'logs' / 'nearness_diagram_w0.log'
+        deadline = time.monotonic() + 300
+        # The controller logs every goal it gets: kill as soon as /w0's second episode began.
+        while not (controller_log.exists()
+                   and controller_log.read_text(errors='replace').count('New goal') >= 2):
+            assert run.poll() is None, stderr_path.read_text()[-3000:]
+            assert time.monotonic() < deadline, 'worker /w0 never got a second episode'
+            time.sleep(0.01)
+        markers = (('sessgan_controllers/nearness_diagram',) if victim == 'controller'
+                   else ('sessgan_sim/simulator',))
+        os.kill(child_of(run.pid, *markers, '__ns:=/w0'), signal.SIGKILL)
+        assert run.wait(timeout=600) == 0, stderr_path.read_text()[-3000:]
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+    log = stderr_path.read_text()
+    assert 'a harness failure, not a result; the episode will run again' in log, log[-3000:]
+    assert 'worker /w0: restarted its simulator and controller (restart 1 of' in log
+    assert 'gave no result within' not in log, 'the death was noticed only at the timeout'
+    rows = episode_rows(tmp_path / 'runs' / 'disturbed')
+    assert 'controller_unresponsive' not in {row['outcome'] for row in rows}
+    assert rows == episode_rows(straight)
 
 
 def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, tmp_path):

@@ -44,8 +44,12 @@ from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 SOFTWARE_VERSION = '0.1.0'
 
 EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
-"""Wall seconds per map cell added to the default episode timeout: a simulator built a
-4096 x 4096 map (16.8 M cells) in 262 s, 16 us a cell; three times that covers a busy host."""
+"""Wall seconds per map cell added to the default episode timeout for building the world: a
+simulator built a 4096 x 4096 map (16.8 M cells) in 262 s, 16 us a cell (a 1024 x 1024 map
+with 10 % walls: 21 us); more than twice that covers a busy host."""
+EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND = 1e-5
+"""Wall seconds per map cell and sim second of time limit added for stepping: the 1024 x 1024
+map took 5.6 wall s per sim second (5.3 us a cell); about twice that."""
 
 
 class CampaignError(SessganEvolverError):
@@ -75,8 +79,8 @@ class CampaignConfig:
     time_limit: float = 0.0
     """[scenario's] Episode time limit in sim seconds."""
     episode_timeout: float = 0.0
-    """[max(30, 2 x time limit) + 50 us per map cell] Wall seconds before an episode is retried
-    elsewhere."""
+    """[max(30, 2 x time limit), plus 50 us + 10 us x time limit per map cell] Wall seconds
+    before an episode is retried elsewhere."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
     seed_schedule: str = 'fixed'
@@ -127,12 +131,15 @@ class CampaignConfig:
     def episode_timeout_for(self, cells: int) -> float:
         """Wall seconds an episode on a map of ``cells`` cells may take before it is retried
         on another worker: ``episode_timeout`` if set, else twice the time limit (a clocked
-        simulator runs at real time; at least 30 s) plus the world's build time, which grows
-        with the map (:data:`EPISODE_TIMEOUT_SECONDS_PER_CELL`)."""
+        simulator runs at real time; at least 30 s) plus the world's build and stepping time,
+        which grow with the map (:data:`EPISODE_TIMEOUT_SECONDS_PER_CELL`,
+        :data:`EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND`)."""
         if self.episode_timeout:
             return self.episode_timeout
-        return (max(30.0, 2.0 * self.resolved_time_limit())
-                + EPISODE_TIMEOUT_SECONDS_PER_CELL * max(0, int(cells)))
+        time_limit = self.resolved_time_limit()
+        per_cell = (EPISODE_TIMEOUT_SECONDS_PER_CELL
+                    + EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND * time_limit)
+        return max(30.0, 2.0 * time_limit) + per_cell * max(0, int(cells))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

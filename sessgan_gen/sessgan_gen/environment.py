@@ -19,6 +19,13 @@ from sessgan_gen.scenarios import OCCUPANCY_VALUES, get_scenario
 MAX_CELLS_PER_SIDE = 4096
 """Grids larger than this per side are rejected as absurd (memory and build time)."""
 
+MAX_TOTAL_CELLS = 1024 * 1024
+"""Grids of more cells than this (1,048,576) are rejected: the simulator's time and memory
+grow with the cells. Measured on a 2-core host, a 1024 x 1024 map with 10 % walls took 22 s
+and 1.3 GB to build and 5.6 wall s per sim second (a 4096 x 4096 map, which the old limit
+allowed, took 262 s and 3.3 GB to build); generating a 1024 x 1024 map took 6.4 s and
+0.7 GB."""
+
 MAX_ENVIRONMENT_ID_LENGTH = 128
 ENVIRONMENT_ID_PATTERN = re.compile(r'[A-Za-z0-9][A-Za-z0-9._-]{0,127}')
 """Environment ids name failure bag directories and files, so they are safe file names: a
@@ -45,6 +52,18 @@ def check_environment_id(environment_id: object) -> str:
             'letter or digit and hold only letters, digits, ".", "_" and "-" (no "..", no '
             '".tmp-"), because it names the failure bag directory')
     return environment_id
+
+
+def check_grid_size(width: int, height: int) -> None:
+    """InvalidEnvironmentError unless a ``width`` x ``height`` grid is within
+    :data:`MAX_CELLS_PER_SIDE` per side and :data:`MAX_TOTAL_CELLS` in all."""
+    if not (1 <= height <= MAX_CELLS_PER_SIDE and 1 <= width <= MAX_CELLS_PER_SIDE):
+        raise InvalidEnvironmentError(
+            f'grid {width}x{height} cells is outside 1..{MAX_CELLS_PER_SIDE} per side')
+    if width * height > MAX_TOTAL_CELLS:
+        raise InvalidEnvironmentError(
+            f'grid {width}x{height} has {width * height:,} cells, more than the '
+            f'{MAX_TOTAL_CELLS:,} a simulator accepts (MAX_TOTAL_CELLS)')
 
 
 @dataclass(frozen=True)
@@ -104,10 +123,10 @@ class Environment:
                 f'environment {self.id!r}: occupancy must be a 2-D array, '
                 f'got shape {getattr(grid, "shape", None)}')
         height, width = grid.shape
-        if not (1 <= height <= MAX_CELLS_PER_SIDE and 1 <= width <= MAX_CELLS_PER_SIDE):
-            raise InvalidEnvironmentError(
-                f'environment {self.id!r}: grid {width}x{height} cells is outside '
-                f'1..{MAX_CELLS_PER_SIDE} per side')
+        try:
+            check_grid_size(width, height)
+        except InvalidEnvironmentError as err:
+            raise InvalidEnvironmentError(f'environment {self.id!r}: {err}') from err
         if not (math.isfinite(self.resolution) and self.resolution > 0):
             raise InvalidEnvironmentError(
                 f'environment {self.id!r}: resolution must be a positive finite number of '

@@ -15,7 +15,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.ros_conversion import environment_to_msg
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
@@ -36,7 +36,11 @@ class GeneratorNode(Node):
         self.declare_parameter('seed', 0)         # first seed; each publication uses the next
         self.declare_parameter('rate', 0.0)       # Hz; 0 publishes one environment at start
         self.declare_parameter('device', 'cpu')
-        self.sampler = EnvironmentSampler(device=self.get_parameter('device').value)
+        # Most cells (seeds x height x width) one generate_environments request may ask for.
+        self.declare_parameter('max_cells_per_request', DEFAULT_MAX_CELLS_PER_REQUEST)
+        self.sampler = EnvironmentSampler(
+            device=self.get_parameter('device').value,
+            max_cells_per_request=int(self.get_parameter('max_cells_per_request').value))
         self.next_seed = int(self.get_parameter('seed').value)
         self.environment_publisher = self.create_publisher(EnvironmentMsg, 'environments', 10)
         self.map_publisher = self.create_publisher(OccupancyGrid, 'environment', MAP_QOS)

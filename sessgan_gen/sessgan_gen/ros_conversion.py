@@ -8,7 +8,7 @@ import numpy as np
 from geometry_msgs.msg import Pose
 from nav_msgs.msg import OccupancyGrid
 
-from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment, Pose2D
+from sessgan_gen.environment import Environment, Pose2D, check_grid_size
 from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 
@@ -50,10 +50,10 @@ def occupancy_from_grid_msg(grid: OccupancyGrid) -> tuple[np.ndarray, float, tup
     """(occupancy array, resolution, origin) of a grid; InvalidEnvironmentError if malformed."""
     width, height = int(grid.info.width), int(grid.info.height)
     resolution = float(grid.info.resolution)
-    if not (1 <= width <= MAX_CELLS_PER_SIDE and 1 <= height <= MAX_CELLS_PER_SIDE):
-        raise InvalidEnvironmentError(
-            f'occupancy grid of {width}x{height} cells is outside 1..{MAX_CELLS_PER_SIDE} per '
-            f'side')
+    try:
+        check_grid_size(width, height)  # before anything is built from the data
+    except InvalidEnvironmentError as err:
+        raise InvalidEnvironmentError(f'occupancy grid: {err}') from err
     if len(grid.data) != width * height:
         raise InvalidEnvironmentError(
             f'occupancy grid data has {len(grid.data)} cells but info says '

@@ -101,6 +101,14 @@ def test_bad_input_gets_clear_results_and_node_keeps_serving(node_processes, ros
     metrics, _ = evaluate(ros_node, '/bad', in_wall)
     assert metrics.outcome == 'invalid_environment', metrics.detail
 
+    # More cells than a simulator accepts: refused before anything is built.
+    huge = environment_msg(room(), 'factory', 'huge')
+    huge.map.info.width, huge.map.info.height = 2048, 1024
+    huge.map.data = bytes(2048 * 1024)
+    metrics, _ = evaluate(ros_node, '/bad', huge, timeout=30)
+    assert metrics.outcome == 'invalid_environment'
+    assert '2,097,152 cells, more than the 1,048,576' in metrics.detail, metrics.detail
+
     unknown = environment_msg(room(), 'factory', 'moon')
     unknown.scenario = 'moon'
     metrics, _ = evaluate(ros_node, '/bad', unknown)

@@ -106,9 +106,12 @@ def test_resume_after_interruption_gives_the_uninterrupted_results(checkpoint, t
 
 def test_episode_timeout_grows_with_the_map_and_the_time_limit():
     short = CampaignConfig(scenario='factory', time_limit=20.0)
-    assert short.episode_timeout_for(32 * 32) == pytest.approx(40.0 + 32 * 32 * 5e-5)
+    assert short.episode_timeout_for(32 * 32) == pytest.approx(40.0 + 32 * 32 * 25e-5)
     assert CampaignConfig(time_limit=5.0).episode_timeout_for(0) == 30.0  # at least 30 s
     assert CampaignConfig(time_limit=200.0).episode_timeout_for(0) == 400.0
-    # The largest map a simulator accepted took 262 s to build: its episode is not cut off.
-    assert short.episode_timeout_for(4096 * 4096) > 2 * 262.0
-    assert CampaignConfig(episode_timeout=7.0).episode_timeout_for(4096 * 4096) == 7.0
+    # The largest map a simulator accepts took 22 s to build and 5.6 s per sim second:
+    # measured times, with margin, fit into its timeout.
+    cells = 1024 * 1024
+    assert short.episode_timeout_for(cells) > 1.5 * (22.0 + 5.6 * 20.0)
+    assert CampaignConfig(time_limit=60.0).episode_timeout_for(cells) > 1.5 * (22 + 5.6 * 60)
+    assert CampaignConfig(episode_timeout=7.0).episode_timeout_for(cells) == 7.0

@@ -11,7 +11,11 @@ from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
-from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    check_checkpoint_file,
+    default_checkpoint_path,
+    load_checkpoint,
+)
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
 from sessgan_gen.errors import CheckpointError, SessganGenError
 from sessgan_gen.model import GeneratorPyramid
@@ -65,10 +69,12 @@ class EnvironmentSampler:
             key = 'bytes:' + hashlib.sha256(checkpoint).hexdigest()
         else:
             path = Path(checkpoint)
+            check_checkpoint_file(path, f'checkpoint {str(path)!r}')
             try:
                 key = f'path:{path.resolve()}:{path.stat().st_mtime_ns}'
             except OSError as err:
-                raise CheckpointError(f'checkpoint {str(path)!r} cannot be read: {err}') from err
+                raise CheckpointError(f'checkpoint {str(path)!r} cannot be read: '
+                                      f'{err.strerror}') from err
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]

@@ -58,6 +58,7 @@ from sessgan_controllers.messages import (
 )
 from sessgan_controllers.registry import ControllerSpec, get_controller
 from sessgan_controllers.types import STOP, Goal, RobotState, VelocityCommand, config_help
+from sessgan_gen.node_help import exit_if_help
 
 GOAL_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -290,10 +291,15 @@ def main(args: Sequence[str] | None = None) -> None:
     controller's registry name."""
     name = Path(sys.argv[0]).name
     try:
-        get_controller(name)
+        spec = get_controller(name)
     except KeyError as err:
         print(f'{name}: {err}', file=sys.stderr)
         sys.exit(2)
+    exit_if_help(f'sessgan_controllers {name}', f'{spec.description} For the {spec.robot} '
+                 'robot.\n\nSubscribes scan, odom and goal_pose; publishes one cmd_vel '
+                 '(Twist, or TwistStamped with use_stamped_cmd_vel) per scan. Run it with '
+                 'use_sim_time:=true beside a simulator worker in the same namespace.',
+                 lambda: ControllerNode(name), args)
     run(name, args)
 
 

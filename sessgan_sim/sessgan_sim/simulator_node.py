@@ -35,6 +35,7 @@ from tf2_msgs.msg import TFMessage
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.navigation import make_environment
+from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import (
     environment_from_msg,
     occupancy_from_grid_msg,
@@ -523,6 +524,7 @@ def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
 
 
 def main(args=None) -> None:
+    exit_if_help('sessgan_sim simulator', __doc__ or '', SimulatorNode, args)
     rclpy.init(args=args)
     node = None
     executor = MultiThreadedExecutor(num_threads=2)

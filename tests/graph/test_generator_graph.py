@@ -89,3 +89,15 @@ def test_requests_beyond_the_cell_cap_are_refused(node_processes, ros_node):
     assert not too_big.success and 'more than the 1,048,576' in too_big.message
     accepted = call_service(ros_node, client, GenerateEnvironments.Request(seeds=[1, 2]))
     assert accepted.success and len(accepted.environments) == 2
+
+
+def test_an_unreadable_checkpoint_parameter_ends_the_node_with_the_reason(node_processes,
+                                                                         tmp_path):
+    corrupt = tmp_path / 'corrupt.pt'
+    corrupt.write_bytes(b'not a checkpoint')
+    for checkpoint, reason in ((tmp_path / 'missing.pt', 'missing.pt'),
+                               (corrupt, 'not a valid checkpoint')):
+        generator = start_generator(node_processes, '/gen_d', f'checkpoint:={checkpoint}')
+        assert generator.wait(timeout=60) == 1, generator.output()
+        assert 'cannot start the generator' in generator.output()
+        assert reason in generator.output(), generator.output()

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -90,6 +90,11 @@ class CampaignConfig:
     the maps drawn)."""
     record_failures: bool = True
     """[True] Write every failure episode as a bag under bags/<run>/."""
+    mode: str = 'lockstep'
+    """[lockstep] Stepping mode of the simulators this campaign starts: lockstep or clocked."""
+    external: bool = False
+    """[False] Start no simulators or controllers: use every evaluate action server already
+    running (e.g. your own stack under /w0, /w1)."""
     elite_count: int = 1
     """[1] Members kept unchanged each generation."""
     tournament_size: int = 3
@@ -112,6 +117,8 @@ class CampaignConfig:
                                 f'{self.seed_schedule!r}')
         if self.bag_storage not in ('mcap', 'sqlite3'):
             raise CampaignError(f'bag storage must be mcap or sqlite3, got {self.bag_storage!r}')
+        if self.mode not in ('lockstep', 'clocked'):
+            raise CampaignError(f'mode must be lockstep or clocked, got {self.mode!r}')
         self.algorithm_config().validate()
         self.fitness.validate()
 
@@ -187,18 +194,23 @@ class Campaign:
     """One run: ``runs/<run>/`` and ``bags/<run>/``, resumable."""
 
     def __init__(self, config: CampaignConfig, run_name: str, runs_root: Path, bags_root: Path,
-                 log: Callable[[str], None] = print) -> None:
+                 log: Callable[[str], None] = print,
+                 invocation: Mapping[str, Any] | None = None) -> None:
+        """``invocation``: how the campaign was started (command line, run and bag roots),
+        kept in config.json beside the config. Bad settings or an unreadable checkpoint raise
+        before anything is written."""
         config.validate()
         self.config = config
-        self.store = RunStore(runs_root, run_name)
-        self.bags_dir = Path(bags_root).resolve() / run_name
-        self.log = log
+        self.invocation = dict(invocation or {})
         scenario = get_scenario(config.scenario)
         self.scenario = scenario
         self.example = load_example_map(scenario.name).cells
         checkpoint = config.checkpoint or str(default_checkpoint_path(scenario.name))
         self.pyramid, self.metadata = load_checkpoint(checkpoint, scenario=scenario.name)
         self.template = {k: v.clone() for k, v in self.pyramid.state_dict().items()}
+        self.store = RunStore(runs_root, run_name)  # creates the run directory
+        self.bags_dir = Path(bags_root).resolve() / run_name
+        self.log = log
 
     def weights_of(self, genome: Genome) -> bytes:
         """Checkpoint bytes of a member: the pre-trained pyramid with the genome's tensors."""
@@ -207,7 +219,8 @@ class Campaign:
 
     def start(self, resume: bool) -> tuple[GeneticAlgorithm, float | None]:
         """The algorithm to continue with and the TPKL reference (None before generation 0)."""
-        self.store.write_config(self.config.to_dict(), self.config.seed, SOFTWARE_VERSION)
+        self.store.write_config(self.config.to_dict(), self.config.seed, SOFTWARE_VERSION,
+                                invocation=self.invocation)
         point = self.store.resume() if resume else None
         if resume and point is None:
             self.log(f'nothing to resume in {self.store.run_dir}: starting at generation 0')

@@ -10,7 +10,6 @@ it started on exit, Ctrl-C or SIGTERM.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import signal
 import sys
@@ -23,7 +22,6 @@ from typing import TYPE_CHECKING, Any
 
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError, EpisodeJob
 from sessgan_evolver.errors import SessganEvolverError
-from sessgan_evolver.fitness import FitnessConfig
 from sessgan_evolver.process_supervisor import (
     ChildProcess,
     ProcessSupervisor,
@@ -31,6 +29,7 @@ from sessgan_evolver.process_supervisor import (
     WorkerPool,
     worker_cores,
 )
+from sessgan_gen.config_cli import build_parser, config_from_namespace
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.scenarios import get_scenario
@@ -55,62 +54,34 @@ NO_WORKER_TIMEOUT = 60.0
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        prog='ros2 run sessgan_evolver campaign', description=__doc__,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    defaults = CampaignConfig()
-    docs = field_docs(CampaignConfig)
-    for field in dataclasses.fields(CampaignConfig):
-        if field.name == 'fitness':
-            continue
-        flag = '--' + field.name.replace('_', '-')
-        default = getattr(defaults, field.name)
-        if isinstance(default, bool):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
-                                help=docs.get(field.name, ''))
-        else:
-            parser.add_argument(flag, type=type(default), default=default,
-                                help=docs.get(field.name, ''))
-    for field in dataclasses.fields(FitnessConfig):
-        parser.add_argument('--fitness-' + field.name.replace('_', '-'), type=float,
-                            default=field.default, help=field_docs(FitnessConfig).get(field.name))
+    return campaign_parser().parse_args(argv)
+
+
+def campaign_parser() -> argparse.ArgumentParser:
+    """The options: one per CampaignConfig field (its nested FitnessConfig as --fitness-...),
+    plus where the run goes and whether it resumes."""
+    parser = build_parser(CampaignConfig, prog='ros2 run sessgan_evolver campaign',
+                          description=__doc__ or '')
     parser.add_argument('--run', default='', help='run name (default: <scenario>-seed<seed>)')
-    parser.add_argument('--runs-root', type=Path, default=Path('runs'))
-    parser.add_argument('--bags-root', type=Path, default=Path('bags'))
+    parser.add_argument('--runs-root', type=Path, default=Path('runs'),
+                        help='directory of the run directories')
+    parser.add_argument('--bags-root', type=Path, default=Path('bags'),
+                        help='directory of the failure bag directories')
     parser.add_argument('--resume', action='store_true',
                         help='continue a killed run from its last completed generation')
-    parser.add_argument('--external', action='store_true',
-                        help='start no simulators or controllers: use every evaluate action '
-                             'server already running (e.g. your own stack under /w0, /w1)')
-    parser.add_argument('--mode', choices=('lockstep', 'clocked'), default='lockstep',
-                        help='stepping mode of the simulators this campaign starts')
-    args = parser.parse_args(argv)
-    return args
-
-
-def field_docs(cls) -> dict[str, str]:
-    """Attribute docstrings of a dataclass (the string literal after each field)."""
-    import ast
-    import inspect
-
-    try:
-        tree = ast.parse(inspect.getsource(cls))
-    except (OSError, TypeError):
-        return {}
-    docs, body = {}, tree.body[0].body
-    for statement, following in zip(body, body[1:]):
-        if (isinstance(statement, ast.AnnAssign) and isinstance(following, ast.Expr)
-                and isinstance(following.value, ast.Constant)):
-            docs[statement.target.id] = ' '.join(str(following.value.value).split())
-    return docs
+    return parser
 
 
 def config_from_args(args: argparse.Namespace) -> CampaignConfig:
-    fitness = FitnessConfig(**{f.name: getattr(args, 'fitness_' + f.name)
-                               for f in dataclasses.fields(FitnessConfig)})
-    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(CampaignConfig)
-              if f.name != 'fitness'}
-    return CampaignConfig(fitness=fitness, **values)
+    return config_from_namespace(CampaignConfig, args)
+
+
+def invocation_of(args: argparse.Namespace, argv: Sequence[str]) -> dict[str, Any]:
+    """The options that are not settings (where the run goes, resume) and the command line,
+    kept in config.json beside the settings."""
+    return {'run': args.run, 'runs_root': str(args.runs_root),
+            'bags_root': str(args.bags_root), 'resume': bool(args.resume),
+            'command_line': ['ros2', 'run', 'sessgan_evolver', 'campaign', *argv]}
 
 
 # ---- the ROS evaluator -------------------------------------------------------------------
@@ -418,9 +389,8 @@ def metrics_dict(msg) -> dict:
 
 
 def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: CampaignConfig,
-                controller: str, external: bool, mode: str,
-                generator_running: bool) -> ChildProcess | None:
-    """Start the generator (unless one runs) and, without ``external``, a simulator +
+                controller: str, generator_running: bool) -> ChildProcess | None:
+    """Start the generator (unless one runs) and, without ``config.external``, a simulator +
     controller pair per worker; returns the generator process started, if any."""
     generator = None
     if not generator_running:
@@ -429,7 +399,7 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
             'ros2', 'run', 'sessgan_gen', 'generator', '--ros-args',
             '-r', f'__ns:={GENERATOR_NAMESPACE}', '-p', f'scenario:={config.scenario}',
             '-p', 'rate:=0.0'])
-    if external:
+    if config.external:
         return generator
     for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'
@@ -437,8 +407,8 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
         pool.start_pair(
             namespace,
             (f'simulator_w{worker}', [
-                'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args, '-p', f'mode:={mode}',
-                '-p', f'bag_storage:={config.bag_storage}']),
+                'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
+                '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}']),
             (f'{controller}_w{worker}', [
                 'ros2', 'run', 'sessgan_controllers', controller, *ros_args,
                 '-p', 'use_sim_time:=true']),
@@ -447,7 +417,8 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = parse_args(sys.argv[1:] if argv is None else argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parse_args(argv)
     try:
         config = config_from_args(args)
         config.validate()
@@ -456,14 +427,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     run_name = args.run or f'{config.scenario}-seed{config.seed}'
     controller = config.controller or get_scenario(config.scenario).controller
-    if args.external:
+    if config.external:
         controller = config.controller or 'external'
 
     def log(message: str) -> None:
         print(f'[campaign] {message}', file=sys.stderr, flush=True)
 
     try:
-        campaign = Campaign(config, run_name, args.runs_root, args.bags_root, log)
+        campaign = Campaign(config, run_name, args.runs_root, args.bags_root, log,
+                            invocation=invocation_of(args, argv))
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
@@ -478,17 +450,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         evaluator = RosEvaluator(node, config, campaign.bags_dir, controller, supervisor, log)
         generator_running = evaluator.generator.wait_for_service(timeout_sec=1.0)
-        if not args.external:
+        if not config.external:
             evaluator.allowed = {f'/w{i}/evaluate' for i in range(config.workers)}
             evaluator.wait_until_absent(sorted(evaluator.allowed), timeout=15.0)
         evaluator.generator_process = start_graph(
-            supervisor, evaluator.pool, config, controller, args.external, args.mode,
-            generator_running)
+            supervisor, evaluator.pool, config, controller, generator_running)
         log(f'run {run_name}: {config.generations} generations x {config.population} members x '
             f'{config.maps_per_member} maps, scenario {config.scenario}, controller '
             f'{controller}, ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
         evaluator.wait_for_generator(timeout=120.0)
-        evaluator.wait_for_workers(1 if args.external else config.workers, timeout=120.0)
+        evaluator.wait_for_workers(1 if config.external else config.workers, timeout=120.0)
         result = campaign.run(evaluator, resume=args.resume)
     except KeyboardInterrupt:
         log('interrupted: stopping every process this campaign started '

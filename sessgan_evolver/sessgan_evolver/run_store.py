@@ -2,7 +2,7 @@
 
 Layout of ``<runs_root>/<run_name>/``::
 
-    config.json                      campaign config, seed, software version
+    config.json                      campaign config, seed, software version, invocation
     checkpoints/generation_0003.pt   algorithm state ready to evaluate generation 3
     metrics.jsonl                    every metrics row, one JSON object per line, with 'kind'
     metrics_episodes.csv             the 'episode' rows (one per map and member)
@@ -42,6 +42,8 @@ import torch
 from sessgan_evolver import __version__
 from sessgan_evolver.errors import RunStoreError
 from sessgan_gen.atomic_files import atomic_write_bytes
+from sessgan_gen.checkpoint import check_checkpoint_file, not_a_checkpoint_message
+from sessgan_gen.errors import CheckpointError
 from sessgan_gen.json_data import to_json_data
 
 CHECKPOINT_FORMAT = 'sessgan_evolver.checkpoint/1'
@@ -113,13 +115,16 @@ class RunStore:
     # -- config ---------------------------------------------------------------------------
 
     def write_config(self, config: Mapping[str, Any], seed: int,
-                     software_version: str = __version__) -> None:
+                     software_version: str = __version__,
+                     invocation: Mapping[str, Any] | None = None) -> None:
         """Write config.json once. Writing the same config and seed again is a no-op (a
         resumed run; the recorded software version stays the original one); a different
         config or seed raises RunStoreError listing what differs, so a run name is never
-        reused with other settings by accident."""
+        reused with other settings by accident. ``invocation`` (command line, paths) is
+        stored for the record but not compared."""
         document = {'config': _plain(config), 'seed': int(seed),
-                    'software_version': software_version}
+                    'software_version': software_version,
+                    'invocation': _plain(dict(invocation or {}))}
         if self.config_path.exists():
             existing = self.read_config()
             differences = _differences({'config': existing.get('config'),
@@ -175,12 +180,15 @@ class RunStore:
         """Load a checkpoint (by generation or path) with ``weights_only=True``."""
         path = (self.checkpoint_path(generation_or_path)
                 if isinstance(generation_or_path, int) else Path(generation_or_path))
+        label = f'population checkpoint {path}'
+        try:
+            check_checkpoint_file(path, label)
+        except CheckpointError as err:
+            raise RunStoreError(str(err)) from err
         try:
             payload = torch.load(path, map_location='cpu', weights_only=True)
-        except FileNotFoundError as err:
-            raise RunStoreError(f'checkpoint {path} does not exist') from err
         except Exception as err:  # torch raises many types for a corrupt file
-            raise RunStoreError(f'checkpoint {path} is corrupt or unreadable: {err}') from err
+            raise RunStoreError(not_a_checkpoint_message(label, err)) from err
         if not isinstance(payload, dict) or payload.get('format') != CHECKPOINT_FORMAT:
             raise RunStoreError(f'{path} is not a sessgan_evolver population checkpoint')
         return payload

@@ -181,8 +181,11 @@ def test_a_failed_atomic_write_keeps_the_old_file(tmp_path, monkeypatch):
 def test_a_corrupt_checkpoint_is_reported(tmp_path):
     store = RunStore(tmp_path, 'run')
     store.checkpoint_path(3).write_bytes(b'garbage')
-    with pytest.raises(RunStoreError, match='corrupt'):
+    with pytest.raises(RunStoreError, match='is not a valid checkpoint') as caught:
         store.load_checkpoint(3)
+    assert 'weights_only' not in str(caught.value)
+    with pytest.raises(RunStoreError, match='is a directory, not a checkpoint file'):
+        store.load_checkpoint(tmp_path)
     other = tmp_path / 'other.pt'
     torch.save({'weights': torch.ones(1)}, other)
     with pytest.raises(RunStoreError, match='not a sessgan_evolver'):

@@ -225,6 +225,8 @@ class Campaign:
         if resume and point is None:
             self.log(f'nothing to resume in {self.store.run_dir}: starting at generation 0')
         if point is not None:
+            for line in point.set_aside:
+                self.log(f'{line}: going back to an earlier generation')
             self.log(f'resuming {self.store.run_dir} at generation {point.generation}')
             algorithm = GeneticAlgorithm.from_state_dict(point.checkpoint['algorithm'])
             return algorithm, point.checkpoint['extra'].get('tpkl_reference')

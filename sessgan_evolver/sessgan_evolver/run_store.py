@@ -72,6 +72,9 @@ class ResumePoint:
     checkpoint: dict[str, Any]
     """The payload of ``save_checkpoint``: 'algorithm' (the state dict) and 'extra'."""
     path: Path
+    set_aside: tuple[str, ...] = ()
+    """One line per newer checkpoint that could not be read and was renamed to
+    ``*.pt.corrupt`` (the run continues from an earlier generation instead)."""
 
 
 class RunStore:
@@ -276,23 +279,45 @@ class RunStore:
         that generation and later, checkpoints of later generations, and stray temporary
         files. The caller restores the algorithm from ``checkpoint['algorithm']`` and
         evaluates ``generation`` next.
+
+        A latest checkpoint that cannot be read (truncated or corrupted on disk) is renamed
+        to ``*.pt.corrupt`` and the run goes back to the newest readable one; evaluating from
+        there gives the same results, as every generation does (see ``set_aside``). When no
+        checkpoint is readable, RunStoreError says how to start over; nothing is changed.
         """
         self.remove_stray_temporary_files()
+        set_aside: list[str] = []
         if generation is None:
-            info = self.latest_checkpoint()
-            if info is None:
+            found = self.checkpoints()
+            if not found:
                 return None
+            errors = []
+            for info in reversed(found):
+                try:
+                    payload = self.load_checkpoint(info.path)
+                    break
+                except RunStoreError as err:
+                    errors.append(str(err))
+            else:
+                raise RunStoreError(
+                    f'run {self.run_name!r} cannot be resumed: none of its {len(found)} '
+                    f'checkpoints is readable (latest: {errors[0]}). Start it over: remove '
+                    f'{self.run_dir} (and its failure bags), or run with another --run name')
+            for newer, error in zip(reversed(found), errors, strict=False):
+                corrupt = newer.path.with_name(newer.path.name + '.corrupt')
+                os.replace(newer.path, corrupt)
+                set_aside.append(f'{error}; renamed to {corrupt.name}')
         else:
             info = CheckpointInfo(generation, self.checkpoint_path(generation))
             if not info.path.is_file():
                 raise RunStoreError(f'run {self.run_name!r} has no checkpoint of generation '
                                     f'{generation}')
-        payload = self.load_checkpoint(info.path)
+            payload = self.load_checkpoint(info.path)
         for later in self.checkpoints():
             if later.generation > info.generation:
                 later.path.unlink()
         self.truncate_metrics(info.generation)
-        return ResumePoint(info.generation, payload, info.path)
+        return ResumePoint(info.generation, payload, info.path, tuple(set_aside))
 
     def delete(self) -> None:
         """Remove the whole run directory (for a fresh start under the same name)."""

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, Final, Literal, NamedTuple
 
 import numpy as np
+import yaml
 from rosbags.interfaces import (
     Connection,
     Qos,
@@ -215,7 +216,9 @@ def write_episode_bag(directory: str | Path,
     staging.mkdir()
     bag_path = staging / final.name
     try:
-        counts, first_ns, last_ns = _write_bag(bag_path, records, storage, store)
+        custom_data = {'sessgan.episode': final.name, 'sessgan.software_version': __version__}
+        counts, first_ns, last_ns = _write_bag(bag_path, records, storage, store, custom_data)
+        _describe_as_jazzy(bag_path / METADATA_FILE)
         origin_values = [float(value) for value in origin]
         write_map_server(bag_path / MAP_YAML_FILE, np.asarray(map_occupancy), float(resolution),
                          origin_values)
@@ -270,7 +273,7 @@ def remove_stale_staging_directories(parent: str | Path) -> list[Path]:
 
 
 def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int, bytes]],
-               storage: BagStorage, store: Typestore
+               storage: BagStorage, store: Typestore, custom_data: Mapping[str, str]
                ) -> tuple[dict[str, int], int | None, int | None]:
     """Stream the records into a new bag; returns per-topic counts and the time span."""
     connections: dict[tuple[str, str], Connection] = {}
@@ -278,6 +281,8 @@ def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int
     first_ns: int | None = None
     last_ns: int | None = None
     with Writer(bag_path, version=BAG_VERSION, storage_plugin=storage.plugin) as writer:
+        for key, value in custom_data.items():
+            writer.set_custom_data(key, value)
         for index, record in enumerate(records):
             topic, msgtype, timestamp_ns, data = _checked_record(index, record)
             key = (topic, msgtype)
@@ -295,6 +300,17 @@ def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int
             first_ns = timestamp_ns if first_ns is None else min(first_ns, timestamp_ns)
             last_ns = timestamp_ns if last_ns is None else max(last_ns, timestamp_ns)
     return counts, first_ns, last_ns
+
+
+def _describe_as_jazzy(metadata_path: Path) -> None:
+    """Make metadata.yaml read as Jazzy's recorder writes it: ``ros_distro: jazzy`` (rosbags
+    writes its own name there), ``custom_data`` a mapping."""
+    document = yaml.safe_load(metadata_path.read_text(encoding='utf-8'))
+    information = document['rosbag2_bagfile_information']
+    information['ros_distro'] = 'jazzy'
+    information['custom_data'] = dict(information.get('custom_data') or {})
+    metadata_path.write_text(yaml.safe_dump(document, default_flow_style=False, sort_keys=False),
+                             encoding='utf-8')
 
 
 def _checked_record(index: int, record: BagRecord | tuple[str, str, int, bytes]

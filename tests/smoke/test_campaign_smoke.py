@@ -146,6 +146,14 @@ def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, 
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and 'does not exist' in bad.stderr
 
+    # Half a bag: refused before its episode.json is trusted (no simulator is started).
+    storage = next(bag.glob('*.mcap'))
+    storage.write_bytes(storage.read_bytes()[:storage.stat().st_size // 2])
+    half = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag),
+                           '--resimulate'], capture_output=True, text=True, timeout=60)
+    assert half.returncode == 2, half.stdout + half.stderr[-2000:]
+    assert 'incomplete or corrupt' in half.stderr and 'recorded' not in half.stdout
+
 
 def test_campaign_rejects_bad_settings_clearly(ros_workspace, tmp_path):
     for arguments, message in ((['--scenario', 'moon'], 'moon'),

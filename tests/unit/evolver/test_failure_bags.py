@@ -7,9 +7,11 @@ import os
 
 import numpy as np
 import pytest
+import yaml
 from rosbags.typesys import Stores, get_typestore
 
 from sessgan_evolver.bag_reading import (
+    check_bag_complete,
     iter_bag_messages,
     read_bag_topics,
     read_episode_bag,
@@ -340,3 +342,40 @@ def test_overwrite_replaces_only_a_failure_bag(tmp_path):
     write_episode_bag(record / 'earlier', serialized_records()[:3], METADATA, OCCUPANCY,
                       RESOLUTION, ORIGIN, storage='sqlite3', overwrite=True)
     assert read_episode_bag(record / 'earlier').episode['messages']['count'] == 3
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_metadata_reads_as_jazzy_writes_it(tmp_path, storage):
+    target = tmp_path / 'g003-m07-s12'
+    write_episode_bag(target, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN,
+                      storage=storage)
+    information = yaml.safe_load((target / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']
+    assert information['ros_distro'] == 'jazzy'
+    assert information['version'] == 9
+    assert information['custom_data'] == {'sessgan.episode': 'g003-m07-s12',
+                                          'sessgan.software_version': '0.1.0'}
+    assert check_bag_complete(target) == len(serialized_records())
+
+
+@pytest.mark.parametrize(('storage', 'suffix'), [('mcap', '.mcap'), ('sqlite3', '.db3')])
+def test_a_truncated_bag_is_refused_as_incomplete(tmp_path, storage, suffix):
+    target = tmp_path / 'episode'
+    records = serialized_records() * 40  # large enough that half of it is mid-message
+    write_episode_bag(target, records, METADATA, OCCUPANCY, RESOLUTION, ORIGIN,
+                      storage=storage)
+    assert check_bag_complete(target) == len(records)
+    storage_file = target / f'episode{suffix}'
+    storage_file.write_bytes(storage_file.read_bytes()[:storage_file.stat().st_size // 2])
+    with pytest.raises(BagReadError, match='incomplete'):
+        check_bag_complete(target)
+
+
+def test_a_bag_with_fewer_messages_than_its_episode_json_is_refused(tmp_path):
+    target = tmp_path / 'episode'
+    write_episode_bag(target, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN)
+    episode = json.loads((target / 'episode.json').read_text())
+    episode['messages']['count'] += 1
+    (target / 'episode.json').write_text(json.dumps(episode))
+    with pytest.raises(BagReadError, match='episode.json recorded'):
+        check_bag_complete(target)

@@ -20,8 +20,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import CampaignError
 from sessgan_evolver.fitness import (
     FitnessConfig,
     generation_summary,
@@ -40,8 +41,7 @@ from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
-
-SOFTWARE_VERSION = '0.1.0'
+from sessgan_sim.bag_recording import BagStorage
 
 EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
 """Wall seconds per map cell added to the default episode timeout for building the world: a
@@ -50,10 +50,6 @@ with 10 % walls: 21 us); more than twice that covers a busy host."""
 EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND = 1e-5
 """Wall seconds per map cell and sim second of time limit added for stepping: the 1024 x 1024
 map took 5.6 wall s per sim second (5.3 us a cell); about twice that."""
-
-
-class CampaignError(SessganEvolverError):
-    """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""
 
 
 @dataclass(frozen=True)
@@ -115,8 +111,9 @@ class CampaignConfig:
         if self.seed_schedule not in ('fixed', 'per-generation'):
             raise CampaignError(f'seed schedule must be fixed or per-generation, got '
                                 f'{self.seed_schedule!r}')
-        if self.bag_storage not in ('mcap', 'sqlite3'):
-            raise CampaignError(f'bag storage must be mcap or sqlite3, got {self.bag_storage!r}')
+        if self.bag_storage not in set(BagStorage):
+            raise CampaignError(f'bag storage must be one of {[s.value for s in BagStorage]}, '
+                                f'got {self.bag_storage!r}')
         if self.mode not in ('lockstep', 'clocked'):
             raise CampaignError(f'mode must be lockstep or clocked, got {self.mode!r}')
         self.algorithm_config().validate()
@@ -219,7 +216,7 @@ class Campaign:
 
     def start(self, resume: bool) -> tuple[GeneticAlgorithm, float | None]:
         """The algorithm to continue with and the TPKL reference (None before generation 0)."""
-        self.store.write_config(self.config.to_dict(), self.config.seed, SOFTWARE_VERSION,
+        self.store.write_config(self.config.to_dict(), self.config.seed, __version__,
                                 invocation=self.invocation)
         point = self.store.resume() if resume else None
         if resume and point is None:

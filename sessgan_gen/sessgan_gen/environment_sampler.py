@@ -17,7 +17,7 @@ from sessgan_gen.checkpoint import (
     load_checkpoint,
 )
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
-from sessgan_gen.errors import CheckpointError, SessganGenError
+from sessgan_gen.errors import CheckpointError, SamplingRequestError
 from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
@@ -30,10 +30,6 @@ DEFAULT_MAX_CELLS_PER_REQUEST = 4 * 1024 * 1024
 4096 factory maps of 32 x 32). Sampling costs about 6.5 us per cell on one core (a
 1024 x 1024 map 6.4 s, 1024 maps of 32 x 32 6.8 s), so a request stays within half a
 minute, well inside the campaign's 120 s wait for the generator."""
-
-
-class SamplingRequestError(SessganGenError, ValueError):
-    """A request the sampler cannot serve: absurd size, too many seeds, unknown scenario."""
 
 
 def environment_id(scenario: str, generation: int, member: int, seed: int) -> str:

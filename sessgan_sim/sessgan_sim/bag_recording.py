@@ -55,7 +55,7 @@ from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_gen.json_data import to_json_data
 from sessgan_gen.map_server_io import write_map_server
 from sessgan_sim import __version__
-from sessgan_sim.errors import SessganSimError
+from sessgan_sim.errors import BagWriteError
 
 BAG_VERSION: Final[Literal[9]] = 9
 """rosbag2 metadata version; Jazzy's ``ros2 bag`` reads version 9."""
@@ -74,10 +74,6 @@ _BAG_SIDE_FILES = frozenset({EPISODE_FILE, MAP_YAML_FILE, 'map.pgm', METADATA_FI
 # rmw's "infinite" duration as Jazzy's rosbag2 writes it in metadata.yaml.
 _INFINITE = QosTime(sec=9223372036, nsec=854775807)
 _UNSPECIFIED = QosTime(sec=0, nsec=0)
-
-
-class BagWriteError(SessganSimError):
-    """A failure bag that cannot be written (bad record, unknown type, file system)."""
 
 
 class BagStorage(StrEnum):

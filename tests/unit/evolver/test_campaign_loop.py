@@ -157,3 +157,12 @@ def test_every_campaign_option_is_in_config_json(checkpoint, tmp_path):
                                         document['config']['fitness']}
     assert options - {'help'} <= stored | set(document['invocation'])
 
+
+
+def test_bag_storage_is_checked_against_the_storage_registry():
+    from sessgan_sim.bag_recording import BagStorage
+
+    for storage in BagStorage:
+        CampaignConfig(bag_storage=storage.value).validate()
+    with pytest.raises(CampaignError, match=r"one of \['mcap', 'sqlite3'\], got 'zip'"):
+        CampaignConfig(bag_storage='zip').validate()

@@ -10,6 +10,7 @@ from nav_msgs.msg import OccupancyGrid
 
 from sessgan_gen.environment import Environment, Pose2D, check_grid_size
 from sessgan_gen.errors import InvalidEnvironmentError
+from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 
 
@@ -17,15 +18,15 @@ def pose_to_msg(pose: Pose2D) -> Pose:
     msg = Pose()
     msg.position.x = float(pose.x)
     msg.position.y = float(pose.y)
-    msg.orientation.z = math.sin(pose.yaw / 2.0)
-    msg.orientation.w = math.cos(pose.yaw / 2.0)
+    q = msg.orientation
+    q.x, q.y, q.z, q.w = quaternion_from_yaw(pose.yaw)
     return msg
 
 
 def pose_from_msg(msg: Pose) -> Pose2D:
     q = msg.orientation
-    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-    return Pose2D(float(msg.position.x), float(msg.position.y), yaw)
+    return Pose2D(float(msg.position.x), float(msg.position.y),
+                  yaw_from_quaternion(q.x, q.y, q.z, q.w))
 
 
 def occupancy_grid_msg(environment: Environment, frame_id: str = 'map',

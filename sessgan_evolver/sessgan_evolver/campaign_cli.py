@@ -286,8 +286,8 @@ class RosEvaluator:
                                         f'{report}:\n{pair.simulator.log_tail(1000)}\n'
                                         f'{pair.controller.log_tail(1000)}')
         for name in list(self.starting):
-            pair = self.pair_of(name)
-            if pair is not None and pair.logged_since_start(SIMULATOR_READY_LOG):
+            restarted = self.pair_of(name)
+            if restarted is not None and restarted.logged_since_start(SIMULATOR_READY_LOG):
                 self.starting.discard(name)  # discover_workers makes a new client for it
         return taken
 

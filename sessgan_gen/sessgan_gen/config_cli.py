@@ -51,7 +51,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, cls: type,
     hints = typing.get_type_hints(cls)
     for field in dataclasses.fields(cls):
         kind = hints[field.name]
-        if dataclasses.is_dataclass(kind):
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
             add_config_arguments(parser, kind, f'{prefix}{field.name}_')
             continue
         name = prefix + field.name
@@ -73,9 +73,8 @@ def config_from_namespace(cls: type[ConfigT], namespace: argparse.Namespace,
     values: dict[str, Any] = {}
     for field in dataclasses.fields(cls):  # type: ignore[arg-type]
         kind = hints[field.name]
-        if dataclasses.is_dataclass(kind):
-            values[field.name] = config_from_namespace(kind, namespace,  # type: ignore[arg-type]
-                                                       f'{prefix}{field.name}_')
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            values[field.name] = config_from_namespace(kind, namespace, f'{prefix}{field.name}_')
         else:
             values[field.name] = getattr(namespace, prefix + field.name)
     return cls(**values)

@@ -97,6 +97,8 @@ class EnvironmentSampler:
                 f'{len(seeds)} seeds in one request; at most {MAX_SEEDS_PER_REQUEST}')
         pyramid, metadata = self.load(checkpoint, scenario)
         scenario_name = scenario or metadata.get('scenario')
+        if not scenario_name:
+            raise SamplingRequestError('the checkpoint names no scenario: give one')
         spec = get_scenario(scenario_name)
         if size is None or size == (0, 0):
             size = spec.default_size

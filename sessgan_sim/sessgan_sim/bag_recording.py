@@ -277,8 +277,8 @@ def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int
     first_ns: int | None = None
     last_ns: int | None = None
     with Writer(bag_path, version=BAG_VERSION, storage_plugin=storage.plugin) as writer:
-        for key, value in custom_data.items():
-            writer.set_custom_data(key, value)
+        for name, value in custom_data.items():
+            writer.set_custom_data(name, value)
         for index, record in enumerate(records):
             topic, msgtype, timestamp_ns, data = _checked_record(index, record)
             key = (topic, msgtype)

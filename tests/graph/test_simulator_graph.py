@@ -14,8 +14,6 @@ pytestmark = pytest.mark.graph
 
 EXTERNAL_CONTROLLER = Path(__file__).with_name('external_controller.py')
 DOG_LEG_MAP = Path(__file__).parents[1] / 'data' / 'narrow_dog_leg.txt'
-OUTCOMES = {'goal_reached', 'collision_limit', 'timeout', 'stuck', 'controller_unresponsive',
-            'invalid_environment'}
 
 
 def room(size: int = 16) -> np.ndarray:

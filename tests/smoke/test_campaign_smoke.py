@@ -140,7 +140,7 @@ def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, 
     again = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag),
                             '--resimulate'], capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stdout + again.stderr[-2000:]
-    assert 'as expected' in again.stdout
+    assert again.stdout.strip().splitlines()[-1] == 'as expected'  # not 'NOT as expected'
 
     bad = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(tmp_path / 'nothing')],
                          capture_output=True, text=True, timeout=60)

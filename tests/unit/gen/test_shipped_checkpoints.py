@@ -3,7 +3,9 @@
 Bounds keep a margin from what was measured (seeds 0, 1 and 2 of 20 maps, 1 CPU thread):
 TPKL diagonal factory 0.83-0.96, racetrack 0.16, drone 0.57-0.73 nats, every off-diagonal entry
 above 2.3; uniqueness 8x8 factory 99.8-100, racetrack 77.0-77.5, drone 98.3-98.9 % and 16x16
-99.98-100 %; every map feasible. A retrained checkpoint that is much worse fails here.
+99.98-100 %; every map feasible, or, with the stricter valid-test rule of issue 9 (start and
+goal with clearance, a certified route), racetrack 55-85 % of 20 maps (77-87 % of 60). A
+retrained checkpoint that is much worse fails here.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from sessgan_gen.report import FEASIBILITY_TARGET, REPORT_SCENARIOS, ReportData, compute_report
+from sessgan_gen.report import REPORT_SCENARIOS, ReportData, compute_report
 
 pytestmark = pytest.mark.unit
 
@@ -21,6 +23,8 @@ UNIQUENESS_FLOOR = {'factory': {8: 90.0, 16: 95.0}, 'racetrack': {8: 70.0, 16: 9
                     'drone': {8: 90.0, 16: 95.0}}
 """Percent of distinct s x s patches; the paper's Table 1: factory 82.69 / 100, racetrack
 66.67 / 95.60, drone 33.0 / 98.20."""
+VALID_FRACTION_FLOOR = {'factory': 0.9, 'racetrack': 0.4, 'drone': 0.9}
+"""Share of the 20 maps that are valid tests (feasible for the robot)."""
 
 
 @pytest.fixture(scope='module')
@@ -47,4 +51,4 @@ def test_generated_maps_are_diverse(report, scenario):
 
 @pytest.mark.parametrize('scenario', REPORT_SCENARIOS)
 def test_generated_maps_are_valid_tests(report, scenario):
-    assert report.samples[scenario].feasible_rate >= FEASIBILITY_TARGET
+    assert report.samples[scenario].feasible_rate >= VALID_FRACTION_FLOOR[scenario]

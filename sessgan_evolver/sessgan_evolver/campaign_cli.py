@@ -51,6 +51,8 @@ GOAL_ANSWER_TIMEOUT = 15.0
 """Wall seconds a worker may take to accept or refuse a goal before it is sent again."""
 NO_WORKER_TIMEOUT = 60.0
 """Wall seconds without any usable worker before the campaign gives up."""
+RESTART_READY_TIMEOUT = 120.0
+"""Wall seconds a restarted simulator may take to say it is ready."""
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -128,8 +130,9 @@ class RosEvaluator:
         self.clients: dict[str, ActionClient] = {}
         self.allowed: set[str] | None = None  # None: every discovered worker (--external)
         self.quarantine: dict[str, float] = {}
-        self.starting: set[str] = set()
-        """Action names of restarted pairs whose new simulator is not ready yet."""
+        self.starting: dict[str, float] = {}
+        """Action names of restarted pairs whose new simulator is not ready yet, with the
+        monotonic time by which it must be."""
         self.max_attempts = 3
 
     def spin(self, seconds: float = 0.02) -> None:
@@ -271,9 +274,9 @@ class RosEvaluator:
             else:
                 self.log(f'worker {pair.namespace}: {report}')
             self.drop_client(name)
-            self.starting.discard(name)
+            self.starting.pop(name, None)
             if self.pool.restart(pair):
-                self.starting.add(name)
+                self.starting[name] = time.monotonic() + RESTART_READY_TIMEOUT
                 self.log(f'worker {pair.namespace}: restarted its simulator and controller '
                          f'(restart {pair.restarts} of {self.pool.max_restarts})')
             else:
@@ -285,10 +288,17 @@ class RosEvaluator:
                     raise CampaignError(f'every simulator worker died repeatedly; last: '
                                         f'{report}:\n{pair.simulator.log_tail(1000)}\n'
                                         f'{pair.controller.log_tail(1000)}')
-        for name in list(self.starting):
+        for name, deadline in list(self.starting.items()):
             restarted = self.pair_of(name)
-            if restarted is not None and restarted.logged_since_start(SIMULATOR_READY_LOG):
-                self.starting.discard(name)  # discover_workers makes a new client for it
+            if restarted is None:
+                self.starting.pop(name)
+            elif restarted.logged_since_start(SIMULATOR_READY_LOG):
+                self.starting.pop(name)  # discover_workers makes a new client for it
+            elif time.monotonic() > deadline:
+                # Stopped, its pair counts as dead in the next loop: restarted or quarantined.
+                self.log(f'worker {restarted.namespace}: its restarted simulator did not log '
+                         f'{SIMULATOR_READY_LOG!r} within {RESTART_READY_TIMEOUT:.0f} s')
+                self.supervisor.stop([restarted.simulator], grace_seconds=0.0)
         return taken
 
     def evaluate(self, jobs: Sequence[EpisodeJob],

@@ -148,3 +148,23 @@ def test_a_dead_simulator_is_seen_at_once_and_its_episode_rerun(evaluator):
     assert run_with(evaluator, script) == ['timeout']
     assert pair.restarts == 1 and pair.simulator.process.pid != first_simulator.pid
     assert not any('gave no result' in line for line in evaluator.logs)
+
+
+def test_a_restarted_pair_that_never_gets_ready_is_quarantined(evaluator, monkeypatch):
+    from sessgan_evolver import campaign_cli
+    from sessgan_evolver.campaign import CampaignError
+
+    monkeypatch.setattr(campaign_cli, 'RESTART_READY_TIMEOUT', 1.0)
+    pool = evaluator.pool
+    pool.max_restarts = 1
+    pair = pool.pairs['/w0']
+    # From now on the simulator never says it is ready.
+    pair.simulator.command = [sys.executable, '-c', 'import time; time.sleep(120)']
+
+    def script(number, result):
+        os.kill(pair.controller.process.pid, signal.SIGKILL)
+
+    with pytest.raises(CampaignError, match='every simulator worker died repeatedly'):
+        run_with(evaluator, script)
+    assert any("did not log 'simulator ready' within 1 s" in line for line in evaluator.logs)
+    assert pool.pairs == {} and '/w0' in pool.quarantined

@@ -26,8 +26,8 @@ def campaign(tmp_path: Path, run: str, *extra: str) -> list[str]:
             '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags'), *extra]
 
 
-def episode_rows(run_dir: Path) -> list[dict]:
-    with open(run_dir / 'metrics_episodes.csv') as handle:
+def episode_rows(run_dir: Path, kind: str = 'episodes') -> list[dict]:
+    with open(run_dir / f'metrics_{kind}.csv') as handle:
         return [{k: v for k, v in row.items() if k not in IGNORED_COLUMNS}
                 for row in csv.DictReader(handle)]
 
@@ -119,6 +119,9 @@ def test_a_worker_process_killed_mid_episode_is_restarted_and_the_episode_rerun(
     rows = episode_rows(tmp_path / 'runs' / 'disturbed')
     assert 'controller_unresponsive' not in {row['outcome'] for row in rows}
     assert rows == episode_rows(straight)
+    for kind in ('members', 'generations'):  # fitness, and what evolution made of it
+        assert episode_rows(tmp_path / 'runs' / 'disturbed', kind) == \
+            episode_rows(straight, kind)
 
 
 def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, tmp_path):

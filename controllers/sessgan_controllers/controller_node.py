@@ -32,6 +32,12 @@ publishes it) and get every map that arrives; the others never subscribe it.
   newer pose would shift every return by the distance driven since) and the goal, the
   way Nav2's controller_server runs (20 Hz by default); for a clocked simulator. Scans
   are not answered one by one.
+
+Every built-in controller runs through :func:`main`, one entry point for all of them: the
+executable's name (``ros2 run sessgan_controllers nearness_diagram``) is the registry name of
+the controller it runs (:mod:`sessgan_controllers.registry`). Parameters: the fields of the
+controller's config plus ``use_stamped_cmd_vel``, ``base_frame_id``, ``control_mode`` and
+``control_rate_hz``.
 """
 
 from __future__ import annotations
@@ -40,6 +46,8 @@ import dataclasses
 import math
 import sys
 from collections import deque
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import rclpy
@@ -76,6 +84,7 @@ from sessgan_controllers.types import (
     accepts_map,
     config_help,
 )
+from sessgan_gen.node_help import exit_if_help
 
 GOAL_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -106,13 +115,16 @@ def _nanoseconds(stamp) -> int:
 
 
 class ControllerNode(Node):
-    """A controller core wrapped in the topic contract; one subclass per controller."""
+    """A registered controller core wrapped in the topic contract."""
 
     controller_name = ''
-    """Registry name of the controller; set by each subclass."""
+    """Registry name of the controller, unless given to the constructor (a subclass may set
+    it)."""
 
-    def __init__(self, **kwargs: Any) -> None:
-        spec = get_controller(self.controller_name)
+    def __init__(self, controller_name: str = '', **kwargs: Any) -> None:
+        """``controller_name``: registry name (also the node's default name); ``kwargs`` go to
+        rclpy's Node (context, namespace, parameter_overrides, ...)."""
+        spec = get_controller(controller_name or self.controller_name)
         super().__init__(spec.name, **kwargs)
         self._spec: ControllerSpec = spec
         self._config = self._declare_config(spec.config_type)
@@ -355,8 +367,9 @@ def spin(node: Node) -> None:
         executor.shutdown()
 
 
-def run(node_type: type[ControllerNode], args: list[str] | None = None) -> None:
-    """Spin ``node_type`` until shutdown, with Jazzy's shutdown idiom.
+def run(controller_name: str, args: Sequence[str] | None = None) -> None:
+    """Spin the node of controller ``controller_name`` until shutdown, with Jazzy's shutdown
+    idiom.
 
     Unusable parameters end the process with a one-line error and exit status 1.
     """
@@ -364,16 +377,41 @@ def run(node_type: type[ControllerNode], args: list[str] | None = None) -> None:
     node = None
     failure = ''
     try:
-        node = node_type()
+        node = ControllerNode(controller_name)
         spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, ParameterException) as err:
-        failure = f'cannot start {node_type.controller_name}: {err}'
+        failure = f'cannot start {controller_name}: {err}'
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     if failure:
-        rclpy.logging.get_logger(node_type.controller_name).fatal(failure)
+        rclpy.logging.get_logger(controller_name).fatal(failure)
         sys.exit(1)
+
+
+def main(args: Sequence[str] | None = None) -> None:
+    """Entry point of every built-in controller executable: the executable's name is the
+    controller's registry name."""
+    name = Path(sys.argv[0]).name
+    try:
+        spec = get_controller(name)
+    except KeyError as err:
+        print(f'{name}: {err}', file=sys.stderr)
+        sys.exit(2)
+    robots = (f'the robots {", ".join(spec.robots)} (its robot parameter)' if spec.robots
+              else f'the {spec.robot} robot')
+    exit_if_help(f'sessgan_controllers {name}', f'{spec.description} For {robots}.\n\n'
+                 'Subscribes scan, odom and goal_pose (and map, if it plans on one); publishes '
+                 'cmd_vel (Twist, or TwistStamped with use_stamped_cmd_vel): one per scan, or '
+                 'with control_mode:=timer every 1 / control_rate_hz s of its clock. Run it '
+                 'with use_sim_time:=true beside a simulator worker in the same namespace (in '
+                 'timer mode also -r /clock:=<namespace>/clock).',
+                 lambda: ControllerNode(name), args)
+    run(name, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -126,7 +126,7 @@ def astar(penalty: np.ndarray, start: Cell, goal: Cell) -> list[Cell] | None:
         if not math.isfinite(cost[row, col]):
             raise ValueError(f'{name} cell {(row, col)} is impassable')
     if tuple(start) == tuple(goal):
-        return [tuple(start)]
+        return [(int(start[0]), int(start[1]))]
     stride = width + 2
     padded = np.pad(cost, 1, mode='constant', constant_values=np.inf)
     step_cost = (1.0 + padded).ravel().tolist()  # inf stays inf

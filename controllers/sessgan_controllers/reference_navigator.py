@@ -42,6 +42,13 @@ generator finds in a competent planner-based navigator:
 
 Robot-dependent parameters default to 0, meaning the preset of the chosen ``robot``
 (:data:`ROBOT_PRESETS`, matched to sessgan_sim's robot models).
+
+As a node: ``ros2 run sessgan_controllers reference_navigator --ros-args -p robot:=car
+-p use_sim_time:=true`` (``diff_drive`` is the default) answers every scan of a lockstep
+simulator; against a clocked one it runs on its own timer like Nav2's controller server:
+``-p control_mode:=timer -p control_rate_hz:=20.0``, and under a namespace ``-r
+/clock:=<namespace>/clock`` (the simulator publishes its clock in its namespace; a node's
+sim time comes from ``/clock``). See :mod:`sessgan_controllers.controller_node`.
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ import dataclasses
 import enum
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -169,8 +177,9 @@ class ReferenceNavigatorConfig:
     stop_margin: float = parameter(
         0.15, 'Gap in m kept when braking for something the scan sees on the path.')
     collision_margin: float = parameter(
-        0.05, 'A return the map does not explain closer than radius + this + dynamic_margin to '
-        'a path point blocks the path (m).')
+        0.05, 'Gap in m between footprint and obstacles that the motion towards the carrot must '
+        'keep (RPP collision detection); a return the map does not explain closer than radius '
+        '+ this + dynamic_margin to a path point blocks the path.')
     dynamic_margin: float = parameter(
         0.3, 'Extra gap in m kept from returns the map does not explain (they may move) when '
         'checking the path ahead.')
@@ -215,8 +224,8 @@ class ReferenceNavigatorConfig:
         preset = ROBOT_PRESETS.get(self.robot)
         if preset is None:
             return self
-        changes = {name: value for name, value in preset.items()
-                   if getattr(self, name) == 0.0}
+        changes: dict[str, Any] = {name: value for name, value in preset.items()
+                                   if getattr(self, name) == 0.0}
         return dataclasses.replace(self, **changes)
 
     def validate(self) -> None:

@@ -101,7 +101,6 @@ register_controller(ControllerSpec(
     robot='diff_drive',
     description='A default Nav2 set-up: A* on the map with inflation and scan marks, replanning, '
                 'and a rotation shim + regulated pure pursuit (diff_drive), bicycle pure pursuit '
-                'with a curvature speed profile (car) or holonomic pursuit (flyer); choose the '
-                "robot with its 'robot' parameter.",
+                'with a curvature speed profile (car) or holonomic pursuit (flyer).',
     robots=('diff_drive', 'car', 'flyer'),
 ))

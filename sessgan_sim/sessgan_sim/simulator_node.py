@@ -17,7 +17,6 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
@@ -36,6 +35,7 @@ from tf2_msgs.msg import TFMessage
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.navigation import make_environment
+from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import (
     environment_from_msg,
     occupancy_from_grid_msg,
@@ -47,7 +47,12 @@ from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from sessgan_sim import cdr
 from sessgan_sim import ros_messages as rm
-from sessgan_sim.bag_recording import BagRecord, BagWriteError, write_episode_bag
+from sessgan_sim.bag_recording import (
+    BagRecord,
+    BagWriteError,
+    episode_bag_directory,
+    write_episode_bag,
+)
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import SessganSimError
 from sessgan_sim.metrics import Outcome, is_controller_failure
@@ -463,7 +468,6 @@ class SimulatorNode(Node):
 
     def write_bag(self, record_directory, environment, config, metrics, recording, seed,
                   controller) -> str:
-        directory = Path(record_directory) / environment.id
         metadata = {
             'environment_id': environment.id, 'scenario': environment.scenario,
             'seed': environment.seed, 'episode_seed': int(seed),
@@ -478,11 +482,12 @@ class SimulatorNode(Node):
         }
         try:
             path = write_episode_bag(
-                directory, recording.records(), metadata, environment.occupancy,
-                environment.resolution, environment.origin,
+                episode_bag_directory(record_directory, environment.id), recording.records(),
+                metadata, environment.occupancy, environment.resolution, environment.origin,
                 storage=self.get_parameter('bag_storage').value, overwrite=True)
         except (BagWriteError, OSError, ValueError) as err:
-            self.get_logger().error(f'cannot write the failure bag {directory}: {err}')
+            self.get_logger().error(
+                f'cannot write the failure bag of {environment.id!r} in {record_directory}: {err}')
             return ''
         self.get_logger().info(f'failure bag written: {path}')
         return str(path)
@@ -521,6 +526,7 @@ def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
 
 
 def main(args=None) -> None:
+    exit_if_help('sessgan_sim simulator', __doc__ or '', SimulatorNode, args)
     rclpy.init(args=args)
     node = None
     executor = MultiThreadedExecutor(num_threads=2)

@@ -17,9 +17,7 @@ import numpy as np  # noqa: E402
 from nav_msgs.msg import OccupancyGrid  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from sessgan_controllers.controller_node import MAP_QOS  # noqa: E402
-from sessgan_controllers.nearness_diagram_node import NearnessDiagramNode  # noqa: E402
-from sessgan_controllers.reference_navigator_node import ReferenceNavigatorNode  # noqa: E402
+from sessgan_controllers.controller_node import MAP_QOS, ControllerNode  # noqa: E402
 from tests.graph.test_controller_node import goal_msg, harness, odom_msg, scan_msg  # noqa: E402,F401
 
 pytestmark = pytest.mark.graph
@@ -39,7 +37,7 @@ def room_map(size: int = 12, resolution: float = 0.5) -> OccupancyGrid:
 
 
 def test_a_map_aware_controller_gets_the_map_and_plans_on_it(harness):  # noqa: F811
-    run = harness(ReferenceNavigatorNode)
+    run = harness('reference_navigator')
     maps = run.probe.create_publisher(OccupancyGrid, 'map', MAP_QOS)
     run.spin_until(lambda: maps.get_subscription_count() > 0)
     maps.publish(room_map())
@@ -61,7 +59,7 @@ def test_a_map_aware_controller_gets_the_map_and_plans_on_it(harness):  # noqa: 
 
 
 def test_controllers_without_a_map_never_subscribe_it(harness):  # noqa: F811
-    run = harness(NearnessDiagramNode)
+    run = harness('nearness_diagram')
     namespace = run.node.get_namespace()
     for _ in range(20):
         run.executor.spin_once(timeout_sec=0.02)
@@ -69,7 +67,7 @@ def test_controllers_without_a_map_never_subscribe_it(harness):  # noqa: F811
 
 
 def test_timer_mode_publishes_at_its_rate_from_the_latest_scan(harness):  # noqa: F811
-    run = harness(NearnessDiagramNode, [Parameter('control_mode', value='timer'),
+    run = harness('nearness_diagram', [Parameter('control_mode', value='timer'),
                                         Parameter('control_rate_hz', value=50.0)])
     for _ in range(20):
         run.executor.spin_once(timeout_sec=0.02)
@@ -83,7 +81,7 @@ def test_timer_mode_publishes_at_its_rate_from_the_latest_scan(harness):  # noqa
 
 
 def test_timer_mode_reads_a_scan_from_the_pose_of_its_tick(harness):  # noqa: F811
-    run = harness(NearnessDiagramNode, [Parameter('control_mode', value='timer')])
+    run = harness('nearness_diagram', [Parameter('control_mode', value='timer')])
     for second, x in ((1, 0.0), (2, 0.5), (3, 1.0)):
         odom = odom_msg(x, 0.0)
         odom.header.stamp.sec = second
@@ -103,7 +101,7 @@ def test_an_unknown_control_mode_is_refused():
     rclpy.init(context=context)
     try:
         with pytest.raises(ValueError, match='control_mode'):
-            NearnessDiagramNode(context=context, parameter_overrides=[
+            ControllerNode('nearness_diagram', context=context, parameter_overrides=[
                 Parameter('control_mode', value='sometimes')])
     finally:
         rclpy.try_shutdown(context=context)

@@ -250,3 +250,18 @@ def test_export_environment_and_token_map(tmp_path):
     loaded = read_map_server(tmp_path / 'tm.yaml')
     assert loaded.occupancy.tolist() == [[0, 100]]
     assert loaded.resolution == 1.0
+
+
+def test_written_images_open_in_pillow_and_a_maxval_100_image_keeps_exact_shades(tmp_path):
+    from PIL import Image
+
+    write_map_server(tmp_path / 'm.yaml', np.array([[0, 50], [100, 0]], dtype=np.int8), 0.5)
+    with Image.open(tmp_path / 'm.pgm') as image:
+        assert image.format == 'PPM' and image.mode == 'L'
+        assert np.asarray(image).tolist() == [[0, 254], [254, 140]]
+    # value 35 of maxval 100 is occ 0.65 exactly: unknown for map_server (occ must exceed
+    # occupied_thresh); a reader that rescales to 8 bits would make it occupied.
+    (tmp_path / 'h.pgm').write_bytes(b'P5\n3 1\n100\n' + bytes([35, 100, 0]))
+    (tmp_path / 'h.yaml').write_text('image: h.pgm\nresolution: 1.0\norigin: [0, 0, 0]\n')
+    assert read_pgm(tmp_path / 'h.pgm')[0].tolist() == [[35, 100, 0]]
+    assert read_map_server(tmp_path / 'h.yaml').occupancy.tolist() == [[-1, 0, 100]]

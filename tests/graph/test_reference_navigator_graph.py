@@ -1,8 +1,9 @@
 """The reference navigator as its own process against a simulator worker, over real topics.
 
 Per scenario, the navigator (with the scenario's robot) drives to the goal of the scenario's
-example map: in lockstep, answering every scan, and against a clocked simulator faster than
-real time, on its own sim-time timer like Nav2's controller server.
+example map (a valid test: start, goal and route certified): in lockstep, answering every
+scan, and against a clocked simulator at 4x real time, on its own sim-time timer like Nav2's
+controller server.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ def test_reference_navigator_reaches_the_goal_in_lockstep(node_processes, ros_no
     start_simulator(node_processes, namespace)
     navigator = start_navigator(node_processes, namespace, ROBOTS[scenario])
     metrics, _ = evaluate(ros_node, namespace, example_environment(scenario), timeout=300)
+    assert metrics.feasible
     assert metrics.outcome == 'goal_reached', (metrics.outcome, metrics.detail)
     assert metrics.collisions == 0, metrics.detail
     assert 'New map' in navigator.output(), 'the navigator never got the map'
@@ -51,5 +53,6 @@ def test_reference_navigator_reaches_the_goal_on_its_timer_in_clocked_mode(
     start_navigator(node_processes, namespace, ROBOTS[scenario], 'control_mode:=timer',
                     'control_rate_hz:=20.0')
     metrics, _ = evaluate(ros_node, namespace, example_environment(scenario), timeout=300)
+    assert metrics.feasible
     assert metrics.outcome == 'goal_reached', (metrics.outcome, metrics.detail)
     assert metrics.collisions == 0, metrics.detail

@@ -3,7 +3,8 @@
 Per scenario, the navigator (with the scenario's robot) drives to the goal of the scenario's
 example map (a valid test: start, goal and route certified): in lockstep, answering every
 scan, and against a clocked simulator at 4x real time, on its own sim-time timer like Nav2's
-controller server.
+controller server. Success as the benchmark counts it: the goal without a fault collision (an
+agent may still drive into the robot standing still).
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ def test_reference_navigator_reaches_the_goal_in_lockstep(node_processes, ros_no
     metrics, _ = evaluate(ros_node, namespace, example_environment(scenario), timeout=300)
     assert metrics.feasible
     assert metrics.outcome == 'goal_reached', (metrics.outcome, metrics.detail)
-    assert metrics.collisions == 0, metrics.detail
+    assert metrics.fault_collisions == 0, metrics.detail
     assert 'New map' in navigator.output(), 'the navigator never got the map'
 
 
@@ -55,4 +56,4 @@ def test_reference_navigator_reaches_the_goal_on_its_timer_in_clocked_mode(
     metrics, _ = evaluate(ros_node, namespace, example_environment(scenario), timeout=300)
     assert metrics.feasible
     assert metrics.outcome == 'goal_reached', (metrics.outcome, metrics.detail)
-    assert metrics.collisions == 0, metrics.detail
+    assert metrics.fault_collisions == 0, metrics.detail

@@ -9,15 +9,14 @@ Serves ``generate_environments`` (sessgan_interfaces/GenerateEnvironments).
 
 from __future__ import annotations
 
-import rclpy
 from nav_msgs.msg import OccupancyGrid
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.ros_conversion import environment_to_msg
+from sessgan_gen.ros_spin import exit_process, run_node
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 from sessgan_interfaces.srv import GenerateEnvironments
 
@@ -86,14 +85,5 @@ class GeneratorNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = GeneratorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    # A signal ends it at once and cleanly, also while it samples (sessgan_gen.ros_spin).
+    exit_process(run_node(GeneratorNode, args=args))

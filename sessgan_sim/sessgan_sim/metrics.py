@@ -27,6 +27,8 @@ class Outcome(enum.StrEnum):
     STUCK = 'stuck'
     CONTROLLER_UNRESPONSIVE = 'controller_unresponsive'
     INVALID_ENVIRONMENT = 'invalid_environment'
+    CANCELLED = 'cancelled'
+    """Cut off by the evaluate client or by the simulator's shutdown: no test result."""
 
 
 def risk_score(collisions: int, proximity_time: float, simulation_time: float) -> float:

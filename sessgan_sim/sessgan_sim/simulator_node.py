@@ -8,7 +8,10 @@ TwistStamped with ``use_stamped_cmd_vel``) and, in free mode, ``environment``
 Stepping modes: ``lockstep`` publishes a tick's data and waits for the controller's answer before
 advancing; ``clocked`` advances ``/clock`` at ``real_time_factor`` and uses the latest command.
 A controller silent for ``controller_timeout`` wall seconds ends the episode as
-``controller_unresponsive``. Every parameter is a field of
+``controller_unresponsive``. Sim time only moves forward: the first episode starts at
+``sim_time_origin``, every later one a control period after the previous one ended (failure
+bags record each episode's origin), so a long-running stack can live through any number of
+episodes. Every parameter is a field of
 :class:`sessgan_sim.simulator_settings.SimulatorSettings`, validated there as a whole.
 
 The node composes the parts in ``sessgan_sim.worker``: it receives work (evaluate goals, free
@@ -221,6 +224,9 @@ class SimulatorNode(Node):
                                        goal_handle, before_first_step=prepare_stack)
             self.log_timing(environment.id, metrics, episode.profile,
                             time.monotonic() - loop_start)
+            # The next episode's clock starts one control period after this one's end: a
+            # long-running stack never sees sim time go back (its tf buffer stays valid).
+            self.clock_origin_ns = clock.stamp_ns(episode.time + config.control_period)
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
         if (recording is not None and metrics.outcome is not Outcome.CANCELLED
                 and is_failure(metrics)):

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
+from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
@@ -27,6 +28,7 @@ LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """map, tf_static and goal_pose: a reader that joins late still gets the latest message."""
 SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+GOAL_ACK_TIMEOUT = Duration(seconds=1.0)
 
 MESSAGE_TYPES = {
     'scan': 'sensor_msgs/msg/LaserScan', 'odom': 'nav_msgs/msg/Odometry',
@@ -99,9 +101,17 @@ class RobotTopics:
 
     def publish_goal(self, goal, stamp_ns: int, recording: Recording | None) -> None:
         """The goal on goal_pose (latched: a transient-local reader that joins later gets
-        it)."""
+        it), acknowledged by every reliable reader before this returns.
+
+        The acknowledgement orders the goal before the episode's first scan in a controller
+        that takes messages in arrival order (the built-in controllers' events executor): sim
+        time no longer goes back at a new episode, so a scan handled before its episode's goal
+        would be answered with the previous goal. A reader that does not acknowledge within a
+        second (a stalled one) does not hold the episode up.
+        """
         self.publish('goal_pose', rm.goal_msg(time_of(stamp_ns), goal.x, goal.y, goal.yaw),
                      stamp_ns, recording)
+        self.publishers['goal_pose'].wait_for_all_acked(GOAL_ACK_TIMEOUT)
         self._goal_readers_told = self.readers('goal_pose')
 
     def republish_goal(self, goal, stamp_ns: int, force: bool = False) -> bool:

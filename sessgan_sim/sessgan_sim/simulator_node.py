@@ -20,6 +20,7 @@ mode maps), runs one episode at a time and answers with its metrics.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 
@@ -48,6 +49,7 @@ from sessgan_sim.metrics import Outcome
 from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSettings
 from sessgan_sim.worker.commands import CommandReceiver
 from sessgan_sim.worker.failure_bags import EpisodeFacts, remove_partial_bags, write_failure_bag
+from sessgan_sim.worker.nav2_stack import Nav2Stack
 from sessgan_sim.worker.stepping import EpisodeClock, EpisodeStepper
 from sessgan_sim.worker.topics import LATCHED_QOS, Recording, RobotTopics
 
@@ -70,6 +72,7 @@ class SimulatorNode(Node):
         command_type = TwistStamped if self.settings.use_stamped_cmd_vel else Twist
         self.commands = CommandReceiver(self, command_type)
         self.stepper = EpisodeStepper(self.topics, self.commands, command_type.__name__)
+        self.stack = Nav2Stack(self, self.callback_group, lambda: self.commands.running)
         self.clock_origin_ns = int(round(self.settings.sim_time_origin * 1e9))
         self.cleaned_directories: set[str] = set()
         self.clean_record_directory(self.settings.record_directory)
@@ -216,12 +219,31 @@ class SimulatorNode(Node):
                                       recording)
 
             def prepare_stack() -> str | None:
-                self.topics.publish_goal(environment.goal, clock.stamp_ns(0.0), recording)
+                """Costmap resets, then the goal: before time advances."""
+                if settings.reset_costmaps:
+                    failure = self.stack.reset_costmaps(settings.stack_timeout)
+                    if failure:
+                        return failure
+                if settings.goal_via.uses_topic:
+                    self.topics.publish_goal(environment.goal, clock.stamp_ns(0.0), recording)
+                if settings.goal_via.uses_action:
+                    return self.stack.send_goal(environment.goal, clock.stamp_ns(0.0),
+                                                settings.stack_timeout)
                 return None
 
+            def stop_after_navigation() -> tuple[float, float, float] | None:
+                """A stack that ended its NavigateToPose goal no longer drives: stand still
+                (as a base with a command timeout does) instead of waiting for cmd_vel."""
+                return (0.0, 0.0, 0.0) if self.stack.navigation_ended else None
+
             loop_start = time.monotonic()
-            metrics = self.stepper.run(episode, observation, clock, settings, recording,
-                                       goal_handle, before_first_step=prepare_stack)
+            metrics = self.stepper.run(
+                episode, observation, clock, settings, recording, goal_handle,
+                before_first_step=prepare_stack, command_override=stop_after_navigation)
+            note = self.stack.finish(settings.stack_timeout)
+            if note:
+                metrics = dataclasses.replace(
+                    metrics, detail=f'{metrics.detail}; {note}' if metrics.detail else note)
             self.log_timing(environment.id, metrics, episode.profile,
                             time.monotonic() - loop_start)
             # The next episode's clock starts one control period after this one's end: a

@@ -189,14 +189,16 @@ class Nav2StandIn(Node):
     def navigate(self, goal_handle):
         from nav2_msgs.action import NavigateToPose
 
-        if self.goal_handle is not None and self.goal_handle.is_active:
-            self.goal_handle.abort()  # preempted, as bt_navigator does
+        previous = self.goal_handle
         self.goal_handle = goal_handle
+        if previous is not None and previous.is_active and not previous.is_cancel_requested:
+            previous.abort()  # preempted, as bt_navigator does
         self.set_goal(goal_handle.request.pose, 'navigate_to_pose')
         result = NavigateToPose.Result()
         while rclpy.ok(context=self.context):
             if goal_handle.is_cancel_requested:
-                self.goal = None
+                if self.goal_handle is goal_handle:  # not replaced by a newer goal
+                    self.goal = None
                 goal_handle.canceled()
                 self.get_logger().info('navigate_to_pose goal canceled')
                 return result

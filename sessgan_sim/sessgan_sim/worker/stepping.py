@@ -98,8 +98,8 @@ class EpisodeStepper:
         startup_timeout = settings.controller_startup_timeout
         dt = episode.config.control_period
         feedback_every = max(1, int(round(FEEDBACK_PERIOD / dt)))
-        goal = episode.environment.goal
         topics, commands = self.topics, self.commands
+        topics.forget_goal()
         command = None
         last_command_wall = time.monotonic()
         wall_origin = time.monotonic()
@@ -127,14 +127,13 @@ class EpisodeStepper:
                 wall_origin = time.monotonic() - observation.time / settings.real_time_factor
                 last_command_wall = time.monotonic()
             if time.monotonic() >= next_goal_check:
-                topics.republish_goal(goal, clock.stamp_ns(0.0))  # a reader that joined late
+                topics.republish_goal()  # to a goal_pose reader that joined late
                 next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
             if lockstep:
                 limit = startup_timeout if first else timeout
                 received = self.wait_for_command(
                     time.monotonic() + limit,
-                    (lambda: topics.republish_goal(goal, clock.stamp_ns(0.0), force=True))
-                    if first else None)
+                    (lambda: topics.republish_goal(force=True)) if first else None)
                 if received is None:
                     if not commands.running:
                         continue  # the loop's head ends it as cancelled

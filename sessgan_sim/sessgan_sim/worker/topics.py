@@ -78,6 +78,7 @@ class RobotTopics:
         }
         self.names = {topic: node.resolve_topic_name(topic)
                       for topic in (*self.publishers, 'cmd_vel')}
+        self._goal: tuple[object, int] | None = None  # (goal, stamp_ns) sent on goal_pose
         self._goal_readers_told = 0
 
     def publish(self, topic: str, message, stamp_ns: int, recording: Recording | None) -> None:
@@ -112,12 +113,21 @@ class RobotTopics:
         self.publish('goal_pose', rm.goal_msg(time_of(stamp_ns), goal.x, goal.y, goal.yaw),
                      stamp_ns, recording)
         self.publishers['goal_pose'].wait_for_all_acked(GOAL_ACK_TIMEOUT)
+        self._goal = (goal, stamp_ns)
         self._goal_readers_told = self.readers('goal_pose')
 
-    def republish_goal(self, goal, stamp_ns: int, force: bool = False) -> bool:
-        """Send the goal again (not recorded) when a goal_pose reader matched since it was
-        last sent, or when ``force``: a volatile reader (Nav2's bt_navigator has one) that
-        joins late gets no latched message. True when it was sent."""
+    def forget_goal(self) -> None:
+        """A new episode: nothing to resend until its goal is sent on goal_pose."""
+        self._goal = None
+
+    def republish_goal(self, force: bool = False) -> bool:
+        """Send the episode's goal_pose again (not recorded) when a reader matched since it
+        was last sent, or when ``force``: a volatile reader (Nav2's bt_navigator has one) that
+        joins late gets no latched message. True when it was sent; never when the episode's
+        goal did not go out on goal_pose."""
+        if self._goal is None:
+            return False
+        goal, stamp_ns = self._goal
         readers = self.readers('goal_pose')
         if not force and readers <= self._goal_readers_told:
             self._goal_readers_told = min(self._goal_readers_told, readers)

@@ -45,15 +45,13 @@ from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from sessgan_sim.episode import Episode
 from sessgan_sim.errors import InvalidConfigError, SessganSimError
-from sessgan_sim.metrics import Outcome
+from sessgan_sim.metrics import Outcome, is_controller_failure
 from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSettings
 from sessgan_sim.worker.commands import CommandReceiver
 from sessgan_sim.worker.failure_bags import EpisodeFacts, remove_partial_bags, write_failure_bag
 from sessgan_sim.worker.nav2_stack import Nav2Stack
 from sessgan_sim.worker.stepping import EpisodeClock, EpisodeStepper
 from sessgan_sim.worker.topics import LATCHED_QOS, Recording, RobotTopics
-
-FAILURE_OUTCOMES = ('timeout', 'stuck')
 
 
 class SimulatorNode(Node):
@@ -251,7 +249,7 @@ class SimulatorNode(Node):
             self.clock_origin_ns = clock.stamp_ns(episode.time + config.control_period)
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
         if (recording is not None and metrics.outcome is not Outcome.CANCELLED
-                and is_failure(metrics)):
+                and is_controller_failure(metrics)):
             self.clean_record_directory(record_directory)
             facts = EpisodeFacts(seed=seed, controller=controller,
                                  namespace=self.get_namespace(),
@@ -295,11 +293,6 @@ class SimulatorNode(Node):
             self.busy.release()
 
 
-def is_failure(metrics) -> bool:
-    """A collision, or a timeout/stuck in a map the robot could have crossed."""
-    return metrics.collisions > 0 or (metrics.feasible and metrics.outcome in FAILURE_OUTCOMES)
-
-
 def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetricsMsg:
     msg = EpisodeMetricsMsg()
     msg.environment_id = environment_id
@@ -315,6 +308,12 @@ def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetric
     msg.final_distance_to_goal = float(metrics.final_distance_to_goal)
     msg.ticks = int(metrics.ticks)
     msg.wall_time = float(wall_time)
+    msg.fault_collisions = int(metrics.fault_collisions)
+    msg.static_collisions = int(metrics.static_collisions)
+    msg.robot_into_agent_collisions = int(metrics.robot_into_agent_collisions)
+    msg.agent_into_robot_collisions = int(metrics.agent_into_robot_collisions)
+    msg.fault_risk_score = float(metrics.fault_risk_score)
+    msg.invalid_commands = int(metrics.invalid_commands)
     return msg
 
 

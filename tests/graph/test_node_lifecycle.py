@@ -9,14 +9,15 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import sys
 import time
 
 import pytest
 
 from tests.graph.test_simulator_graph import (
-    DOG_LEG_MAP,
+    EXTERNAL_CONTROLLER,
     environment_msg,
-    start_controller,
+    room,
     start_simulator,
 )
 from tests.ros_processes import spin_until
@@ -81,18 +82,23 @@ def start_episode(ros_node, namespace: str, environment, record_directory: str):
     return client, handle, feedback
 
 
+def start_blind_robot(node_processes, namespace: str):
+    """A clocked worker (real time, so an episode can be cut off midway) and a controller that
+    drives straight into the wall: a controller failure in a valid test once it hits."""
+    simulator = start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
+                          '-r', f'__ns:={namespace}', '-p', 'use_sim_time:=true'], name='blind')
+    return simulator
+
+
 def test_cancelled_episode_is_reported_and_leaves_no_bag(node_processes, ros_node, tmp_path):
     from action_msgs.msg import GoalStatus
 
-    from sessgan_gen.token_map import read_token_map
-
-    # Clocked at real time, so the client can cancel in the middle of the episode.
-    start_simulator(node_processes, '/cancel', 'dummy_agents:=0', 'mode:=clocked')
-    start_controller(node_processes, '/cancel', 'nearness_diagram')
-    dog_leg = environment_msg(read_token_map(DOG_LEG_MAP, 'factory').cells, 'factory', 'dogleg')
+    start_blind_robot(node_processes, '/cancel')
     bags = tmp_path / 'bags'
-    _, handle, feedback = start_episode(ros_node, '/cancel', dog_leg, str(bags))
-    # It collides in this map: cancel once it has (the episode would be a failure).
+    _, handle, feedback = start_episode(ros_node, '/cancel', environment_msg(
+        room(), 'factory', 'room'), str(bags))
+    # Cancel once it has hit the wall (the episode would be a failure).
     assert spin_until(ros_node, lambda: feedback and feedback[-1].collisions > 0, timeout=90), \
         'no collision reported before the cancel'
     cancel = handle.cancel_goal_async()
@@ -102,24 +108,21 @@ def test_cancelled_episode_is_reported_and_leaves_no_bag(node_processes, ros_nod
     assert result.result().status == GoalStatus.STATUS_CANCELED
     metrics = result.result().result.metrics
     assert metrics.outcome == 'cancelled', metrics.detail
-    assert metrics.collisions > 0
+    assert metrics.fault_collisions > 0 and metrics.feasible
     assert metrics.bag_path == ''
     assert not bags.exists() or not any(bags.iterdir()), list(bags.iterdir())
 
 
 def test_simulator_signalled_mid_episode_exits_and_writes_no_bag(node_processes, ros_node,
                                                                  tmp_path):
-    from sessgan_gen.token_map import read_token_map
-
-    simulator = start_simulator(node_processes, '/midquit', 'dummy_agents:=0', 'mode:=clocked')
-    start_controller(node_processes, '/midquit', 'nearness_diagram')
-    dog_leg = environment_msg(read_token_map(DOG_LEG_MAP, 'factory').cells, 'factory', 'dogleg')
+    simulator = start_blind_robot(node_processes, '/midquit')
     bags = tmp_path / 'bags'
-    _, _, feedback = start_episode(ros_node, '/midquit', dog_leg, str(bags))
+    _, _, feedback = start_episode(ros_node, '/midquit', environment_msg(
+        room(), 'factory', 'room'), str(bags))
     assert spin_until(ros_node, lambda: feedback and feedback[-1].collisions > 0, timeout=90), \
         'no collision reported before the signal'
     assert_exits_cleanly(simulator, signal.SIGINT)
-    assert 'episode dogleg: cancelled' in simulator.output(), simulator.output()[-3000:]
+    assert 'episode room: cancelled' in simulator.output(), simulator.output()[-3000:]
     assert not bags.exists() or not any(bags.iterdir()), list(bags.iterdir())
 
 

@@ -42,6 +42,7 @@ def assert_exits_cleanly(process, signum: int) -> float:
     output = process.output()
     assert code == 0, f'exit status {code} after {signal.Signals(signum).name}:\n{output[-3000:]}'
     assert 'Traceback' not in output and 'RCLError' not in output, output[-3000:]
+    print(f'{process.name} exited {took:.2f} s after {signal.Signals(signum).name}')
     return took
 
 

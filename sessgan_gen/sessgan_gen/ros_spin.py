@@ -75,8 +75,8 @@ def run_node(make_node: Callable[[], Any], make_executor: Callable[[Any], Any] |
     request.install()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     context = rclpy.get_default_context()
-    node = None
-    executor = None
+    node: Any = None
+    executor: Any = None
     failure: list[BaseException] = []
 
     def spin() -> None:

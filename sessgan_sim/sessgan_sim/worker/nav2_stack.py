@@ -14,6 +14,7 @@ nav2_msgs is imported when first needed: a worker that never drives Nav2 runs wi
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from action_msgs.msg import GoalStatus
 
@@ -38,10 +39,10 @@ class Nav2Stack:
         self.node = node
         self.callback_group = callback_group
         self.running = running
-        self._action_client = None
-        self._reset_clients: dict[str, object] = {}
-        self._goal_handle = None
-        self._result_future = None
+        self._action_client: Any = None
+        self._reset_clients: dict[str, Any] = {}
+        self._goal_handle: Any = None
+        self._result_future: Any = None
 
     # ---- resets ----------------------------------------------------------------------------
 

@@ -19,6 +19,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
 
+from sessgan_gen.environment import Pose2D
 from sessgan_gen.ros_conversion import occupancy_grid_msg
 from sessgan_sim import cdr
 from sessgan_sim import ros_messages as rm
@@ -78,7 +79,7 @@ class RobotTopics:
         }
         self.names = {topic: node.resolve_topic_name(topic)
                       for topic in (*self.publishers, 'cmd_vel')}
-        self._goal: tuple[object, int] | None = None  # (goal, stamp_ns) sent on goal_pose
+        self._goal: tuple[Pose2D, int] | None = None  # (goal, stamp_ns) sent on goal_pose
         self._goal_readers_told = 0
 
     def publish(self, topic: str, message, stamp_ns: int, recording: Recording | None) -> None:
@@ -100,7 +101,7 @@ class RobotTopics:
         self.publish('tf_static', rm.static_tf_msg(stamp, ride_height, sensor_height),
                      stamp_ns, recording)
 
-    def publish_goal(self, goal, stamp_ns: int, recording: Recording | None) -> None:
+    def publish_goal(self, goal: Pose2D, stamp_ns: int, recording: Recording | None) -> None:
         """The goal on goal_pose (latched: a transient-local reader that joins later gets
         it), acknowledged by every reliable reader before this returns.
 

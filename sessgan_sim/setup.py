@@ -16,7 +16,8 @@ setup(
     zip_safe=True,
     maintainer='SESS-GAN developers',
     maintainer_email='sessgan@example.org',
-    description='SESS-GAN simulator worker: pybullet world builder, robots, sensors, episode metrics and the simulator node.',
+    description='SESS-GAN simulator worker: pybullet world builder, robots, sensors, '
+                'episode metrics and the simulator node.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

@@ -271,7 +271,7 @@ def start_resimulation_graph(supervisor, settings, namespace: str, log_directory
 
 def main(argv=None) -> int:
     args = parse_args(sys.argv[1:] if argv is None else argv)
-    from sessgan_evolver.bag_reading import read_episode_json
+    from sessgan_evolver.bag_reading import check_bag_complete, read_episode_json
     from sessgan_evolver.errors import SessganEvolverError
 
     try:
@@ -280,6 +280,8 @@ def main(argv=None) -> int:
             if episode is None:
                 print(f'error: {args.bag} has no episode.json to re-simulate', file=sys.stderr)
                 return EXIT_ERROR
+            # episode.json of a bag whose messages are cut off is not to be trusted either.
+            check_bag_complete(args.bag)
             return resimulate(args, episode)
         return replay(args, episode)
     except (SessganEvolverError, OSError, KeyError, ValueError) as err:

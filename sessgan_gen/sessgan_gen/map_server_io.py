@@ -26,6 +26,7 @@ written atomically (temporary file, then os.replace).
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from collections.abc import Sequence
@@ -34,6 +35,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import yaml
+from PIL import Image
 
 from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
@@ -117,7 +119,13 @@ def _pgm_header(data: bytes, source: str) -> tuple[str, list[int], int]:
 
 
 def read_pgm(path: str | os.PathLike) -> tuple[np.ndarray, int]:
-    """Read a PGM (P5 or P2) image: (uint16 array (height, width), top row first; maxval)."""
+    """Read a PGM (P5 or P2) image: (uint16 array (height, width), top row first; maxval).
+
+    Not Pillow: it rescales an image whose maxval is not 255 (or 65535) to 8 (16) bits and
+    drops the maxval, while map_server's thresholds apply to value / maxval exactly; with
+    maxval 100, the value 35 (occ 0.65, unknown under the default occupied_thresh 0.65)
+    became 89 / 255 (occ 0.651: occupied). Writing, where we choose the format, uses Pillow.
+    """
     source = str(path)
     try:
         data = Path(path).read_bytes()
@@ -165,10 +173,11 @@ def read_pgm(path: str | os.PathLike) -> tuple[np.ndarray, int]:
 
 
 def encode_pgm(pixels: np.ndarray) -> bytes:
-    """Encode an 8-bit (height, width) array, top row first, as a binary P5 PGM."""
-    array = np.asarray(pixels, dtype=np.uint8)
-    header = f'P5\n# written by sessgan_gen\n{array.shape[1]} {array.shape[0]}\n255\n'
-    return header.encode('ascii') + np.ascontiguousarray(array).tobytes()
+    """Encode an 8-bit (height, width) array, top row first, as a binary P5 PGM (maxval
+    255)."""
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(pixels, dtype=np.uint8), mode='L').save(buffer, 'PPM')
+    return buffer.getvalue()
 
 
 # --- YAML ---------------------------------------------------------------------------------------

@@ -37,6 +37,7 @@ from sessgan_gen.config_cli import field_docs
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.navigation import make_environment
+from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import environment_from_msg, occupancy_from_grid_msg
 from sessgan_gen.ros_spin import exit_process, run_node
 from sessgan_gen.scenarios import get_scenario
@@ -326,6 +327,7 @@ def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
 
 
 def main(args=None) -> None:
+    exit_if_help('sessgan_sim simulator', __doc__ or '', SimulatorNode, args)
     # Two threads: one runs an episode inside the evaluate callback, the other keeps the
     # action server (and Nav2 clients) answering meanwhile.
     try:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from sessgan_sim.bag_recording import (
     BagWriteError,
+    episode_bag_directory,
     remove_stale_staging_directories,
     write_episode_bag,
 )
@@ -35,7 +36,6 @@ def write_failure_bag(record_directory: str, environment, config, metrics,
     """Write ``<record_directory>/<environment id>/``; returns its path, or '' when it could
     not be written (the reason goes to ``log.error``). ``config``: the resolved episode
     config."""
-    directory = Path(record_directory) / environment.id
     metadata = {
         'environment_id': environment.id, 'scenario': environment.scenario,
         'seed': environment.seed, 'episode_seed': int(facts.seed),
@@ -54,11 +54,12 @@ def write_failure_bag(record_directory: str, environment, config, metrics,
     }
     try:
         path = write_episode_bag(
-            directory, recording.records(), metadata, environment.occupancy,
-            environment.resolution, environment.origin, storage=facts.settings.bag_storage,
-            overwrite=True)
+            episode_bag_directory(record_directory, environment.id), recording.records(),
+            metadata, environment.occupancy, environment.resolution, environment.origin,
+            storage=facts.settings.bag_storage, overwrite=True)
     except (BagWriteError, OSError, ValueError) as err:
-        log.error(f'cannot write the failure bag {directory}: {err}')
+        log.error(f'cannot write the failure bag of {environment.id!r} in {record_directory}: '
+                  f'{err}')
         return ''
     log.info(f'failure bag written: {path}')
     return str(path)

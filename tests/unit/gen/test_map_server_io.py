@@ -254,7 +254,7 @@ def test_export_environment_and_token_map(tmp_path):
 
 def write_negated_facility(directory, origin=(-3.2, 1.5, 0.0)):
     """A 160x120-pixel map_server map at 0.05 m/px (8 x 6 m) saved with ``negate: 1`` (white is
-    occupied): a one-metre-thick border wall, a 1 x 1 m block, a grey (unknown) patch; trinary
+    occupied): a 0.5 m thick border wall, a 1 x 1 m block, a grey (unknown) patch; trinary
     mode, a non-zero origin. Returns (yaml path, the factory token map it should become at
     0.5 m per cell: 12 rows x 16 columns, row 0 at the bottom)."""
     pixels = np.zeros((120, 160), dtype=np.uint8)  # negate: black is free
@@ -294,3 +294,18 @@ def test_a_map_too_large_for_the_cell_size_is_refused(tmp_path):
     with pytest.raises(MapFormatError, match='more than 4096 per side'):
         import_map_server_for_scenario(tmp_path / 'map.yaml', 'factory')
     assert cells_at_cell_size((3, 1), 0.01, 0.5) == (1, 1)  # never zero cells
+
+
+def test_written_images_open_in_pillow_and_a_maxval_100_image_keeps_exact_shades(tmp_path):
+    from PIL import Image
+
+    write_map_server(tmp_path / 'm.yaml', np.array([[0, 50], [100, 0]], dtype=np.int8), 0.5)
+    with Image.open(tmp_path / 'm.pgm') as image:
+        assert image.format == 'PPM' and image.mode == 'L'
+        assert np.asarray(image).tolist() == [[0, 254], [254, 140]]
+    # value 35 of maxval 100 is occ 0.65 exactly: unknown for map_server (occ must exceed
+    # occupied_thresh); a reader that rescales to 8 bits would make it occupied.
+    (tmp_path / 'h.pgm').write_bytes(b'P5\n3 1\n100\n' + bytes([35, 100, 0]))
+    (tmp_path / 'h.yaml').write_text('image: h.pgm\nresolution: 1.0\norigin: [0, 0, 0]\n')
+    assert read_pgm(tmp_path / 'h.pgm')[0].tolist() == [[35, 100, 0]]
+    assert read_map_server(tmp_path / 'h.yaml').occupancy.tolist() == [[-1, 0, 100]]

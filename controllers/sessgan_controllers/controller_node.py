@@ -408,7 +408,7 @@ def main(args: Sequence[str] | None = None) -> None:
                  'cmd_vel (Twist, or TwistStamped with use_stamped_cmd_vel): one per scan, or '
                  'with control_mode:=timer every 1 / control_rate_hz s of its clock. Run it '
                  'with use_sim_time:=true beside a simulator worker in the same namespace (in '
-                 'timer mode also -r /clock:=<namespace>/clock).',
+                 'timer mode also -r /clock:=clock).',
                  lambda: ControllerNode(name), args)
     run(name, args)
 

@@ -47,8 +47,8 @@ As a node: ``ros2 run sessgan_controllers reference_navigator --ros-args -p robo
 -p use_sim_time:=true`` (``diff_drive`` is the default) answers every scan of a lockstep
 simulator; against a clocked one it runs on its own timer like Nav2's controller server:
 ``-p control_mode:=timer -p control_rate_hz:=20.0``, and under a namespace ``-r
-/clock:=<namespace>/clock`` (the simulator publishes its clock in its namespace; a node's
-sim time comes from ``/clock``). See :mod:`sessgan_controllers.controller_node`.
+/clock:=clock`` (the simulator publishes its clock in its namespace; a node's sim time comes
+from ``/clock``). See :mod:`sessgan_controllers.controller_node`.
 """
 
 from __future__ import annotations

@@ -48,6 +48,11 @@ class ControllerSpec:
         """Whether it can drive sessgan_sim's robot model ``robot``."""
         return robot in (self.robots or (self.robot,))
 
+    def node_arguments(self, robot: str) -> list[str]:
+        """ROS arguments that make its node drive ``robot`` (``-p robot:=...`` for a
+        controller of several robots; none otherwise)."""
+        return ['-p', f'robot:={robot}'] if self.robots and robot else []
+
     def make(self, config: Any = None, **overrides: Any) -> Controller:
         """A new controller from ``config`` (default config if None) with ``overrides``."""
         base = config if config is not None else self.config_type()

@@ -8,7 +8,8 @@
 * Each event is attributed (:class:`ContactKind`): the robot against a static obstacle, the
   robot moving into an agent (its velocity toward the agent above ``STANDING_SPEED`` at the
   event's start), or an agent driving into a robot that stood still or moved away (or shoving
-  it into a wall or another agent), which is not the controller's fault. ``fault_collisions`` counts the first two.
+  it into a wall or another agent), which is not the controller's fault.
+  ``fault_collisions`` counts the first two.
 * proximity_time: sim seconds with clearance (robot body to the nearest obstacle or
   agent) below the proximity distance while not in contact, sampled every control
   tick (each tick counts its whole period).

@@ -43,6 +43,8 @@ from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 
 SOFTWARE_VERSION = '0.1.0'
 
+SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
+
 
 class CampaignError(SessganEvolverError):
     """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""
@@ -78,7 +80,11 @@ class CampaignConfig:
     """[fixed] Map and simulator seeds: 'fixed' uses the same K seeds in every generation (so a
     member's fitness is comparable across generations and an elite keeps its score);
     'per-generation' draws new shared seeds each generation (fitness then also varies with
-    the maps drawn)."""
+    the maps drawn); 'rotating' takes K consecutive seeds of a pool of --seed-pool in turn,
+    and a member evaluated in earlier generations (an unchanged elite) is selected on the
+    mean fitness of all its evaluations, so one lucky draw does not keep it."""
+    seed_pool: int = 0
+    """[0: 4 x maps per member] Rotating schedule: the number of seeds in the pool."""
     record_failures: bool = True
     """[True] Write every failure episode as a bag under bags/<run>/."""
     elite_count: int = 1
@@ -98,9 +104,12 @@ class CampaignConfig:
         for name in ('generations', 'population', 'maps_per_member', 'workers'):
             if getattr(self, name) < 1:
                 raise CampaignError(f'{name} must be >= 1, got {getattr(self, name)}')
-        if self.seed_schedule not in ('fixed', 'per-generation'):
-            raise CampaignError(f'seed schedule must be fixed or per-generation, got '
-                                f'{self.seed_schedule!r}')
+        if self.seed_schedule not in SEED_SCHEDULES:
+            raise CampaignError(f'seed schedule must be one of {", ".join(SEED_SCHEDULES)}, '
+                                f'got {self.seed_schedule!r}')
+        if self.seed_pool < 0 or (self.seed_pool and self.seed_pool < self.maps_per_member):
+            raise CampaignError(f'seed pool must be 0 (default) or at least maps_per_member '
+                                f'({self.maps_per_member}), got {self.seed_pool}')
         if self.bag_storage not in ('mcap', 'sqlite3'):
             raise CampaignError(f'bag storage must be mcap or sqlite3, got {self.bag_storage!r}')
         self.algorithm_config().validate()
@@ -115,6 +124,22 @@ class CampaignConfig:
             tournament_size=min(self.tournament_size, self.population),
             crossover_probability=self.crossover_probability, seed=self.seed,
             operators=operators)
+
+    def resolved_seed_pool(self) -> int:
+        return self.seed_pool or 4 * self.maps_per_member
+
+    def generation_seeds(self, generation: int) -> tuple[list[int], list[int]]:
+        """(map seeds, simulator seeds) every member of ``generation`` is evaluated on."""
+        count = self.maps_per_member
+        if self.seed_schedule == 'rotating':
+            pool = self.resolved_seed_pool()
+            maps = shared_seeds(self.seed, 0, pool)
+            sims = shared_seeds(self.seed, 0, pool, SeedStream.SIMULATION)
+            picks = [(generation * count + k) % pool for k in range(count)]
+            return [maps[i] for i in picks], [sims[i] for i in picks]
+        seed_generation = 0 if self.seed_schedule == 'fixed' else generation
+        return (shared_seeds(self.seed, seed_generation, count),
+                shared_seeds(self.seed, seed_generation, count, SeedStream.SIMULATION))
 
     def resolved_time_limit(self) -> float:
         return self.time_limit or get_scenario(self.scenario).time_limit
@@ -186,8 +211,10 @@ class Campaign:
         self.pyramid.load_state_dict(genome.to_state_dict(self.template))
         return checkpoint_bytes(self.pyramid, self.metadata)
 
-    def start(self, resume: bool) -> tuple[GeneticAlgorithm, float | None]:
-        """The algorithm to continue with and the TPKL reference (None before generation 0)."""
+    def start(self, resume: bool) -> tuple[GeneticAlgorithm, float | None,
+                                          dict[str, list[float]]]:
+        """The algorithm to continue with, the TPKL reference (None before generation 0) and
+        the fitness history of the current population's genomes (digest -> fitnesses)."""
         self.store.write_config(self.config.to_dict(), self.config.seed, SOFTWARE_VERSION)
         point = self.store.resume() if resume else None
         if resume and point is None:
@@ -195,18 +222,21 @@ class Campaign:
         if point is not None:
             self.log(f'resuming {self.store.run_dir} at generation {point.generation}')
             algorithm = GeneticAlgorithm.from_state_dict(point.checkpoint['algorithm'])
-            return algorithm, point.checkpoint['extra'].get('tpkl_reference')
+            extra = point.checkpoint['extra']
+            history = {str(k): [float(f) for f in v]
+                       for k, v in (extra.get('fitness_history') or {}).items()}
+            return algorithm, extra.get('tpkl_reference'), history
         if self.store.latest_checkpoint() is not None:
             raise CampaignError(
                 f'run {self.store.run_name!r} exists already: pass --resume to continue it, '
                 f'or choose another --run name')
         initial = Genome.from_state_dict(self.template)
-        return GeneticAlgorithm(self.config.algorithm_config(), initial), None
+        return GeneticAlgorithm(self.config.algorithm_config(), initial), None, {}
 
     def run(self, evaluator: Evaluator, resume: bool = False) -> CampaignResult:
         config = self.config
         wall_start = time.monotonic()
-        algorithm, tpkl_reference = self.start(resume)
+        algorithm, tpkl_reference, history = self.start(resume)
         sample_generations = set(report_generations(config.generations - 1))
         progress = ProgressPrinter()
         last_tokens: list[list[np.ndarray]] = []
@@ -214,12 +244,10 @@ class Campaign:
         while algorithm.generation < config.generations:
             generation = algorithm.generation
             self.store.save_checkpoint(generation, algorithm.state_dict(),
-                                       {'tpkl_reference': tpkl_reference})
+                                       {'tpkl_reference': tpkl_reference,
+                                        'fitness_history': history})
             genomes = algorithm.ask()
-            seed_generation = 0 if config.seed_schedule == 'fixed' else generation
-            map_seeds = shared_seeds(config.seed, seed_generation, config.maps_per_member)
-            sim_seeds = shared_seeds(config.seed, seed_generation, config.maps_per_member,
-                                     SeedStream.SIMULATION)
+            map_seeds, sim_seeds = config.generation_seeds(generation)
             jobs, token_maps = [], []
             for member, genome in enumerate(genomes):
                 environments = evaluator.sample(self.weights_of(genome), map_seeds,
@@ -247,7 +275,7 @@ class Campaign:
             if missing:
                 raise CampaignError(f'generation {generation}: no result for episodes {missing}')
 
-            fitnesses = []
+            fitnesses, selection = [], []
             for member in range(len(genomes)):
                 episodes = [results[(member, k)] for k in range(config.maps_per_member)]
                 for job in jobs[member * config.maps_per_member:(member + 1) *
@@ -259,10 +287,21 @@ class Campaign:
                 breakdown = member_fitness(
                     episodes, tpkls[member], tpkl_reference,
                     map_diversity(token_maps[member]), config.fitness)
+                evaluations = history.setdefault(genomes[member].digest(), [])
+                evaluations.append(breakdown.fitness)
+                # Rotating seeds: an unchanged genome is selected on all its evaluations.
+                selection.append(float(np.mean(evaluations))
+                                 if config.seed_schedule == 'rotating' else breakdown.fitness)
                 self.store.append_member({'generation': generation, 'member': member,
-                                          **breakdown.as_row()})
+                                          **breakdown.as_row(),
+                                          'selection_fitness': selection[-1],
+                                          'evaluations': len(evaluations)})
                 fitnesses.append(breakdown)
-            algorithm.tell([b.fitness for b in fitnesses])
+            algorithm.tell(selection)
+            # Only genomes that can come back (elites, unchanged) keep their history.
+            survivors = {genome.digest() for genome in algorithm.ask()}
+            history = {digest: values for digest, values in history.items()
+                       if digest in survivors}
             summary = generation_summary(generation, fitnesses)
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
@@ -278,7 +317,8 @@ class Campaign:
                 f'{format_duration(per_generation * (config.generations - done))}')
             if done < config.generations:
                 self.store.save_checkpoint(done, algorithm.state_dict(),
-                                           {'tpkl_reference': tpkl_reference})
+                                           {'tpkl_reference': tpkl_reference,
+                                            'fitness_history': history})
             last_tokens = token_maps
         report_path = self.write_report(last_tokens)
         return CampaignResult(self.store.run_dir, self.bags_dir, report_path,

@@ -12,9 +12,8 @@ the search began.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,6 +46,9 @@ class EpisodeRecord:
     elapsed: float
     """Wall seconds from the start of the search to the end of this episode."""
     origin: str
+    cpu: float = 0.0
+    """CPU seconds of this process from the start of the search to the end of this episode
+    (on a shared machine less noisy than wall time)."""
 
     @property
     def valid_failure(self) -> bool:
@@ -60,18 +62,19 @@ class EpisodeLog:
                  clock: Callable[[], float] = time.perf_counter) -> None:
         self.rule = rule or FaultRule()
         self.clock = clock
-        self.started = clock()
         self.records: list[EpisodeRecord] = []
+        self.restart_clock()
 
     def restart_clock(self) -> None:
         self.started = self.clock()
+        self.cpu_started = time.process_time()
 
     def __call__(self, environment: Environment, seed: int, run: EpisodeRun,
                  origin: str) -> None:
         key = key_of_failure(environment, run.metrics, run.trace, self.rule)
         self.records.append(EpisodeRecord(
             len(self.records), environment, int(seed), dict(run.metrics), key,
-            self.clock() - self.started, origin))
+            self.clock() - self.started, origin, time.process_time() - self.cpu_started))
 
 
 def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
@@ -132,10 +135,3 @@ def run_sessgan_search(base: CampaignConfig, evaluator: InProcessEvaluator, budg
     campaign = Campaign(config, run_name, runs_root, runs_root / 'bags', log)
     result = campaign.run(evaluator)
     return SessganSearch(result.run_dir, config.generations, evaluator.episodes - before)
-
-
-def summary_of_metrics(metrics: Mapping[str, Any]) -> str:
-    """'collision_limit, 10 collisions, risk 5.30' for logs."""
-    risk = metrics.get('risk_score')
-    risk_text = f'{risk:.2f}' if isinstance(risk, (int, float)) and math.isfinite(risk) else '?'
-    return f'{metrics.get("outcome")}, {metrics.get("collisions")} collisions, risk {risk_text}'

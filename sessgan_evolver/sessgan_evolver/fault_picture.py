@@ -223,12 +223,31 @@ def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool 
         axis.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize='small')
 
 
+ZOOM_ABOVE = 30.0
+"""m: maps wider than this get a second panel zoomed on the first fault."""
+ZOOM_SIDE = 20.0
+"""m: side of the zoomed panel."""
+
+
 def write_scene_png(scene: FaultScene, path: str | Path) -> Path:
-    """One fault as a PNG."""
+    """One fault as a PNG (with a zoom on the fault for maps wider than ZOOM_ABOVE)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    figure, axis = plt.subplots(figsize=(8.2, 6.0))
-    draw_scene(axis, scene)
+    side = max(scene.occupancy.shape) * scene.resolution
+    if side > ZOOM_ABOVE and scene.fault_place is not None:
+        figure, (whole, zoom) = plt.subplots(1, 2, figsize=(14.5, 6.6))
+        draw_scene(whole, scene, legend=False)
+        draw_scene(zoom, scene)
+        x, y = scene.fault_place
+        zoom.set_xlim(x - ZOOM_SIDE / 2, x + ZOOM_SIDE / 2)
+        zoom.set_ylim(y - ZOOM_SIDE / 2, y + ZOOM_SIDE / 2)
+        zoom.set_title(f'{ZOOM_SIDE:.0f} m around the first fault')
+        whole.add_patch(plt.Rectangle((x - ZOOM_SIDE / 2, y - ZOOM_SIDE / 2), ZOOM_SIDE,
+                                      ZOOM_SIDE, fill=False, edgecolor='#ff7f0e',
+                                      linewidth=1.0))
+    else:
+        figure, axis = plt.subplots(figsize=(8.2, 6.0))
+        draw_scene(axis, scene)
     figure.tight_layout()
     figure.savefig(path, dpi=FIGURE_DPI)
     plt.close(figure)

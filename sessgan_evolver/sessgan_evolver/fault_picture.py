@@ -130,13 +130,13 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
     for message in iter_bag_messages(bag):
         name = message.topic.rsplit('/', 1)[-1]
         if name == 'map' and occupancy is None:
-            grid = store.deserialize_cdr(message.data, message.msgtype)
+            grid: Any = store.deserialize_cdr(message.data, message.msgtype)
             occupancy = np.asarray(grid.data, dtype=np.int8).reshape(grid.info.height,
                                                                      grid.info.width)
             resolution = float(grid.info.resolution)
             origin = (float(grid.info.origin.position.x), float(grid.info.origin.position.y))
         elif name == 'odom':
-            odom = store.deserialize_cdr(message.data, message.msgtype)
+            odom: Any = store.deserialize_cdr(message.data, message.msgtype)
             trajectory.append((odom.pose.pose.position.x, odom.pose.pose.position.y))
     if occupancy is None or resolution is None or origin is None:
         raise FaultPictureError(f'bag {bag} has no map message')

@@ -48,7 +48,8 @@ def confirm_faults(entries: Sequence[FaultEntry], records: Sequence[EpisodeRecor
                                                rule), seconds
 
         confirmation = confirm(entry, record.metrics, rerun, repeats)
-        if want_record and confirmation.confirmed and 'run' in kept:
+        if record_directory is not None and want_record and confirmation.confirmed \
+                and 'run' in kept:
             directory = Path(record_directory) / f'{number:03d}-{entry.key.label}'
             written.append(write_fault_record(directory, record, kept['run'], evaluator, rule,
                                               confirmation, metadata))

@@ -102,12 +102,12 @@ class InProcessEvaluator:
         if not environment.feasible and not self.simulate_invalid:
             run = invalid_map_run(environment)
         else:
-            recording = self.record_directory is not None
+            directory = self.record_directory
             run = self.runner.run(environment, seed, trace=True,
-                                  keep_scans=keep_scans or recording)
-            if recording and is_failure(run.metrics) and run.trace is not None:
+                                  keep_scans=keep_scans or directory is not None)
+            if directory is not None and is_failure(run.metrics) and run.trace is not None:
                 run.metrics['bag_path'] = str(self.write_bag(
-                    self.record_directory / environment.id, environment, seed, run, origin))
+                    directory / environment.id, environment, seed, run, origin))
                 if not keep_scans:
                     run.trace.scans = None  # a campaign keeps no scans in memory
         self.episodes += 1

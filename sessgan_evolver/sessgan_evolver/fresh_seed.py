@@ -71,6 +71,24 @@ class PyramidSource:
         return sample_token_maps(self.pyramid, [int(s) for s in seeds])
 
 
+class PopulationSource:
+    """A population as one generator: map i comes from member i mod n (a member drawn in
+    turn), so N fresh maps cost N episodes whatever the population's size."""
+
+    def __init__(self, label: str, members: Sequence[PyramidSource]) -> None:
+        if not members:
+            raise FreshSeedError('a population needs at least one member')
+        self.label = label
+        self.members = list(members)
+
+    def maps(self, seeds: Sequence[int]) -> np.ndarray:
+        count = len(self.members)
+        if not seeds:
+            return self.members[0].maps([])
+        rows = [self.members[index % count].maps([seed])[0] for index, seed in enumerate(seeds)]
+        return np.stack(rows)
+
+
 class AutomatonSource:
     """The BARN-style cellular automaton (sessgan_evolver.cellular_automaton)."""
 

@@ -81,3 +81,16 @@ def test_every_source_sees_the_same_seeds_and_the_figures_add_up(run_dir):
     assert summary.distinct_faults == len({row['fault'] for row in rows if row['fault']})
     assert summary.tpkl > 0 and 0 < summary.uniqueness <= 100
     assert '| shipped | 3 |' in summary_table([summary])
+
+
+def test_a_population_samples_its_members_in_turn(run_dir):
+    from sessgan_evolver.fresh_seed import PopulationSource
+
+    members = campaign_sources(run_dir, 'final')
+    population = PopulationSource('final', members)
+    maps = population.maps([11, 12, 13, 14])
+    for index, seed in enumerate([11, 12, 13, 14]):
+        assert (maps[index] == members[index % 3].maps([seed])[0]).all()
+    assert population.maps([]).shape == (0, 32, 32)
+    with pytest.raises(FreshSeedError):
+        PopulationSource('none', [])

@@ -94,7 +94,7 @@ def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
         for proposal in batch:
             environment = make_environment(
                 proposal.cells, evaluator.scenario, f'{label}-e{done:05d}',
-                seed=max(proposal.map_seed, 0))
+                seed=proposal.resolved_environment_seed)
             run = evaluator.run_environment(environment, proposal.sim_seed, proposal.origin)
             results.append(Evaluated(proposal, environment, run.metrics))
             done += 1

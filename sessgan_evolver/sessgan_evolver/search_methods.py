@@ -18,8 +18,10 @@ Both genetic algorithms use the campaign's settings (population 12, 1 elite, tou
 3, crossover probability 0.5) and its fitness formula for one map per individual
 (``member_fitness`` of the one episode, TPKL of the map relative to the mean of generation
 0). Elites are not run again: in-process episodes are deterministic, so their result is
-known. A child inherits its first parent's simulator seed and draws a fresh one with
-probability ``sim_seed_mutation``. Every random choice flows from the method's seed.
+known. A test is the map with its environment seed (which places start and goal) and its
+simulator seed (agents, sensor noise): a child inherits both from its first parent and
+draws each afresh with probability ``seed_mutation``. Every random choice flows from the
+method's seed.
 """
 
 from __future__ import annotations
@@ -74,6 +76,14 @@ class Proposal:
     """The generator seed that made the map (-1: not a generator's sample)."""
     origin: str = ''
     """How it was made, for logs (e.g. 'generation 3 crossover 2x7 + paint')."""
+    environment_seed: int | None = None
+    """The Environment's seed (start and goal placement); None: the map seed (0 if none)."""
+
+    @property
+    def resolved_environment_seed(self) -> int:
+        if self.environment_seed is not None:
+            return int(self.environment_seed)
+        return max(int(self.map_seed), 0)
 
 
 @dataclass(frozen=True)
@@ -167,8 +177,9 @@ class GAConfig:
     elite_count: int = 1
     tournament_size: int = 3
     crossover_probability: float = 0.5
-    sim_seed_mutation: float = 0.2
-    """Probability that a child draws a fresh simulator seed instead of its parent's."""
+    seed_mutation: float = 0.2
+    """Probability that a child draws a fresh simulator seed (and, independently, a fresh
+    environment seed) instead of its parent's."""
     noise_strength: float = 0.3
     """latent: s of ``mutate_noise`` (a child's noise keeps a correlation of 0.95)."""
     fitness: FitnessConfig = field(default_factory=FitnessConfig)
@@ -181,7 +192,7 @@ class GAConfig:
                                     f'{self.elite_count}')
         if self.tournament_size < 1:
             raise SearchMethodError(f'tournament_size must be >= 1, got {self.tournament_size}')
-        for name in ('crossover_probability', 'sim_seed_mutation', 'noise_strength'):
+        for name in ('crossover_probability', 'seed_mutation', 'noise_strength'):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise SearchMethodError(f'{name} must lie in [0, 1], got {getattr(self, name)}')
         self.fitness.validate()
@@ -192,6 +203,7 @@ class Individual(Generic[Genotype]):
     genotype: Genotype
     sim_seed: int
     origin: str
+    environment_seed: int
     fitness: float | None = None
     map_seed: int = -1
 
@@ -236,13 +248,16 @@ class MapSearchGA(Generic[Genotype]):
 
     def _first(self, index: int) -> Individual[Genotype]:
         genotype, map_seed = self.initial(index)
-        return Individual(genotype, self._fresh_seed(), 'generation 0', map_seed=map_seed)
+        environment_seed = map_seed if map_seed >= 0 else self._fresh_seed()
+        return Individual(genotype, self._fresh_seed(), 'generation 0', environment_seed,
+                          map_seed=map_seed)
 
     def ask(self) -> list[Proposal]:
         self._pending = [member for member in self.population if member.fitness is None]
         maps = self.express([member.genotype for member in self._pending])
         return [Proposal(cells, member.sim_seed, member.map_seed,
-                         f'generation {self.generation} {member.origin}')
+                         f'generation {self.generation} {member.origin}',
+                         member.environment_seed)
                 for cells, member in zip(maps, self._pending)]
 
     def tell(self, results: Sequence[Evaluated]) -> None:
@@ -278,9 +293,12 @@ class MapSearchGA(Generic[Genotype]):
                 genotype = parent.genotype
                 made = f'from {first}'
             genotype, edit = self.mutate(genotype)
-            sim_seed = (self._fresh_seed() if self.rng.random() < config.sim_seed_mutation
+            sim_seed = (self._fresh_seed() if self.rng.random() < config.seed_mutation
                         else parent.sim_seed)
-            children.append(Individual(genotype, sim_seed, f'{made} + {edit}'))
+            environment_seed = (self._fresh_seed() if self.rng.random() < config.seed_mutation
+                                else parent.environment_seed)
+            children.append(Individual(genotype, sim_seed, f'{made} + {edit}',
+                                       environment_seed))
         self.population = children
         self.generation += 1
 

@@ -288,8 +288,14 @@ class RosEvaluator:
 def metrics_dict(msg) -> dict:
     return {
         'outcome': msg.outcome, 'detail': msg.detail, 'collisions': int(msg.collisions),
+        'fault_collisions': int(msg.fault_collisions),
+        'static_collisions': int(msg.static_collisions),
+        'robot_into_agent_collisions': int(msg.robot_into_agent_collisions),
+        'agent_into_robot_collisions': int(msg.agent_into_robot_collisions),
         'proximity_time': float(msg.proximity_time),
         'simulation_time': float(msg.simulation_time), 'risk_score': float(msg.risk_score),
+        'fault_risk_score': float(msg.fault_risk_score),
+        'invalid_commands': int(msg.invalid_commands),
         'feasible': bool(msg.feasible), 'min_clearance': float(msg.min_clearance),
         'distance_travelled': float(msg.distance_travelled),
         'final_distance_to_goal': float(msg.final_distance_to_goal), 'ticks': int(msg.ticks),

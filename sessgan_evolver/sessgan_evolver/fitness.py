@@ -3,17 +3,19 @@
 Each member samples K maps from seeds shared by the whole generation; each map is one
 episode of the robot under test. With ``w_*`` the weights of ``FitnessConfig``::
 
-    fitness =   w_risk      * mean risk score over the member's FEASIBLE episodes (0 if none)
+    fitness =   w_risk      * mean FAULT risk score over the member's FEASIBLE episodes
               + w_proximity * mean (proximity_time / simulation_time) over FEASIBLE episodes
               - w_infeasible * (fraction of the K maps that are infeasible)
               - w_tpkl      * max(0, tpkl / tpkl_reference - 1 - tpkl_tolerance)
               + w_diversity * diversity of the member's K maps
 
-* risk score (the paper's metric, reported unchanged) = collisions * proximity_time /
-  simulation_time. It is 0 for every episode without a collision, which is most
-  episodes early on, so selection would be blind; the proximity term is a small shaping
-  signal (near misses) that rewards getting close before the first collision is found.
-  It is bounded by ``w_proximity`` (the fraction lies in [0, 1]).
+* fault risk score = fault_collisions * proximity_time / simulation_time: the paper's risk
+  score (reported unchanged beside it) over the contacts the robot under test caused, so an
+  agent ramming a standing robot earns nothing (sessgan_sim.metrics). Only FEASIBLE maps
+  (valid tests with a certified route) count. It is 0 for every episode without a fault
+  collision, which is most episodes early on, so selection would be blind; the proximity
+  term is a small shaping signal (near misses) that rewards getting close before the first
+  collision is found. It is bounded by ``w_proximity`` (the fraction lies in [0, 1]).
 * tpkl: the tile-pattern KL divergence of the member's K maps to the example map;
   tpkl_reference: that of generation 0 (``tpkl_reference_from``), so the penalty measures
   drift relative to the pre-trained generator rather than an absolute level.
@@ -40,6 +42,8 @@ class EpisodeMetricsLike(Protocol):
     proximity_time: float
     simulation_time: float
     risk_score: float
+    fault_collisions: int
+    fault_risk_score: float
     feasible: bool
 
 
@@ -48,7 +52,7 @@ class FitnessConfig:
     """Weights of the fitness formula (module docstring); defaults in brackets."""
 
     risk_weight: float = 1.0
-    """[1.0] w_risk: weight of the mean risk score over feasible episodes."""
+    """[1.0] w_risk: weight of the mean fault risk score over feasible episodes."""
     proximity_weight: float = 0.1
     """[0.1] w_proximity: weight of the shaping term, mean proximity_time / simulation_time
     over feasible episodes (0 disables shaping; the term is at most this weight)."""
@@ -91,6 +95,10 @@ class FitnessBreakdown:
     """Mean risk score (paper's definition) over feasible episodes."""
     collisions: float | None
     """Mean collision count over feasible episodes."""
+    fault_risk_score: float | None
+    """Mean fault risk score over feasible episodes (the risk term's base)."""
+    fault_collisions: float | None
+    """Mean fault collision count over feasible episodes."""
     proximity_time: float | None
     """Mean proximity time over feasible episodes, sim seconds."""
     simulation_time: float | None
@@ -121,7 +129,8 @@ def member_fitness(episodes: Sequence[EpisodeMetricsLike | Mapping[str, Any]],
     """The fitness of one member (formula in the module docstring).
 
     ``episodes``: the member's K episode results (objects or mappings with collisions,
-    proximity_time, simulation_time, risk_score, feasible). ``tpkl``/``tpkl_reference``:
+    fault_collisions, proximity_time, simulation_time, risk_score, fault_risk_score,
+    feasible). ``tpkl``/``tpkl_reference``:
     nats; None skips the TPKL penalty. ``diversity``: in [0, 1]; None gives no bonus.
     """
     config = config or FitnessConfig()
@@ -137,8 +146,9 @@ def member_fitness(episodes: Sequence[EpisodeMetricsLike | Mapping[str, Any]],
         return float(np.mean([row[key] for row in feasible])) if feasible else None
 
     risk = feasible_mean('risk_score')
+    fault_risk = feasible_mean('fault_risk_score')
     proximity_fraction = feasible_mean('proximity_fraction')
-    risk_term = config.risk_weight * (risk or 0.0)
+    risk_term = config.risk_weight * (fault_risk or 0.0)
     proximity_term = config.proximity_weight * (proximity_fraction or 0.0)
     infeasible_penalty = config.infeasible_weight * infeasible_fraction
 
@@ -160,7 +170,9 @@ def member_fitness(episodes: Sequence[EpisodeMetricsLike | Mapping[str, Any]],
     return FitnessBreakdown(
         fitness=fitness, episodes=count, feasible_episodes=feasible_count,
         feasible_fraction=feasible_count / count, risk_score=risk,
-        collisions=feasible_mean('collisions'), proximity_time=feasible_mean('proximity_time'),
+        collisions=feasible_mean('collisions'), fault_risk_score=fault_risk,
+        fault_collisions=feasible_mean('fault_collisions'),
+        proximity_time=feasible_mean('proximity_time'),
         simulation_time=feasible_mean('simulation_time'),
         proximity_fraction=proximity_fraction,
         risk_score_all=float(np.mean([row['risk_score'] for row in rows])),
@@ -192,7 +204,8 @@ def tpkl_reference_from(tpkls: Sequence[float | None]) -> float:
     return float(np.mean(finite))
 
 
-GENERATION_SUMMARY_METRICS = ('risk_score', 'collisions', 'proximity_time', 'simulation_time')
+GENERATION_SUMMARY_METRICS = ('risk_score', 'fault_risk_score', 'collisions', 'fault_collisions',
+                              'proximity_time', 'simulation_time')
 """Metrics a generation summary reports as mean_<metric> and best_<metric>."""
 
 
@@ -252,7 +265,8 @@ def _episode_values(index: int, episode: EpisodeMetricsLike | Mapping[str, Any]
         return getattr(episode, name)
 
     values: dict[str, float | bool] = {'feasible': bool(get('feasible'))}
-    for name in ('collisions', 'proximity_time', 'simulation_time', 'risk_score'):
+    for name in ('collisions', 'fault_collisions', 'proximity_time', 'simulation_time',
+                 'risk_score', 'fault_risk_score'):
         value = float(get(name))
         if not (math.isfinite(value) and value >= 0.0):
             raise FitnessError(f'episode {index}: {name} must be a finite number >= 0, '

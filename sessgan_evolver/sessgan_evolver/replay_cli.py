@@ -119,7 +119,9 @@ def bag_environment(bag: Path, episode: dict):
         resolution=resolution, origin=(origin[0], origin[1]), start=Pose2D(*episode['start']),
         goal=Pose2D(*episode['goal']), seed=int(episode.get('seed', 0)),
         generation=int(episode.get('generation', -1)), member=int(episode.get('member', -1)),
-        feasible=bool(episode.get('feasible', True)))
+        feasible=bool(episode.get('feasible', True)),
+        route_length=float(episode.get('route_length', 0.0)),
+        route_min_clearance=float(episode.get('route_min_clearance', 0.0)))
 
 
 def resimulate(args, episode: dict) -> int:
@@ -130,6 +132,7 @@ def resimulate(args, episode: dict) -> int:
     from sessgan_gen.ros_conversion import environment_to_msg
     from sessgan_gen.scenarios import get_scenario
     from sessgan_interfaces.action import EvaluateEnvironment
+    from sessgan_sim.metrics import is_controller_failure
 
     environment = bag_environment(args.bag, episode)
     recorded = episode['metrics']
@@ -185,7 +188,7 @@ def resimulate(args, episode: dict) -> int:
         print(f'{label:12}{str(old):>18}{str(now):>18}')
     same = (new.outcome == recorded['outcome']
             and int(new.collisions) == int(recorded['collisions']))
-    failed = new.collisions > 0 or (new.feasible and new.outcome in ('timeout', 'stuck'))
+    failed = is_controller_failure(new)
     ok = same if args.expect == 'same' else not failed
     print('as expected' if ok else f'NOT as expected (--expect {args.expect})')
     return EXIT_AS_EXPECTED if ok else EXIT_DIFFERENT

@@ -46,6 +46,11 @@ class Environment:
     generation: int = -1
     member: int = -1
     feasible: bool = True
+    """A valid test: start and goal joined by a certified route (sessgan_gen.route_certificate)."""
+    route_length: float = 0.0
+    """m, length of the certified route (0 when not a valid test or not known)."""
+    route_min_clearance: float = 0.0
+    """m, bottleneck clearance of the route: the tightest passage between start and goal."""
     extra: dict = field(default_factory=dict)
 
     @property

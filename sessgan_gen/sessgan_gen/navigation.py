@@ -1,28 +1,19 @@
-"""Footprint-aware free space, start and goal selection, feasibility and shortest paths.
+"""Footprint-aware free space, valid-test environments and shortest paths.
 
 Used by the generator, the simulator and the evolver, so everything here is
-deterministic (no random numbers) and fast: the evolver builds thousands of
-environments per generation.
+deterministic (random choices come from the environment's seed) and fast: the evolver
+builds thousands of environments per generation.
 
 Conventions:
 
 * Cells are ``(row, col)`` in OccupancyGrid order (row 0 = lowest y).
-* **Footprint inflation**: the robot's centre may stand on a cell when no
-  blocked cell *square* comes closer than the robot's radius to the cell's
-  centre, and the grid's outside counts as blocked. Measuring to the nearest
-  point of a blocked square (not to its centre) is what keeps the car (radius
-  0.6 m in 1 m cells) out of track cells that touch the kerb, while the ground
-  robot and the drone (0.2 m in 0.5 m cells) still fit a one-cell gap.
-* **Connectivity**: 4-connected moves only. A diagonal move between two
-  blocked diagonal neighbours would cut a corner the footprint cannot pass, and
-  forbidding diagonals altogether is the simple safe rule.
-* **Start and goal**: the largest 4-connected region of the inflated free
-  space (ties: the region whose first cell in row-major order comes first);
-  a double sweep of breadth-first searches picks two cells far apart by
-  geodesic distance: A = the cell farthest from the region's first cell in
-  row-major order, B = the cell farthest from A (ties: smallest row, then col).
-  Start = A, goal = B. On a closed circuit this puts the goal about half a lap
-  from the start.
+* **Footprint inflation** (:func:`inflate`): the robot's centre may stand on a cell when no
+  blocked cell *square* comes closer than the robot's radius to the cell's centre, and the
+  grid's outside counts as blocked. Agents use it to patrol.
+* **Valid tests** (:func:`make_environment`): start, goal and the route certificate come from
+  :mod:`sessgan_gen.route_certificate` (start and goal with clearance, a route that keeps a
+  safety margin, far apart along it).
+* **Connectivity**: 4-connected moves only (sessgan_gen.grid_search).
 """
 
 from __future__ import annotations
@@ -34,25 +25,22 @@ from typing import NamedTuple
 import numpy as np
 
 from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
+from sessgan_gen.route_certificate import (
+    RouteCertificate,
+    certify,
+    map_clearance,
+    place_start_goal,
+    required_clearances,
+)
 from sessgan_gen.scenarios import Scenario
 from sessgan_gen.token_map import ScenarioLike, check_cells, resolve_scenario, tokens_to_occupancy
 
 Cell = tuple[int, int]
 """A grid cell (row, col)."""
 
-HEADING_LOOKAHEAD = 3
-"""Path cells ahead (behind, for the goal) used to point the start (goal) yaw along the route."""
-
 OPEN_CELL_WINDOW = 5
 """Side in cells of the window counting passable cells to find the most open cell."""
-
-
-class Route(NamedTuple):
-    """A start, a goal and the 4-connected shortest path between them (both included)."""
-
-    start: Cell
-    goal: Cell
-    path: list[Cell]
 
 
 class Regions(NamedTuple):
@@ -136,154 +124,13 @@ def footprint_free_mask(cells: np.ndarray, scenario: ScenarioLike) -> np.ndarray
     return inflate(passable_mask(cells, spec), spec.robot_radius / spec.cell_size)
 
 
-# --- breadth-first search on a padded flat grid ------------------------------------------------
-#
-# Pure Python on a flat bytearray with a one-cell blocked border: no bounds checks, and
-# faster than numpy for the few thousand cells of a map (numpy's per-call overhead
-# dominates a frontier search whose depth is the map's geodesic diameter).
-
-
-class _FlatGrid(NamedTuple):
-    open_cells: bytearray
-    stride: int
-    height: int
-    width: int
-
-
-def _flat_grid(free: np.ndarray) -> _FlatGrid:
-    mask = np.asarray(free, dtype=bool)
-    if mask.ndim != 2:
-        raise ValueError(f'free mask must be 2-D, got shape {mask.shape}')
-    padded = np.pad(mask, 1, mode='constant', constant_values=False)
-    return _FlatGrid(bytearray(padded.astype(np.uint8).tobytes()), padded.shape[1],
-                     mask.shape[0], mask.shape[1])
-
-
-def _to_flat(grid: _FlatGrid, cell: Cell) -> int:
-    return (cell[0] + 1) * grid.stride + cell[1] + 1
-
-
-def _to_cell(grid: _FlatGrid, index: int) -> Cell:
-    row, col = divmod(index, grid.stride)
-    return (row - 1, col - 1)
-
-
-def _bfs(grid: _FlatGrid, start: int, dist: list[int]) -> list[int]:
-    """Fill ``dist`` (pre-set to -1) from ``start``; return the visit order."""
-    open_cells = grid.open_cells
-    stride = grid.stride
-    dist[start] = 0
-    queue = [start]
-    append = queue.append
-    head = 0
-    while head < len(queue):
-        current = queue[head]
-        head += 1
-        step = dist[current] + 1
-        for neighbour in (current - stride, current - 1, current + 1, current + stride):
-            if open_cells[neighbour] and dist[neighbour] < 0:
-                dist[neighbour] = step
-                append(neighbour)
-    return queue
-
-
-def _farthest(order: list[int], dist: list[int]) -> int:
-    """The visited cell at the largest distance; ties go to the smallest flat index."""
-    best = order[-1]
-    far = dist[best]
-    for index in reversed(order):
-        if dist[index] != far:
-            break
-        best = min(best, index)
-    return best
-
-
-def _walk_back(grid: _FlatGrid, dist: list[int], goal: int) -> list[int]:
-    """Path from the BFS source to ``goal`` following decreasing distances."""
-    stride = grid.stride
-    path = [goal]
-    current = goal
-    while dist[current] > 0:
-        want = dist[current] - 1
-        for neighbour in (current - stride, current - 1, current + 1, current + stride):
-            if dist[neighbour] == want:
-                current = neighbour
-                break
-        path.append(current)
-    path.reverse()
-    return path
-
-
-def _regions(grid: _FlatGrid) -> tuple[list[int], list[list[int]], list[int]]:
-    """Label every free cell of a flat grid.
-
-    Returns (labels, visit order per region, distance from each region's first cell);
-    labels are -1 outside free space.
-    """
-    size = len(grid.open_cells)
-    dist = [-1] * size
-    labels = [-1] * size
-    orders: list[list[int]] = []
-    open_cells = grid.open_cells
-    index = open_cells.find(1)
-    while index >= 0:
-        if dist[index] < 0:
-            order = _bfs(grid, index, dist)
-            label = len(orders)
-            for member in order:
-                labels[member] = label
-            orders.append(order)
-        index = open_cells.find(1, index + 1)
-    return labels, orders, dist
-
-
 def reachable_regions(free: np.ndarray) -> Regions:
     """The 4-connected regions of a free mask (e.g. :func:`footprint_free_mask`)."""
-    grid = _flat_grid(free)
-    labels, orders, _ = _regions(grid)
+    grid = flat_grid(free)
+    labels, orders, _ = label_regions(grid)
     stride = grid.stride
     label_array = np.asarray(labels, dtype=np.int32).reshape(-1, stride)[1:-1, 1:-1]
     return Regions(np.ascontiguousarray(label_array), [len(order) for order in orders])
-
-
-def _route_in_free(free: np.ndarray) -> Route | None:
-    grid = _flat_grid(free)
-    _, orders, dist_from_first = _regions(grid)
-    if not orders:
-        return None
-    largest = max(range(len(orders)), key=lambda label: (len(orders[label]), -label))
-    order = orders[largest]
-    if len(order) < 2:
-        return None
-    start = _farthest(order, dist_from_first)
-    dist = [-1] * len(grid.open_cells)
-    order_from_start = _bfs(grid, start, dist)
-    goal = _farthest(order_from_start, dist)
-    path = [_to_cell(grid, index) for index in _walk_back(grid, dist, goal)]
-    return Route(_to_cell(grid, start), _to_cell(grid, goal), path)
-
-
-MIN_ROUTE_FRACTION = 0.5
-"""A feasible map's route is at least this fraction of the grid's shorter side long."""
-
-
-def min_route_cells(shape: tuple[int, ...]) -> int:
-    """Fewest route steps (cells) of a feasible map of ``shape`` (height, width)."""
-    return max(2, int(MIN_ROUTE_FRACTION * min(shape[0], shape[1])))
-
-
-def plan_route(cells: np.ndarray, scenario: ScenarioLike) -> Route | None:
-    """Start, goal and shortest path as the module docstring describes.
-
-    None when the footprint fits nowhere (no region of at least two cells).
-    """
-    return _route_in_free(footprint_free_mask(cells, scenario))
-
-
-def choose_start_goal(cells: np.ndarray, scenario: ScenarioLike) -> tuple[Cell, Cell] | None:
-    """Deterministic (start, goal) cells far apart in the largest footprint-free region."""
-    route = plan_route(cells, scenario)
-    return None if route is None else (route.start, route.goal)
 
 
 def _check_cell(free: np.ndarray, cell: Cell, label: str) -> None:
@@ -303,39 +150,32 @@ def shortest_path_in_free(free: np.ndarray, start: Cell, goal: Cell) -> list[Cel
     _check_cell(mask, goal, 'goal')
     if not (mask[start] and mask[goal]):
         return []
-    grid = _flat_grid(mask)
+    grid = flat_grid(mask)
     dist = [-1] * len(grid.open_cells)
-    _bfs(grid, _to_flat(grid, start), dist)
-    target = _to_flat(grid, goal)
+    bfs(grid, to_flat(grid, start), dist)
+    target = to_flat(grid, goal)
     if dist[target] < 0:
         return []
-    return [_to_cell(grid, index) for index in _walk_back(grid, dist, target)]
+    return [to_cell(grid, index) for index in walk_back(grid, dist, target)]
 
 
-def shortest_path(cells: np.ndarray, scenario: ScenarioLike, start_rc: Cell,
-                  goal_rc: Cell) -> list[Cell]:
-    """Shortest footprint-safe 4-connected path of cells from start to goal ([] if none)."""
-    return shortest_path_in_free(footprint_free_mask(cells, scenario), start_rc, goal_rc)
+def certify_environment(environment: Environment) -> RouteCertificate | None:
+    """The route certificate of an Environment's own start and goal (None: not a valid test).
 
-
-def is_feasible(cells: np.ndarray, scenario: ScenarioLike, start_rc: Cell,
-                goal_rc: Cell) -> bool:
-    """True when the robot's footprint can travel from ``start_rc`` to ``goal_rc``."""
-    return bool(shortest_path(cells, scenario, start_rc, goal_rc))
+    Recomputed from the occupancy grid with the scenario's margins, so it also holds for
+    environments that did not come from :func:`make_environment` (a user's map, a bag).
+    """
+    spec = resolve_scenario(environment.scenario)
+    grid = map_clearance(environment.occupancy, environment.resolution, environment.origin,
+                         spec)
+    start = grid.cell_of(environment.start.x, environment.start.y)
+    goal = grid.cell_of(environment.goal.x, environment.goal.y)
+    return certify(grid, start, goal, required_clearances(spec)[1])
 
 
 def environment_is_feasible(environment: Environment) -> bool:
-    """Feasibility of an Environment from its occupancy grid, start and goal poses."""
-    spec = resolve_scenario(environment.scenario)
-    passable = occupancy_passable_mask(environment.occupancy, spec)
-    free = inflate(passable, spec.robot_radius / environment.resolution)
-    start = environment.cell_of(environment.start.x, environment.start.y)
-    goal = environment.cell_of(environment.goal.x, environment.goal.y)
-    height, width = free.shape
-    for row, col in (start, goal):
-        if not (0 <= row < height and 0 <= col < width):
-            return False
-    return bool(shortest_path_in_free(free, start, goal))
+    """Whether an Environment's start and goal are joined by a certified route."""
+    return certify_environment(environment) is not None
 
 
 def _box_sums(mask: np.ndarray, side: int) -> np.ndarray:
@@ -366,52 +206,36 @@ def most_open_cell(cells: np.ndarray, scenario: ScenarioLike) -> Cell:
     return (int(row), int(col))
 
 
-def _heading(path: list[Cell], at_start: bool) -> float:
-    """Yaw in radians along the first (or last) HEADING_LOOKAHEAD steps of a path."""
-    if len(path) < 2:
-        return 0.0
-    steps = min(HEADING_LOOKAHEAD, len(path) - 1)
-    if at_start:
-        (row_a, col_a), (row_b, col_b) = path[0], path[steps]
-    else:
-        (row_a, col_a), (row_b, col_b) = path[-1 - steps], path[-1]
-    return math.atan2(row_b - row_a, col_b - col_a)
-
-
 def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str,
                      seed: int = 0, generation: int = -1, member: int = -1) -> Environment:
-    """Build the Environment of a token map: occupancy, start, goal and feasibility.
+    """Build the Environment of a token map: occupancy, start, goal and route certificate.
 
-    Resolution is the scenario's cell size (metres per cell) and the origin (0, 0),
-    so cell (row, col) spans x in [col*res, (col+1)*res). Start and goal sit at cell
-    centres chosen by :func:`plan_route`; their yaw points along the route's first
-    and last steps. ``feasible`` is True when the route has at least
-    :func:`min_route_cells` steps. Without any route (the footprint fits nowhere),
-    ``feasible`` is False and start and goal both sit at :func:`most_open_cell`, yaw 0.
-    ``extra['path_length_m']`` holds the route length in metres (0 when infeasible).
+    Resolution is the scenario's cell size (metres per cell) and the origin (0, 0), so cell
+    (row, col) spans x in [col*res, (col+1)*res). Start and goal are drawn from ``seed`` by
+    :func:`sessgan_gen.route_certificate.place_start_goal`; ``feasible`` (a valid test) is
+    True when they exist, with ``route_length`` and ``route_min_clearance`` (the bottleneck
+    clearance) in metres. Otherwise start and goal both sit at :func:`most_open_cell`, yaw 0,
+    and ``extra['rejection']`` says why. ``extra`` also holds the start and goal clearances.
     """
     spec: Scenario = resolve_scenario(scenario_name)
     array = check_cells(cells, spec)
     occupancy = tokens_to_occupancy(array, spec)
-    route = plan_route(array, spec)
     resolution = spec.cell_size
-
-    def centre(cell: Cell, yaw: float) -> Pose2D:
-        return Pose2D((cell[1] + 0.5) * resolution, (cell[0] + 0.5) * resolution, yaw)
-
-    if route is None:
-        cell = most_open_cell(array, spec)
-        start = goal = centre(cell, 0.0)
-        feasible = False
-        length = 0.0
+    placement = place_start_goal(occupancy, resolution, (0.0, 0.0), spec, seed)
+    extra: dict = {'start_clearance': placement.start_clearance,
+                   'goal_clearance': placement.goal_clearance,
+                   'rejection': placement.rejection}
+    certificate = placement.certificate
+    if placement.start is None or placement.goal is None or certificate is None:
+        row, col = most_open_cell(array, spec)
+        start = goal = Pose2D((col + 0.5) * resolution, (row + 0.5) * resolution, 0.0)
+        feasible, length, bottleneck = False, 0.0, 0.0
     else:
-        start = centre(route.start, _heading(route.path, at_start=True))
-        goal = centre(route.goal, _heading(route.path, at_start=False))
-        length = (len(route.path) - 1) * resolution
-        # A start next to its goal tests nothing: a map only counts as feasible if its
-        # route crosses a fair part of it.
-        feasible = len(route.path) - 1 >= min_route_cells(array.shape)
+        start, goal = Pose2D(*placement.start), Pose2D(*placement.goal)
+        feasible = True
+        length, bottleneck = certificate.length, certificate.bottleneck_clearance
     return Environment(
         id=env_id, scenario=spec.name, occupancy=occupancy, resolution=resolution,
         start=start, goal=goal, origin=(0.0, 0.0), seed=seed, generation=generation,
-        member=member, feasible=feasible, extra={'path_length_m': length})
+        member=member, feasible=feasible, route_length=length,
+        route_min_clearance=bottleneck, extra=extra)

@@ -80,6 +80,8 @@ def environment_to_msg(environment: Environment, stamp=None) -> EnvironmentMsg:
     msg.start = pose_to_msg(environment.start)
     msg.goal = pose_to_msg(environment.goal)
     msg.feasible = bool(environment.feasible)
+    msg.route_length = float(environment.route_length)
+    msg.route_min_clearance = float(environment.route_min_clearance)
     return msg
 
 
@@ -90,6 +92,7 @@ def environment_from_msg(msg: EnvironmentMsg) -> Environment:
         id=msg.id, scenario=msg.scenario, occupancy=occupancy, resolution=resolution,
         origin=origin, start=pose_from_msg(msg.start), goal=pose_from_msg(msg.goal),
         seed=int(msg.seed), generation=int(msg.generation), member=int(msg.member),
-        feasible=bool(msg.feasible))
+        feasible=bool(msg.feasible), route_length=float(msg.route_length),
+        route_min_clearance=float(msg.route_min_clearance))
     environment.validate()
     return environment

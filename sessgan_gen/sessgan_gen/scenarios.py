@@ -54,6 +54,12 @@ class Scenario:
     """Clearance in metres below which time counts as proximity time."""
     dummy_agents: int
     """Default number of moving dummy agents."""
+    clearance_margin: float = 0.25
+    """m beyond the robot's radius that start and goal keep from every obstacle: room to
+    turn and to leave (sessgan_gen.route_certificate)."""
+    route_margin: float = 0.1
+    """m beyond the robot's radius that the certified route keeps from every obstacle (Nav2's
+    inscribed radius plus an inflation margin); at most ``clearance_margin``."""
 
     @property
     def num_tokens(self) -> int:
@@ -81,6 +87,10 @@ def register_scenario(scenario: Scenario) -> Scenario:
             f'scenario {scenario.name!r}: tokens, names and occupancy differ in length')
     if sorted(scenario.hierarchy) != list(range(len(scenario.tokens))):
         raise ValueError(f'scenario {scenario.name!r}: hierarchy must list every token once')
+    if not 0 <= scenario.route_margin <= scenario.clearance_margin:
+        raise ValueError(
+            f'scenario {scenario.name!r}: margins must satisfy 0 <= route_margin '
+            f'({scenario.route_margin}) <= clearance_margin ({scenario.clearance_margin})')
     SCENARIOS[scenario.name] = scenario
     return scenario
 
@@ -128,6 +138,10 @@ register_scenario(Scenario(
     time_limit=120.0,
     proximity_distance=0.5,
     dummy_agents=0,
+    # Relative to the example's track, about 5 m wide: the start lies in the middle band of a
+    # track at least 3.2 m wide, and the route keeps a 1.8 m lane.
+    clearance_margin=1.0,
+    route_margin=0.3,
 ))
 
 register_scenario(Scenario(

@@ -7,13 +7,16 @@ speed. Agents are kinematic: static pybullet bodies moved every physics step,
 which the robot under test can hit (a contact counts as a collision) but cannot
 push. They move in the robot's plane (ground agents for ground robots, flyers at
 cruise altitude for the flyer) and are seen by its lidar. No agent starts within
-``min_start_distance`` of the robot's start.
+``min_start_distance`` of the robot's start, and no patrol begins or ends inside the
+``keep_clear`` discs the episode names (around the goal and on the certified route's narrow
+passages, so an agent never parks where the robot must pass).
 """
 
 from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,16 +98,22 @@ class DummyAgents:
         self._client = -1
         self._height = 0.0
         self._travelled = 0.0
+        self._index_of_body: dict[int, int] = {}
 
     def spawn(self, client: int, environment: Environment, robot: Robot, count: int,
-              rng: np.random.Generator) -> int:
-        """Create up to ``count`` agents; return how many found room."""
+              rng: np.random.Generator,
+              keep_clear: Sequence[tuple[float, float, float]] = ()) -> int:
+        """Create up to ``count`` agents; return how many found room.
+
+        ``keep_clear``: discs (x, y, radius) in metres where no patrol starts or ends.
+        """
         if count < 0:
             raise InvalidConfigError(f'agents: count must be >= 0, got {count}')
         self._client = client
         self._height = robot.ride_height
         self._travelled = 0.0
         self.body_ids, self.paths = [], []
+        self._index_of_body = {}
         if count == 0:
             self.positions = np.zeros((0, 2))
             return 0
@@ -116,9 +125,12 @@ class DummyAgents:
         centres_x = environment.origin[0] + (cols + 0.5) * resolution
         centres_y = environment.origin[1] + (rows + 0.5) * resolution
         start: Pose2D = environment.start
+        allowed = np.ones(len(rows), dtype=bool)
+        for x, y, radius in keep_clear:
+            allowed &= np.hypot(centres_x - x, centres_y - y) >= radius
         far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
-        spawn_cells = np.flatnonzero(far)
-        all_cells = np.arange(len(rows))
+        spawn_cells = np.flatnonzero(far & allowed)
+        end_cells = np.flatnonzero(allowed)
         if not len(spawn_cells):
             self.positions = np.zeros((0, 2))
             return 0
@@ -129,7 +141,7 @@ class DummyAgents:
             origin_cell = (int(rows[first]), int(cols[first]))
             best = [origin_cell]
             for _ in range(PATH_TRIES):
-                other = int(rng.choice(all_cells))
+                other = int(rng.choice(end_cells))
                 path = shortest_path_in_free(free, origin_cell, (int(rows[other]),
                                                                  int(cols[other])))
                 if len(path) > len(best):
@@ -146,7 +158,12 @@ class DummyAgents:
                 int(CollisionGroup.ROBOT | CollisionGroup.RAY), physicsClientId=client)
             self.body_ids.append(body)
         self.positions = np.array([path.position(0.0) for path in self.paths])
+        self._index_of_body = {body: index for index, body in enumerate(self.body_ids)}
         return len(self.body_ids)
+
+    def index_of(self, body_id: int) -> int | None:
+        """Index of the agent whose pybullet body is ``body_id``; None for any other body."""
+        return self._index_of_body.get(body_id)
 
     def advance(self, dt: float) -> None:
         """Move every agent ``dt`` seconds further along its patrol."""

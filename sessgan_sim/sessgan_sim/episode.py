@@ -38,10 +38,24 @@ import pybullet as p
 
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.grid_search import distance_field
+from sessgan_gen.route_certificate import (
+    CertificateGrid,
+    RouteCertificate,
+    certify,
+    map_clearance,
+    required_clearances,
+)
 from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_sim.agents import AgentConfig, DummyAgents
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
-from sessgan_sim.metrics import EpisodeMetrics, MetricsRecorder, Outcome
+from sessgan_sim.metrics import (
+    STANDING_SPEED,
+    ContactKind,
+    EpisodeMetrics,
+    MetricsRecorder,
+    Outcome,
+)
 from sessgan_sim.robots import STOP, Robot, VelocityCommand, create_robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
@@ -49,10 +63,13 @@ from sessgan_sim.sensors import (
     LidarConfig,
     LidarInfo,
     Twist2D,
-    in_contact,
+    contact_partners,
     read_odometry,
 )
 from sessgan_sim.world import World, WorldLayout, WorldStyle
+
+ROUTE_TIME_FACTOR = 4.0
+"""Default time limits allow driving the certified route at a quarter of the top speed."""
 
 START_OVERLAP_TOLERANCE = 1e-4
 """m: a start footprint penetrating an obstacle deeper than this is invalid."""
@@ -75,7 +92,9 @@ class EpisodeConfig:
     """Physics steps per sim second, rounded to a whole number of steps per tick. 100 Hz
     keeps a car at 12 m/s moving 12 cm per step, well inside any barrier's 1 m cell."""
     time_limit: float | None = None
-    """Sim seconds before the episode ends with outcome timeout."""
+    """Sim seconds before the episode ends with outcome timeout. None: the scenario's limit,
+    raised to ROUTE_TIME_FACTOR x the certified route's length / the robot's top speed, so a
+    valid test always leaves time to drive its route."""
     proximity_distance: float | None = None
     """Clearance below which time counts as proximity time."""
     clearance_range: float | None = None
@@ -199,33 +218,6 @@ class TickProfile:
         return self.physics + self.sensors + self.metrics
 
 
-def geodesic_field(passable: np.ndarray, goal: tuple[int, int]) -> np.ndarray:
-    """4-connected grid distance in cells from ``goal`` over ``passable`` cells (inf where
-    unreachable, everywhere when the goal cell is not passable)."""
-    mask = np.asarray(passable, dtype=bool)
-    distance = np.full(mask.shape, np.inf)
-    row, col = goal
-    if not (0 <= row < mask.shape[0] and 0 <= col < mask.shape[1]) or not mask[row, col]:
-        return distance
-    frontier = np.zeros_like(mask)
-    frontier[row, col] = True
-    reached = frontier.copy()
-    distance[row, col] = 0.0
-    step = 0
-    while frontier.any():
-        step += 1
-        grown = np.zeros_like(mask)
-        grown[1:, :] |= frontier[:-1, :]
-        grown[:-1, :] |= frontier[1:, :]
-        grown[:, 1:] |= frontier[:, :-1]
-        grown[:, :-1] |= frontier[:, 1:]
-        grown &= mask & ~reached
-        distance[grown] = step
-        reached |= grown
-        frontier = grown
-    return distance
-
-
 def _as_command(command: VelocityCommand | Sequence[float]) -> VelocityCommand:
     if isinstance(command, VelocityCommand):
         return command
@@ -248,6 +240,20 @@ class _Record:
     touching: bool = False
 
 
+class ProgressField(NamedTuple):
+    """Distance to the goal in certificate-grid steps that the stuck rule measures progress on.
+
+    Exact inside the certified route's space (clearance >= radius + route margin: where a
+    stack with an inflation margin drives, so a detour the route needs counts as progress),
+    extended a few steps into the band around it where a robot cutting a corner or touching
+    a wall may be, but never through a gap the certificate does not use; inf elsewhere. In a
+    map without a certified route it is the distance through any space the footprint fits.
+    """
+
+    grid: CertificateGrid
+    steps: np.ndarray
+
+
 @dataclass
 class _Live:
     """The simulation of an episode whose environment could be built."""
@@ -255,13 +261,15 @@ class _Live:
     robot: Robot
     lidar: Lidar
     clearance: ClearanceSensor
-    progress_field: np.ndarray
+    progress: ProgressField
     time_limit: float
     proximity_distance: float
     goal_tolerance: float
     best_progress: float = math.inf
     last_progress_time: float = 0.0
     next_scan_time: float = 0.0
+    velocity: tuple[float, float] = (0.0, 0.0)
+    """m/s, map-frame velocity of the robot's centre over the last physics step."""
 
 
 class Episode:
@@ -361,9 +369,14 @@ class Episode:
 
         try:
             environment.validate()
-            config = config.resolved(get_scenario(environment.scenario))
-            record.config = config
+            scenario_limit = config.time_limit is None
+            config = record.config = config.resolved(get_scenario(environment.scenario))
             robot = create_robot(str(config.robot), config.robot_params)
+            if scenario_limit and environment.route_length > 0:
+                route_time = ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
+                config = dataclasses.replace(
+                    config, time_limit=max(float(config.time_limit or 0.0), route_time))
+            record.config = config
         except (SessganGenError, UnknownRobotError) as err:
             self._end(Outcome.INVALID_ENVIRONMENT, str(err))
             return self._blank_observation()
@@ -379,16 +392,23 @@ class Episode:
             return self._blank_observation()
 
         noise_seed, agent_seed = np.random.SeedSequence(config.seed).spawn(2)
+        spec = get_scenario(environment.scenario)
+        grid = map_clearance(environment.occupancy, environment.resolution,
+                             environment.origin, spec)
+        route_need = required_clearances(spec)[1]
+        certificate = (certify(grid, grid.cell_of(environment.start.x, environment.start.y),
+                               grid.cell_of(environment.goal.x, environment.goal.y), route_need)
+                       if environment.feasible else None)
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
-                           np.random.default_rng(agent_seed))
+                           np.random.default_rng(agent_seed),
+                           keep_clear=self._agent_keep_clear(environment, robot, config,
+                                                             certificate))
         lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
         lidar.attach(client, robot, layout, self._agents)
-        passable = np.isin(environment.occupancy, robot.passable_values)
         live = _Live(
             robot=robot, lidar=lidar,
             clearance=ClearanceSensor(client, robot, layout, clearance_range),
-            progress_field=geodesic_field(
-                passable, environment.cell_of(environment.goal.x, environment.goal.y)),
+            progress=self._progress_field(grid, environment, robot, route_need),
             time_limit=float(config.time_limit or 0.0),
             proximity_distance=float(config.proximity_distance or 0.0),
             goal_tolerance=float(config.goal_tolerance or 0.0),
@@ -421,9 +441,10 @@ class Episode:
 
         # The hot loop: bound methods and locals keep Python's overhead per step low.
         advance_agents, apply, sync = self._agents.advance, robot.apply, robot.sync
-        record_contact, hypot = recorder.record_contact, math.hypot
-        step_simulation = p.stepSimulation
+        step_simulation, hypot = p.stepSimulation, math.hypot
         x, y = robot.position
+        velocity = live.velocity
+        step_time = record.ticks * config.control_period
         travelled = 0.0
         for _ in range(config.physics_steps_per_tick):
             advance_agents(dt)
@@ -431,12 +452,17 @@ class Episode:
             apply(command, dt)
             step_simulation(physicsClientId=client)
             sync()
-            touching = in_contact(client, body)
-            record_contact(touching)
+            step_time += dt
             x, y = robot.position
+            previous, velocity = velocity, ((x - x_before) / dt, (y - y_before) / dt)
+            partners = contact_partners(client, body)
+            touching = bool(partners)
+            if touching:
+                self._record_contacts(recorder, partners, step_time, x, y, (previous, velocity))
             travelled += hypot(x - x_before, y - y_before)
             if hypot(x - goal.x, y - goal.y) <= tolerance:
                 reached = True
+        live.velocity = velocity
         recorder.record_motion(travelled)
         record.touching = touching
         record.ticks += 1
@@ -530,18 +556,80 @@ class Episode:
                           f'stopped {self._distance_to_goal(record):.2f} m from it at '
                           f'{now:.2f} s')
 
+    def _record_contacts(self, recorder: MetricsRecorder, partners: set[int], time: float,
+                         x: float, y: float,
+                         velocities: tuple[tuple[float, float], ...]) -> None:
+        """Record one physics step's contacts, attributing each (see sessgan_sim.metrics)."""
+        agents = self._agents
+        static_recorded = False
+        for body in partners:
+            agent = agents.index_of(body)
+            if agent is None:
+                if not static_recorded:
+                    recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
+                    static_recorded = True
+                continue
+            dx, dy = agents.positions[agent, 0] - x, agents.positions[agent, 1] - y
+            distance = math.hypot(dx, dy) or 1e-9
+            # The robot drove into the agent if, just before or during the contact step, it
+            # moved toward it faster than a standing robot would.
+            approach = max((vx * dx + vy * dy) / distance for vx, vy in velocities)
+            kind = (ContactKind.ROBOT_INTO_AGENT if approach > STANDING_SPEED
+                    else ContactKind.AGENT_INTO_ROBOT)
+            recorder.record_contact(time, agent, kind, x, y)
+
+    @staticmethod
+    def _progress_field(grid: CertificateGrid, environment: Environment, robot: Robot,
+                        route_need: float) -> ProgressField:
+        goal = grid.cell_of(environment.goal.x, environment.goal.y)
+        clearance = grid.clearance
+        steps = distance_field(clearance >= route_need - 1e-9, goal)
+        start = grid.cell_of(environment.start.x, environment.start.y)
+        inside = 0 <= start[0] < steps.shape[0] and 0 <= start[1] < steps.shape[1]
+        if not (inside and math.isfinite(steps[start])):
+            return ProgressField(grid, distance_field(
+                clearance >= robot.footprint_radius * 0.75, goal))
+        band = (clearance > 0.0) & ~np.isfinite(steps)
+        for _ in range(int(math.ceil(route_need / grid.cell_size)) + 1):
+            padded = np.pad(steps, 1, constant_values=np.inf)
+            nearest = np.minimum.reduce([padded[:-2, 1:-1], padded[2:, 1:-1],
+                                         padded[1:-1, :-2], padded[1:-1, 2:]]) + 1.0
+            steps = np.where(band, np.minimum(steps, nearest), steps)
+        return ProgressField(grid, steps)
+
+    @staticmethod
+    def _agent_keep_clear(environment: Environment, robot: Robot, config: EpisodeConfig,
+                          certificate: RouteCertificate | None
+                          ) -> list[tuple[float, float, float]]:
+        """Discs (x, y, radius) where agents may neither start nor end a patrol leg: around
+        the goal, and on the certified route's narrow passages (where the robot could not
+        pass an agent standing there)."""
+        agents = config.agents
+        goal = environment.goal
+        discs = [(goal.x, goal.y, agents.min_start_distance)]
+        if certificate is None:
+            return discs
+        spec = get_scenario(environment.scenario)
+        narrow_below = agents.radius + robot.footprint_radius + spec.route_margin
+        reach = agents.radius + robot.footprint_radius
+        grid_step = max(1, len(certificate.path) // 400)  # bound the disc count on long routes
+        clearance = certificate.grid.clearance
+        for row, col in certificate.path[::grid_step]:
+            if clearance[row, col] < narrow_below:
+                x, y = certificate.grid.centre((row, col))
+                discs.append((x, y, reach))
+        return discs
+
     def _progress_distance(self, record: _Record, live: _Live) -> float:
-        """Geodesic grid distance (m) from the robot's cell to the goal; straight-line
-        distance where the grid gives none."""
-        environment = record.environment
+        """Distance (m) from the robot to the goal along its ProgressField; inf (never
+        progress) where the field does not reach."""
+        progress = live.progress
         x, y = live.robot.position
-        row, col = environment.cell_of(x, y)
-        field_ = live.progress_field
-        if 0 <= row < field_.shape[0] and 0 <= col < field_.shape[1]:
-            cells = field_[row, col]
-            if math.isfinite(cells):
-                return float(cells) * environment.resolution
-        return self._distance_to_goal(record)
+        row, col = progress.grid.cell_of(x, y)
+        steps = progress.steps
+        if 0 <= row < steps.shape[0] and 0 <= col < steps.shape[1]:
+            return float(steps[row, col]) * progress.grid.cell_size
+        return math.inf
 
     def _distance_to_goal(self, record: _Record) -> float:
         environment = record.environment

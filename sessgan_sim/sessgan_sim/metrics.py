@@ -1,21 +1,36 @@
 """Episode outcomes and metrics, exactly as ARCHITECTURE.md defines them.
 
-* collisions: contact *events*, i.e. no-contact -> contact transitions between the
-  robot and walls, out-of-bounds barriers, low obstacles (ground robots) or agents,
-  checked after every physics step.
+* collisions: contact *events* between the robot and walls, out-of-bounds barriers, low
+  obstacles (ground robots) or agents, checked after every physics step. One physical contact
+  counts once: an event with a partner (static obstacles together, each agent on its own)
+  begins when the robot touches it after at least ``CONTACT_DEBOUNCE`` seconds out of contact
+  with it, so sliding along a wall, or a contact flickering on and off, is one event.
+* Each event is attributed (:class:`ContactKind`): the robot against a static obstacle, the
+  robot moving into an agent (its velocity toward the agent above ``STANDING_SPEED`` at the
+  event's start), or an agent driving into a robot that stood still or moved away, which is
+  not the controller's fault. ``fault_collisions`` counts the first two.
 * proximity_time: sim seconds with clearance (robot body to the nearest obstacle or
   agent) below the proximity distance while not in contact, sampled every control
   tick (each tick counts its whole period).
 * simulation_time: sim seconds until the episode ended (or so far).
-* risk_score = collisions * proximity_time / simulation_time (0 when no time passed).
+* risk_score = collisions * proximity_time / simulation_time (0 when no time passed), the
+  paper's formula; fault_risk_score is the same with fault collisions.
+* A *controller failure* (:func:`is_controller_failure`) happens only in a valid test
+  (feasible map): a fault collision, or the goal not reached (timeout, stuck).
 """
 
 from __future__ import annotations
 
 import enum
 import math
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import asdict, dataclass, field
+from typing import Any, NamedTuple
+
+CONTACT_DEBOUNCE = 0.5
+"""s out of contact with a partner before touching it again counts as a new event."""
+
+STANDING_SPEED = 0.05
+"""m/s: a robot approaching an agent slower than this at contact did not drive into it."""
 
 
 class Outcome(enum.StrEnum):
@@ -27,6 +42,43 @@ class Outcome(enum.StrEnum):
     STUCK = 'stuck'
     CONTROLLER_UNRESPONSIVE = 'controller_unresponsive'
     INVALID_ENVIRONMENT = 'invalid_environment'
+
+
+FAILURE_OUTCOMES = frozenset({Outcome.TIMEOUT, Outcome.STUCK})
+"""Outcomes that fail a valid test even without a collision: the goal was not reached."""
+
+
+class ContactKind(enum.StrEnum):
+    """Who caused a contact event."""
+
+    STATIC = 'static'
+    """The robot touched a wall, barrier or low obstacle: its fault."""
+    ROBOT_INTO_AGENT = 'robot_into_agent'
+    """The robot moved into an agent: its fault."""
+    AGENT_INTO_ROBOT = 'agent_into_robot'
+    """An agent drove into the robot standing still or moving away: not its fault."""
+
+
+class ContactEvent(NamedTuple):
+    """One debounced contact event."""
+
+    time: float
+    """s since the episode's start."""
+    x: float
+    """m, robot centre in the map frame when the event began."""
+    y: float
+    kind: ContactKind
+    agent: int
+    """Index of the agent touched; -1 for static obstacles."""
+
+    @property
+    def fault(self) -> bool:
+        """Whether the robot under test caused it."""
+        return self.kind is not ContactKind.AGENT_INTO_ROBOT
+
+    def to_dict(self) -> dict[str, Any]:
+        return {'time': self.time, 'x': self.x, 'y': self.y, 'kind': self.kind.value,
+                'agent': self.agent, 'fault': self.fault}
 
 
 def risk_score(collisions: int, proximity_time: float, simulation_time: float) -> float:
@@ -41,6 +93,7 @@ class EpisodeMetrics:
     """The result of one episode (or of its part so far, with outcome None)."""
 
     collisions: int
+    """Contact events of every kind (the paper's count)."""
     proximity_time: float
     """s"""
     simulation_time: float
@@ -63,36 +116,68 @@ class EpisodeMetrics:
     """Commands with a NaN or infinite component, replaced by a stop."""
     detail: str = ''
     """Human-readable explanation of the outcome and of anything unusual."""
+    fault_collisions: int = 0
+    """Contact events the robot under test caused (static + robot_into_agent)."""
+    static_collisions: int = 0
+    robot_into_agent_collisions: int = 0
+    agent_into_robot_collisions: int = 0
+    """Agents driving into the robot: recorded, not its fault."""
+    fault_risk_score: float = 0.0
+    """fault_collisions x proximity_time / simulation_time."""
+    contacts: tuple[ContactEvent, ...] = field(default=())
+    """Every contact event, in order."""
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (outcome as its string value; infinities as None)."""
         data = asdict(self)
         data['outcome'] = self.outcome.value if self.outcome is not None else None
+        data['contacts'] = [event.to_dict() for event in self.contacts]
         for key, value in data.items():
             if isinstance(value, float) and not math.isfinite(value):
                 data[key] = None
         return data
 
 
+def is_controller_failure(metrics: Any) -> bool:
+    """A fault of the controller under test: in a valid test (feasible map), a contact it
+    caused, or the goal not reached (timeout, stuck). Works on EpisodeMetrics and on
+    anything with the same fields (messages, rows)."""
+    if not metrics.feasible:
+        return False
+    return metrics.fault_collisions > 0 or str(metrics.outcome) in FAILURE_OUTCOMES
+
+
 class MetricsRecorder:
     """Accumulates an episode's metrics step by step."""
 
     def __init__(self, clearance_range: float) -> None:
-        self.collisions = 0
         self.proximity_time = 0.0
         self.min_clearance = clearance_range
         self.distance_travelled = 0.0
         self.ticks = 0
         self.invalid_commands = 0
-        self._touching = False
+        self.contacts: list[ContactEvent] = []
+        self._last_touch: dict[int, float] = {}
+        """Last time (s) each partner was touched; -1 = static obstacles, i = agent i."""
 
-    def record_contact(self, touching: bool) -> bool:
-        """Record the contact state after a physics step; True when a new event began."""
-        started = touching and not self._touching
-        if started:
-            self.collisions += 1
-        self._touching = touching
-        return started
+    @property
+    def collisions(self) -> int:
+        return len(self.contacts)
+
+    @property
+    def fault_collisions(self) -> int:
+        return sum(1 for event in self.contacts if event.fault)
+
+    def record_contact(self, time: float, partner: int, kind: ContactKind, x: float,
+                       y: float) -> bool:
+        """Record that the robot touches ``partner`` (-1 static, else an agent index) at
+        ``time`` s; True when this begins a new event (see CONTACT_DEBOUNCE)."""
+        last = self._last_touch.get(partner)
+        self._last_touch[partner] = time
+        if last is not None and time - last <= CONTACT_DEBOUNCE + 1e-9:
+            return False
+        self.contacts.append(ContactEvent(time, x, y, kind, partner))
+        return True
 
     def record_motion(self, distance: float) -> None:
         """Add ``distance`` metres travelled by the robot's centre."""
@@ -111,6 +196,8 @@ class MetricsRecorder:
     def snapshot(self, simulation_time: float, feasible: bool, distance_to_goal: float,
                  outcome: Outcome | None, detail: str) -> EpisodeMetrics:
         """The metrics so far."""
+        kinds = [event.kind for event in self.contacts]
+        faults = self.fault_collisions
         return EpisodeMetrics(
             collisions=self.collisions,
             proximity_time=self.proximity_time,
@@ -124,4 +211,10 @@ class MetricsRecorder:
             outcome=outcome,
             invalid_commands=self.invalid_commands,
             detail=detail,
+            fault_collisions=faults,
+            static_collisions=kinds.count(ContactKind.STATIC),
+            robot_into_agent_collisions=kinds.count(ContactKind.ROBOT_INTO_AGENT),
+            agent_into_robot_collisions=kinds.count(ContactKind.AGENT_INTO_ROBOT),
+            fault_risk_score=risk_score(faults, self.proximity_time, simulation_time),
+            contacts=tuple(self.contacts),
         )

@@ -154,6 +154,11 @@ class Robot(abc.ABC):
     def mass(self) -> float:
         """Mass in kg."""
 
+    @property
+    @abc.abstractmethod
+    def top_speed(self) -> float:
+        """Fastest forward speed in m/s."""
+
     # --- dynamics, supplied by each model -------------------------------------------------
 
     @abc.abstractmethod
@@ -316,6 +321,10 @@ class DiffDriveRobot(Robot):
     def mass(self) -> float:
         return self.params.mass
 
+    @property
+    def top_speed(self) -> float:
+        return self.params.max_linear_speed
+
     def _create_shape(self, client: int) -> int:
         return p.createCollisionShape(p.GEOM_CYLINDER, radius=self.params.radius,
                                       height=self.params.height, physicsClientId=client)
@@ -403,6 +412,10 @@ class CarRobot(Robot):
     @property
     def mass(self) -> float:
         return self.params.mass
+
+    @property
+    def top_speed(self) -> float:
+        return self.params.max_speed
 
     @property
     def steering_angle(self) -> float:
@@ -508,6 +521,10 @@ class FlyerRobot(Robot):
     @property
     def mass(self) -> float:
         return self.params.mass
+
+    @property
+    def top_speed(self) -> float:
+        return self.params.max_speed
 
     def _create_shape(self, client: int) -> int:
         return p.createCollisionShape(p.GEOM_CYLINDER, radius=self.params.radius,

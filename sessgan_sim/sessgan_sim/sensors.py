@@ -501,13 +501,12 @@ def read_odometry(robot: Robot) -> Odometry:
     return Odometry(Pose2D(state.x, state.y, state.yaw), Twist2D(state.vx, state.vy, state.wz))
 
 
-def in_contact(client: int, body_id: int, tolerance: float = CONTACT_TOLERANCE) -> bool:
-    """Whether ``body_id`` touches anything it collides with (its contact points from the last
-    physics step, penetrating or closer than ``tolerance`` metres)."""
-    for point in p.getContactPoints(bodyA=body_id, physicsClientId=client):
-        if point[8] <= tolerance:
-            return True
-    return False
+def contact_partners(client: int, body_id: int,
+                     tolerance: float = CONTACT_TOLERANCE) -> set[int]:
+    """Bodies ``body_id`` touches (its contact points from the last physics step, penetrating
+    or closer than ``tolerance`` metres); empty when it touches nothing."""
+    return {point[2] for point in p.getContactPoints(bodyA=body_id, physicsClientId=client)
+            if point[8] <= tolerance}
 
 
 class Footprint(NamedTuple):

@@ -50,7 +50,7 @@ from sessgan_sim import ros_messages as rm
 from sessgan_sim.bag_recording import BagRecord, BagWriteError, write_episode_bag
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import SessganSimError
-from sessgan_sim.metrics import Outcome
+from sessgan_sim.metrics import Outcome, is_controller_failure
 from sessgan_sim.sensors import LidarConfig
 
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -59,7 +59,6 @@ SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 """cmd_vel: matches reliable and best-effort controllers; see CommandReceiver."""
 
-FAILURE_OUTCOMES = ('timeout', 'stuck')
 
 
 class CommandReceiver:
@@ -283,7 +282,7 @@ class SimulatorNode(Node):
             self.log_timing(environment.id, metrics, episode.profile,
                             time.monotonic() - loop_start)
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
-        if recording is not None and is_failure(metrics):
+        if recording is not None and is_controller_failure(metrics):
             message.bag_path = self.write_bag(
                 record_directory, environment, config, metrics, recording, seed, controller)
         return message
@@ -473,7 +472,9 @@ class SimulatorNode(Node):
             'robot': config.robot, 'time_limit': config.time_limit,
             'start': [environment.start.x, environment.start.y, environment.start.yaw],
             'goal': [environment.goal.x, environment.goal.y, environment.goal.yaw],
-            'feasible': environment.feasible, 'namespace': self.get_namespace(),
+            'feasible': environment.feasible, 'route_length': environment.route_length,
+            'route_min_clearance': environment.route_min_clearance,
+            'namespace': self.get_namespace(),
         }
         try:
             path = write_episode_bag(
@@ -485,11 +486,6 @@ class SimulatorNode(Node):
             return ''
         self.get_logger().info(f'failure bag written: {path}')
         return str(path)
-
-
-def is_failure(metrics) -> bool:
-    """A collision, or a timeout/stuck in a map the robot could have crossed."""
-    return metrics.collisions > 0 or (metrics.feasible and metrics.outcome in FAILURE_OUTCOMES)
 
 
 def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetricsMsg:
@@ -507,6 +503,12 @@ def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetric
     msg.final_distance_to_goal = float(metrics.final_distance_to_goal)
     msg.ticks = int(metrics.ticks)
     msg.wall_time = float(wall_time)
+    msg.fault_collisions = int(metrics.fault_collisions)
+    msg.static_collisions = int(metrics.static_collisions)
+    msg.robot_into_agent_collisions = int(metrics.robot_into_agent_collisions)
+    msg.agent_into_robot_collisions = int(metrics.agent_into_robot_collisions)
+    msg.fault_risk_score = float(metrics.fault_risk_score)
+    msg.invalid_commands = int(metrics.invalid_commands)
     return msg
 
 

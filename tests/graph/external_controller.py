@@ -3,7 +3,8 @@
 It imports nothing from SESS-GAN, proving that any stack plugs into the simulator through the
 topic contract (scan, odom, goal_pose in; cmd_vel out). Policy: turn toward the goal, drive
 forward when facing it, slow down near obstacles ahead. ``--nan`` sends NaN velocities instead
-(a broken controller), ``--silent`` never answers.
+(a broken controller), ``--silent`` never answers, ``--blind`` drives straight ahead whatever
+the scan says (a faulty controller that must fail a valid test).
 """
 
 import math
@@ -44,6 +45,8 @@ class GoToGoal(Node):
         if self.behaviour == 'nan':
             cmd.linear.x = float('nan')
             cmd.angular.z = float('inf')
+        elif self.behaviour == 'blind':
+            cmd.linear.x = 0.5
         elif self.goal is not None and self.pose is not None:
             x, y, yaw = self.pose
             heading = math.atan2(self.goal[1] - y, self.goal[0] - x)
@@ -58,7 +61,8 @@ class GoToGoal(Node):
 
 
 def main() -> None:
-    behaviour = 'nan' if '--nan' in sys.argv else 'silent' if '--silent' in sys.argv else 'go'
+    behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind') if flag in sys.argv),
+                     'go')
     rclpy.init(args=sys.argv)
     node = GoToGoal(behaviour)
     try:

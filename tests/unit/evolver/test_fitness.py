@@ -25,10 +25,20 @@ class Episode:
     proximity_time: float
     simulation_time: float
     feasible: bool = True
+    agent_caused: int = 0
+    """Collisions of an agent driving into the standing robot: not faults."""
 
     @property
     def risk_score(self) -> float:
         return self.collisions * self.proximity_time / self.simulation_time
+
+    @property
+    def fault_collisions(self) -> int:
+        return self.collisions - self.agent_caused
+
+    @property
+    def fault_risk_score(self) -> float:
+        return self.fault_collisions * self.proximity_time / self.simulation_time
 
 
 def test_formula_by_hand():
@@ -84,16 +94,28 @@ def test_tpkl_penalty_only_above_the_reference_and_tolerance():
 
 def test_mappings_are_accepted_as_episodes():
     row = {'collisions': 1, 'proximity_time': 2.0, 'simulation_time': 4.0,
-           'risk_score': 0.5, 'feasible': True, 'outcome': 'collision_limit'}
+           'risk_score': 0.5, 'fault_collisions': 1, 'fault_risk_score': 0.5,
+           'feasible': True, 'outcome': 'collision_limit'}
     assert member_fitness([row]).risk_score == 0.5
 
 
+def test_collisions_the_robot_did_not_cause_earn_no_fitness():
+    rammed = member_fitness([Episode(2, 3.0, 10.0, agent_caused=2)],
+                            config=FitnessConfig(proximity_weight=0.0, diversity_weight=0.0))
+    assert rammed.risk_score == pytest.approx(0.6)  # the paper's figure, still reported
+    assert rammed.fault_risk_score == 0.0 and rammed.fitness == 0.0
+    own = member_fitness([Episode(2, 3.0, 10.0, agent_caused=1)],
+                         config=FitnessConfig(proximity_weight=0.0, diversity_weight=0.0))
+    assert own.fitness == pytest.approx(0.3) and own.fault_collisions == 1
+
+
 @pytest.mark.parametrize('episode', [
-    {'collisions': 1, 'proximity_time': 2.0, 'simulation_time': 4.0, 'feasible': True},
+    {'collisions': 1, 'proximity_time': 2.0, 'simulation_time': 4.0, 'feasible': True,
+     'fault_collisions': 1, 'fault_risk_score': 0.5},
     {'collisions': 1, 'proximity_time': -2.0, 'simulation_time': 4.0, 'risk_score': 0.0,
-     'feasible': True},
+     'fault_collisions': 1, 'fault_risk_score': 0.0, 'feasible': True},
     {'collisions': 1, 'proximity_time': float('nan'), 'simulation_time': 4.0,
-     'risk_score': 0.0, 'feasible': True},
+     'risk_score': 0.0, 'fault_collisions': 1, 'fault_risk_score': 0.0, 'feasible': True},
 ])
 def test_bad_episodes_are_rejected(episode):
     with pytest.raises(FitnessError):

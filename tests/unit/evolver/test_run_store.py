@@ -39,9 +39,10 @@ def fake_episode(genome: Genome, map_seed: int) -> dict:
     collisions = int(rng.integers(0, 3))
     simulation_time = float(rng.uniform(5.0, 30.0))
     proximity_time = float(rng.uniform(0.0, simulation_time / 2))
-    return {'collisions': collisions, 'proximity_time': proximity_time,
-            'simulation_time': simulation_time,
+    return {'collisions': collisions, 'fault_collisions': collisions,
+            'proximity_time': proximity_time, 'simulation_time': simulation_time,
             'risk_score': collisions * proximity_time / simulation_time,
+            'fault_risk_score': collisions * proximity_time / simulation_time,
             'feasible': bool(rng.random() > 0.2),
             'outcome': 'collision_limit' if collisions else 'goal_reached'}
 

@@ -1,24 +1,20 @@
-"""Tests of footprint inflation, regions, start/goal choice, paths and make_environment."""
+"""Tests of footprint inflation, regions, paths and make_environment (placement and the route
+certificate themselves: test_route_certificate.py)."""
 
-import math
 
 import numpy as np
 import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.navigation import (
-    choose_start_goal,
     environment_is_feasible,
     footprint_free_mask,
     inflate,
-    is_feasible,
     make_environment,
     most_open_cell,
     occupancy_passable_mask,
     passable_mask,
-    plan_route,
     reachable_regions,
-    shortest_path,
     shortest_path_in_free,
 )
 from sessgan_gen.token_map import parse_token_map
@@ -95,58 +91,18 @@ def test_reachable_regions_are_four_connected():
     assert regions.labels.dtype == np.int32
 
 
-def test_corridor_start_and_goal_are_its_ends():
-    cells = grid('WWWWWWWWWW\nWGGGGGGGGW\nWWWWWWWWWW\n')
-    start, goal = choose_start_goal(cells, 'factory')
-    assert {start, goal} == {(1, 1), (1, 8)}
-    assert choose_start_goal(cells, 'factory') == (start, goal)  # deterministic
-
-
-def test_start_and_goal_lie_in_the_largest_region():
-    cells = grid("""WWWWWWWWWWWW
-WGGWGGGGGGGW
-WGGWGWWWWWWW
-WWWWGGGGGGGW
-WWWWWWWWWWWW""")
-    # A U-shaped aisle (15 cells) beats the 2x2 room; its first cell is (1, 4), the
-    # farthest from it is the top end (3, 10), and the farthest from that the bottom end.
-    start, goal = choose_start_goal(cells, 'factory')
-    assert (start, goal) == ((3, 10), (1, 10))
-    path = shortest_path(cells, 'factory', start, goal)
-    assert len(path) == 15 and path[0] == start and path[-1] == goal
-    for (row_a, col_a), (row_b, col_b) in zip(path, path[1:], strict=False):
-        assert abs(row_a - row_b) + abs(col_a - col_b) == 1
-
-
-def test_goal_is_about_half_a_lap_on_a_loop():
-    size = 20
-    cells = np.ones((size, size), dtype=np.int64)
-    cells[2:18, 2:18] = 0
-    cells[6:14, 6:14] = 1   # a ring 4 cells wide, centre line 48 cells long
-    start, goal = choose_start_goal(cells, 'racetrack')
-    free_mask = footprint_free_mask(cells, 'racetrack')
-    path = shortest_path_in_free(free_mask, start, goal)
-    # The other way round the ring, avoiding the first path's interior.
-    blocked_once = free_mask.copy()
-    for cell in path[1:-1]:
-        blocked_once[cell] = False
-    other = shortest_path_in_free(blocked_once, start, goal)
-    assert other, 'start and goal should be joined both ways round the loop'
-    assert 0.6 < (len(path) - 1) / (len(other) - 1) <= 1.0
-
-
-def test_feasibility_and_paths():
-    cells = grid("""WWWWWWW
-WGGWGGW
-WGGWGGW
-WWWWWWW""")
-    assert is_feasible(cells, 'factory', (1, 1), (2, 2))
-    assert not is_feasible(cells, 'factory', (1, 1), (1, 4))
-    assert not is_feasible(cells, 'factory', (1, 1), (0, 0))  # goal on a wall
-    assert shortest_path(cells, 'factory', (1, 1), (1, 4)) == []
-    assert shortest_path(cells, 'factory', (1, 1), (1, 1)) == [(1, 1)]
+def test_shortest_path_in_free():
+    mask = free("""
+        ..#..
+        ..#..
+    """)
+    assert shortest_path_in_free(mask, (0, 0), (1, 1)) in ([(0, 0), (0, 1), (1, 1)],
+                                                           [(0, 0), (1, 0), (1, 1)])
+    assert shortest_path_in_free(mask, (0, 0), (0, 4)) == []
+    assert shortest_path_in_free(mask, (0, 0), (0, 2)) == []  # goal on a wall
+    assert shortest_path_in_free(mask, (1, 1), (1, 1)) == [(1, 1)]
     with pytest.raises(ValueError, match='outside'):
-        is_feasible(cells, 'factory', (1, 1), (9, 9))
+        shortest_path_in_free(mask, (0, 0), (9, 9))
 
 
 def test_no_diagonal_corner_cutting():
@@ -157,28 +113,29 @@ def test_no_diagonal_corner_cutting():
     assert shortest_path_in_free(mask, (0, 1), (1, 0)) == []
 
 
-def test_make_environment_on_a_corridor():
-    cells = grid('WWWWWWWW\nWGGGGGGW\nWGGGGGGW\nWWWWWWWW\n')
+def test_make_environment_in_a_hall():
+    cells = np.zeros((32, 32), dtype=np.int64)
+    cells[[0, -1], :] = 1
+    cells[:, [0, -1]] = 1
+    cells[10:22, 15:17] = 1  # a wall in the middle of the hall
     environment = make_environment(cells, 'factory', 'env-1', seed=7, generation=3, member=2)
     assert isinstance(environment, Environment)
     environment.validate()
-    assert environment.feasible
+    assert environment.feasible and environment.extra['rejection'] == ''
     assert (environment.id, environment.seed, environment.generation, environment.member) == (
         'env-1', 7, 3, 2)
     assert environment.resolution == 0.5 and environment.origin == (0.0, 0.0)
     assert environment.occupancy.dtype == np.int8
-    assert environment.occupancy[0].tolist() == [100] * 8
-    start_cell = environment.cell_of(environment.start.x, environment.start.y)
-    goal_cell = environment.cell_of(environment.goal.x, environment.goal.y)
-    assert {start_cell[1], goal_cell[1]} == {1, 6}
-    # Poses sit at cell centres.
-    assert environment.start.x == pytest.approx((start_cell[1] + 0.5) * 0.5)
-    # Yaw points from start towards the goal along the corridor (x axis).
-    direction = math.copysign(1.0, goal_cell[1] - start_cell[1])
-    assert math.cos(environment.start.yaw) * direction > 0.7
-    assert math.cos(environment.goal.yaw) * direction > 0.7
-    assert environment.extra['path_length_m'] >= 5 * 0.5
+    assert environment.occupancy[0].tolist() == [100] * 32
+    # Far apart: at least half the map's side along the route.
+    assert environment.route_length >= 0.5 * 32 * 0.5 * 0.7
+    assert environment.route_min_clearance >= 0.2 + 0.1
+    assert environment.extra['start_clearance'] >= 0.45
     assert environment_is_feasible(environment)
+    same = make_environment(cells, 'factory', 'env-1', seed=7)
+    assert (same.start, same.goal) == (environment.start, environment.goal)
+    other = make_environment(cells, 'factory', 'env-1', seed=8)
+    assert (other.start, other.goal) != (environment.start, environment.goal)
 
 
 def test_make_environment_without_room_for_the_robot():
@@ -186,12 +143,11 @@ def test_make_environment_without_room_for_the_robot():
     cells[2:4, 2:4] = 0   # 2x2 track: too narrow for the car
     environment = make_environment(cells, 'racetrack', 'tight')
     assert not environment.feasible
+    assert environment.extra['rejection'] == 'no_clear_cell'
     assert environment.start == environment.goal
     assert environment.cell_of(environment.start.x, environment.start.y) == (2, 2)
-    assert environment.extra['path_length_m'] == 0.0
+    assert environment.route_length == 0.0
     environment.validate()
-    assert plan_route(cells, 'racetrack') is None
-    assert choose_start_goal(cells, 'racetrack') is None
     all_walls = make_environment(np.ones((4, 4), dtype=np.int64), 'factory', 'walls')
     assert not all_walls.feasible
     all_walls.validate()
@@ -207,22 +163,22 @@ WWWWWWWWW""")
 
 
 def test_environment_is_feasible_checks_the_poses():
-    occupancy = np.array([[0, 0, 100, 0]], dtype=np.int8)
-    environment = Environment('e', 'factory', occupancy, 0.5, Pose2D(0.25, 0.25),
-                              Pose2D(0.75, 0.25))
+    occupancy = np.zeros((4, 12), dtype=np.int8)
+    occupancy[:, 6] = 100
+    environment = Environment('e', 'factory', occupancy, 0.5, Pose2D(0.5, 1.0),
+                              Pose2D(2.5, 1.0))
     assert environment_is_feasible(environment)
-    environment.goal = Pose2D(1.75, 0.25)
+    environment.goal = Pose2D(4.5, 1.0)  # behind the wall
     assert not environment_is_feasible(environment)
-    environment.goal = Pose2D(9.0, 0.25)
+    environment.goal = Pose2D(9.0, 1.0)  # outside the grid
+    assert not environment_is_feasible(environment)
+    environment.goal = Pose2D(2.9, 1.0)  # 0.1 m from the wall: no clearance for the route
     assert not environment_is_feasible(environment)
 
 
-def test_a_short_route_is_not_feasible():
-    from sessgan_gen.navigation import min_route_cells
-
+def test_a_short_route_is_not_a_valid_test():
     cells = np.ones((32, 32), dtype=np.int64)  # factory: all wall...
-    cells[10, 10:14] = 0                        # ...but a 4-cell pocket
+    cells[10:14, 10:16] = 0                     # ...but a small room
     environment = make_environment(cells, 'factory', 'pocket')
-    assert environment.extra['path_length_m'] > 0  # a route exists
-    assert not environment.feasible                 # but crosses too little of the map
-    assert min_route_cells((32, 32)) == 16
+    assert not environment.feasible
+    assert environment.extra['rejection'] == 'no_far_goal'

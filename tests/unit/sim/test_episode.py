@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.grid_search import distance_field
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
-from sessgan_sim.episode import Episode, EpisodeConfig, Observation, geodesic_field
+from sessgan_sim.episode import Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError, InvalidConfigError
-from sessgan_sim.metrics import Outcome
+from sessgan_sim.metrics import ContactKind, Outcome, is_controller_failure
 from sessgan_sim.robots import VelocityCommand
 from sessgan_sim.sensors import LidarConfig
 
@@ -103,10 +104,10 @@ def test_standing_still_ends_stuck_or_at_the_time_limit(episode):
 
 def test_progress_is_measured_along_the_free_space():
     passable = np.array([[1, 1, 1], [0, 0, 1], [1, 1, 1]], dtype=bool)
-    field = geodesic_field(passable, (0, 0))
+    field = distance_field(passable, (0, 0))
     assert field[2, 0] == 6  # around the wall, not 2 cells straight up
     assert np.isinf(field[1, 0])
-    assert np.isinf(geodesic_field(passable, (1, 0))).all()
+    assert np.isinf(distance_field(passable, (1, 0))).all()
 
 
 def test_a_detour_away_from_the_goal_is_not_stuck(episode):
@@ -127,6 +128,71 @@ def test_pressing_into_a_wall_is_one_collision(episode):
     assert metrics.collisions == 1
     assert metrics.outcome is Outcome.TIMEOUT
     assert metrics.min_clearance == 0.0
+
+
+def test_sliding_along_a_wall_for_two_seconds_is_one_event(episode):
+    # Heading 0.15 rad into the south wall from 0.1 m above it: the robot touches it within
+    # a few ticks and then slides along it for more than two seconds.
+    env = environment(CORRIDOR, (1.0, 0.8, -0.15), (7.0, 1.0))
+    episode.reset(env, config(stuck_timeout=0.0, time_limit=4.5))
+    contact_times = []
+    observation = None
+    while not episode.done:
+        observation = episode.step(VelocityCommand(0.5, 0.0, 0.0)).observation
+        if observation.in_contact:
+            contact_times.append(observation.time)
+    metrics = episode.metrics()
+    # Contact flickers while sliding (pybullet drops it between some steps): one event.
+    assert contact_times[-1] - contact_times[0] >= 2.0 and len(contact_times) >= 20
+    assert observation.pose.x > 1.5  # it moved along the wall, pressed against it
+    assert metrics.collisions == 1 and metrics.static_collisions == 1
+    assert metrics.fault_collisions == 1 and metrics.fault_risk_score == pytest.approx(
+        metrics.proximity_time / metrics.simulation_time)
+    assert [event.kind for event in metrics.contacts] == [ContactKind.STATIC]
+
+
+def test_an_agent_driving_into_a_standing_robot_is_not_its_fault(episode):
+    # A corridor with one patrolling agent; the robot stands still. Agents pick their
+    # patrol from the seed: find the seeds where the agent runs into the robot.
+    env = corridor(feasible=False)  # no route certificate: agents may patrol anywhere
+    touched = 0
+    for seed in range(40):
+        episode.reset(env, config(dummy_agents=1, seed=seed, stuck_timeout=0.0,
+                                  time_limit=15.0))
+        metrics = run(episode, VelocityCommand())
+        if metrics.collisions:
+            touched += 1
+            assert {event.kind for event in metrics.contacts} == {ContactKind.AGENT_INTO_ROBOT}
+            assert metrics.fault_collisions == 0 and metrics.fault_risk_score == 0.0
+            assert metrics.agent_into_robot_collisions == metrics.collisions
+        if touched >= 2:
+            break
+    assert touched >= 2
+
+
+def test_driving_into_an_agent_is_a_fault(episode):
+    env = corridor(feasible=False)
+    for seed in range(40):
+        episode.reset(env, config(dummy_agents=1, seed=seed, stuck_timeout=0.0,
+                                  time_limit=8.0, collision_limit=1))
+        metrics = run(episode, VelocityCommand(0.8, 0.0, 0.0))
+        agent_events = [e for e in metrics.contacts if e.agent >= 0]
+        if agent_events and not metrics.static_collisions:
+            assert agent_events[0].kind is ContactKind.ROBOT_INTO_AGENT
+            assert metrics.fault_collisions == len(metrics.contacts)
+            return
+    pytest.fail('no seed drove the robot into the agent')
+
+
+def test_only_faults_in_valid_tests_are_controller_failures(episode):
+    episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=2.0))
+    metrics = run(episode, VelocityCommand(-0.3, 0.0, 0.0))
+    assert is_controller_failure(metrics)
+    episode.reset(corridor(feasible=False), config(stuck_timeout=0.0, time_limit=2.0))
+    assert not is_controller_failure(run(episode, VelocityCommand(-0.3, 0.0, 0.0)))
+    episode.reset(corridor(), config(time_limit=20.0, goal_tolerance=0.3))
+    reached = run(episode, VelocityCommand(1.0, 0.0, 0.0))
+    assert reached.outcome is Outcome.GOAL_REACHED and not is_controller_failure(reached)
 
 
 def test_repeated_crashes_end_at_the_collision_limit(episode):
@@ -272,8 +338,10 @@ def test_scenario_defaults_fill_the_config():
     with Episode() as episode:
         episode.reset(env)
         resolved = episode.config
-    assert (resolved.robot, resolved.time_limit, resolved.proximity_distance) == (
-        'car', 120.0, 0.5)
+    assert (resolved.robot, resolved.proximity_distance) == ('car', 0.5)
+    # The scenario's 120 s, raised to leave time for the long certified route.
+    assert env.route_length > 400
+    assert resolved.time_limit == pytest.approx(max(120.0, 4.0 * env.route_length / 12.0))
     assert resolved.dummy_agents == 0 and resolved.goal_tolerance == 1.0
     assert resolved.physics_steps_per_tick == 5
     assert resolved.physics_timestep == pytest.approx(0.01)

@@ -5,7 +5,14 @@ import math
 
 import pytest
 
-from sessgan_sim.metrics import EpisodeMetrics, MetricsRecorder, Outcome, risk_score
+from sessgan_sim.metrics import (
+    CONTACT_DEBOUNCE,
+    ContactKind,
+    EpisodeMetrics,
+    MetricsRecorder,
+    Outcome,
+    risk_score,
+)
 
 pytestmark = pytest.mark.unit
 
@@ -20,12 +27,23 @@ def test_risk_score_is_zero_without_simulation_time():
     assert risk_score(2, 0.0, 0.0) == 0.0
 
 
-def test_contact_events_count_transitions_only():
+def test_contact_events_are_debounced_per_partner():
     recorder = MetricsRecorder(clearance_range=1.0)
-    states = [False, True, True, True, False, False, True, False, True, True]
-    started = [recorder.record_contact(state) for state in states]
-    assert recorder.collisions == 3
-    assert started == [False, True, False, False, False, False, True, False, True, False]
+    static = ContactKind.STATIC
+
+    def touch(time, partner=-1, kind=static):
+        return recorder.record_contact(time, partner, kind, 1.0, 2.0)
+
+    assert touch(1.0)
+    assert not touch(1.01) and not touch(1.0 + CONTACT_DEBOUNCE)  # same contact, flickering
+    assert touch(2.0 + CONTACT_DEBOUNCE)  # apart for more than the debounce time: new event
+    assert touch(2.6, partner=0, kind=ContactKind.AGENT_INTO_ROBOT)  # another partner
+    assert not touch(2.61, partner=0, kind=ContactKind.ROBOT_INTO_AGENT)  # still the same event
+    assert recorder.collisions == 3 and recorder.fault_collisions == 2
+    assert [event.kind for event in recorder.contacts] == [static, static,
+                                                           ContactKind.AGENT_INTO_ROBOT]
+    assert recorder.contacts[0].to_dict() == {'time': 1.0, 'x': 1.0, 'y': 2.0, 'kind': 'static',
+                                              'agent': -1, 'fault': True}
 
 
 def test_proximity_time_counts_only_close_ticks_without_contact():
@@ -48,16 +66,18 @@ def test_min_clearance_is_capped_at_the_clearance_range():
 
 def test_snapshot_applies_the_risk_formula():
     recorder = MetricsRecorder(clearance_range=1.0)
-    recorder.record_contact(True)
-    recorder.record_contact(False)
-    recorder.record_contact(True)
+    recorder.record_contact(0.5, -1, ContactKind.STATIC, 0.0, 0.0)
+    recorder.record_contact(2.0, -1, ContactKind.STATIC, 0.0, 0.0)
+    recorder.record_contact(3.0, 1, ContactKind.AGENT_INTO_ROBOT, 0.0, 0.0)
     for _ in range(10):
         recorder.record_tick(0.1, clearance=0.1, touching=False, proximity_distance=0.25)
     metrics = recorder.snapshot(simulation_time=4.0, feasible=True, distance_to_goal=2.5,
                                 outcome=Outcome.TIMEOUT, detail='time limit')
-    assert metrics.collisions == 2
+    assert metrics.collisions == 3 and metrics.fault_collisions == 2
+    assert metrics.static_collisions == 2 and metrics.agent_into_robot_collisions == 1
     assert metrics.proximity_time == pytest.approx(1.0)
-    assert metrics.risk_score == pytest.approx(2 * 1.0 / 4.0)
+    assert metrics.risk_score == pytest.approx(3 * 1.0 / 4.0)
+    assert metrics.fault_risk_score == pytest.approx(2 * 1.0 / 4.0)
     assert metrics.outcome is Outcome.TIMEOUT
 
 

@@ -138,6 +138,9 @@ def test_rays_see_low_obstacles_only_below_their_height():
     WorldStyle(merge_obstacles=False)])
 def test_every_world_style_gives_the_same_scans_and_motion(style):
     env = make_environment(load_example_map('factory').cells, 'factory', 'factory')
+    # A fixed pose in the open hall: from some seeded starts, beams graze wall corners
+    # (either face may be hit) and the comparison would measure that, not the styles.
+    env.start = Pose2D(8.0, 11.0, 0.0)
     trajectories = []
     # The pybullet lidar, whose rays meet the bodies the style builds.
     lidar = LidarConfig(noise_std=0.0, caster=RayCaster.PYBULLET)
@@ -153,7 +156,9 @@ def test_every_world_style_gives_the_same_scans_and_motion(style):
     (scans, pose, collisions), (other_scans, other_pose, other_collisions) = trajectories
     # Bullet's ray cast against a box is off by a few mm at grazing angles, and a beam
     # that grazes a corner may hit either face: nearly all beams still agree.
-    assert (np.abs(scans - other_scans) < 0.01).mean() > 0.995
+    with np.errstate(invalid='ignore'):  # inf - inf: both beams saw nothing
+        agree = (scans == other_scans) | (np.abs(scans - other_scans) < 0.01)
+    assert agree.mean() > 0.995
     assert pose.x == pytest.approx(other_pose.x, abs=1e-3)
     assert pose.y == pytest.approx(other_pose.y, abs=1e-3)
     assert collisions == other_collisions

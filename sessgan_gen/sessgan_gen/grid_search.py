@@ -1,0 +1,127 @@
+"""Breadth-first search on grid masks: the one implementation every module uses.
+
+Pure Python on a flat bytearray with a one-cell blocked border: no bounds checks, and
+faster than numpy for the few thousand cells of a map (numpy's per-call overhead dominates
+a frontier search whose depth is the map's geodesic diameter). Moves are 4-connected.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+Cell = tuple[int, int]
+"""A grid cell (row, col)."""
+
+
+class FlatGrid(NamedTuple):
+    """A bool mask flattened with a blocked one-cell border."""
+
+    open_cells: bytearray
+    stride: int
+    height: int
+    width: int
+
+
+def flat_grid(free: np.ndarray) -> FlatGrid:
+    """The flat form of a 2-D bool mask (True = may be entered)."""
+    mask = np.asarray(free, dtype=bool)
+    if mask.ndim != 2:
+        raise ValueError(f'free mask must be 2-D, got shape {mask.shape}')
+    padded = np.pad(mask, 1, mode='constant', constant_values=False)
+    return FlatGrid(bytearray(padded.astype(np.uint8).tobytes()), padded.shape[1],
+                    mask.shape[0], mask.shape[1])
+
+
+def to_flat(grid: FlatGrid, cell: Cell) -> int:
+    return (cell[0] + 1) * grid.stride + cell[1] + 1
+
+
+def to_cell(grid: FlatGrid, index: int) -> Cell:
+    row, col = divmod(index, grid.stride)
+    return (row - 1, col - 1)
+
+
+def bfs(grid: FlatGrid, start: int, dist: list[int]) -> list[int]:
+    """Fill ``dist`` (pre-set to -1) with step counts from ``start``; return the visit order."""
+    open_cells = grid.open_cells
+    stride = grid.stride
+    dist[start] = 0
+    queue = [start]
+    append = queue.append
+    head = 0
+    while head < len(queue):
+        current = queue[head]
+        head += 1
+        step = dist[current] + 1
+        for neighbour in (current - stride, current - 1, current + 1, current + stride):
+            if open_cells[neighbour] and dist[neighbour] < 0:
+                dist[neighbour] = step
+                append(neighbour)
+    return queue
+
+
+def farthest(order: list[int], dist: list[int]) -> int:
+    """The visited cell at the largest distance; ties go to the smallest flat index."""
+    best = order[-1]
+    far = dist[best]
+    for index in reversed(order):
+        if dist[index] != far:
+            break
+        best = min(best, index)
+    return best
+
+
+def walk_back(grid: FlatGrid, dist: list[int], goal: int) -> list[int]:
+    """Path from the BFS source to ``goal`` following decreasing distances."""
+    stride = grid.stride
+    path = [goal]
+    current = goal
+    while dist[current] > 0:
+        want = dist[current] - 1
+        for neighbour in (current - stride, current - 1, current + 1, current + stride):
+            if dist[neighbour] == want:
+                current = neighbour
+                break
+        path.append(current)
+    path.reverse()
+    return path
+
+
+def label_regions(grid: FlatGrid) -> tuple[list[int], list[list[int]], list[int]]:
+    """Label every free cell of a flat grid.
+
+    Returns (labels, visit order per region, distance from each region's first cell);
+    labels are -1 outside free space.
+    """
+    size = len(grid.open_cells)
+    dist = [-1] * size
+    labels = [-1] * size
+    orders: list[list[int]] = []
+    open_cells = grid.open_cells
+    index = open_cells.find(1)
+    while index >= 0:
+        if dist[index] < 0:
+            order = bfs(grid, index, dist)
+            label = len(orders)
+            for member in order:
+                labels[member] = label
+            orders.append(order)
+        index = open_cells.find(1, index + 1)
+    return labels, orders, dist
+
+
+def distance_field(free: np.ndarray, source: Cell) -> np.ndarray:
+    """4-connected step count from ``source`` over ``free`` cells as a float array (inf where
+    unreachable, everywhere when the source is outside or not free)."""
+    grid = flat_grid(free)
+    distance = np.full((grid.height, grid.width), np.inf)
+    row, col = source
+    if not (0 <= row < grid.height and 0 <= col < grid.width) or not free[row, col]:
+        return distance
+    dist = [-1] * len(grid.open_cells)
+    bfs(grid, to_flat(grid, source), dist)
+    flat = np.asarray(dist, dtype=np.float64).reshape(-1, grid.stride)[1:-1, 1:-1]
+    distance[flat >= 0] = flat[flat >= 0]
+    return distance

@@ -155,6 +155,8 @@ def write_trace_bag(directory: str | Path, environment: Environment, trace: Epis
     facts.setdefault('start', [environment.start.x, environment.start.y, environment.start.yaw])
     facts.setdefault('goal', [environment.goal.x, environment.goal.y, environment.goal.yaw])
     facts.setdefault('feasible', environment.feasible)
+    facts.setdefault('route_length', environment.route_length)
+    facts.setdefault('route_min_clearance', environment.route_min_clearance)
     facts.setdefault('namespace', '')
     facts['trace'] = trace.summary()
     return write_episode_bag(directory, trace_records(environment, trace), facts,

@@ -12,11 +12,9 @@ Deterministic: the same environment, seed and settings give the same metrics and
 between episodes).
 
 A trace (optional) keeps what a picture or a bag of the episode needs: per tick the robot's
-pose and velocity, the command, the agents' positions (and the scans for a bag), and every
-contact event with the robot's position. Until sessgan_sim reports contact events itself,
-the kind of a contact is decided here: ``agent`` when an agent's disc lies within
-``AGENT_CONTACT_SLACK`` of the robot's footprint circle at the end of the tick in which the
-event began, else ``static`` (a wall, an out-of-bounds barrier or a low obstacle).
+pose and velocity, the command, the agents' positions (and the scans for a bag), and the
+episode's contact events as sessgan_sim attributes them (static, robot into agent, agent
+into robot).
 """
 
 from __future__ import annotations
@@ -38,41 +36,11 @@ from sessgan_gen.environment import Environment
 from sessgan_gen.scenarios import get_scenario
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError
-
-AGENT_CONTACT_SLACK = 0.05
-"""m: an agent this close to the robot's footprint circle when a contact begins is taken to
-be what the robot touched."""
-
-CONTACT_AGENT = 'agent'
-CONTACT_STATIC = 'static'
+from sessgan_sim.metrics import ContactEvent
 
 
 class EpisodeRunnerError(SessganEvolverError):
     """An episode that cannot be run in process (unknown controller, bad settings)."""
-
-
-@dataclass(frozen=True)
-class ContactEvent:
-    """The start of one contact (a collision event of the metrics)."""
-
-    time: float
-    """Sim seconds at the end of the tick in which the contact began."""
-    x: float
-    """Robot centre, metres (map frame), at that time."""
-    y: float
-    kind: str
-    """'agent' or 'static' (module docstring)."""
-    agent: int = -1
-    """Index of the agent touched (kind 'agent'), else -1."""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {'time': self.time, 'x': self.x, 'y': self.y, 'kind': self.kind,
-                'agent': self.agent}
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> ContactEvent:
-        return cls(float(data['time']), float(data['x']), float(data['y']), str(data['kind']),
-                   int(data.get('agent', -1)))
 
 
 @dataclass
@@ -90,6 +58,7 @@ class EpisodeTrace:
     agents: np.ndarray
     """(n, agents, 2) agent centres, metres."""
     contacts: list[ContactEvent] = field(default_factory=list)
+    """The episode's contact events (sessgan_sim.metrics), in order."""
     scans: np.ndarray | None = None
     """(n, beams) float32 ranges in metres when kept (bags), else None."""
     lidar: dict[str, float] = field(default_factory=dict)
@@ -204,20 +173,19 @@ class EpisodeRunner:
         started = self._clock()
         observation = episode.reset(environment, self.episode_config(seed))
         recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
-        collisions = 0
         while not episode.done:
             command = controller.compute_command(*observed(observation), goal)
             values = (float(command.vx), float(command.vy), float(command.wz))
             observation = episode.step(values).observation
             if recorder is not None:
-                now = episode.metrics().collisions
-                recorder.add(observation, values, new_contact=now > collisions)
-                collisions = now
+                recorder.add(observation, values)
         wall_time = self._clock() - started
-        metrics = episode.metrics().to_dict()
+        result = episode.metrics()
+        metrics = result.to_dict()
         metrics['wall_time'] = wall_time
         metrics['bag_path'] = ''
-        return EpisodeRun(metrics, recorder.finish() if recorder else None, wall_time)
+        return EpisodeRun(metrics, recorder.finish(list(result.contacts)) if recorder else None,
+                          wall_time)
 
 
 class _TraceRecorder:
@@ -232,7 +200,6 @@ class _TraceRecorder:
         self.commands: list[tuple[float, float, float]] = []
         self.agents: list[np.ndarray] = []
         self.scans: list[np.ndarray] = []
-        self.contacts: list[ContactEvent] = []
         try:
             robot = episode.robot
             self.robot_radius = float(robot.footprint_radius)
@@ -252,23 +219,11 @@ class _TraceRecorder:
         if self.keep_scans:
             self.scans.append(np.array(observation.scan, dtype=np.float32))
 
-    def add(self, observation: Observation, command: tuple[float, float, float],
-            new_contact: bool) -> None:
+    def add(self, observation: Observation, command: tuple[float, float, float]) -> None:
         self.commands.append(command)
         self._observe(observation)
-        if new_contact:
-            x, y, _ = self.poses[-1]
-            kind, agent = CONTACT_STATIC, -1
-            agents = self.agents[-1]
-            if len(agents):
-                gaps = np.hypot(agents[:, 0] - x, agents[:, 1] - y) - (
-                    self.robot_radius + self.agent_radius)
-                nearest = int(np.argmin(gaps))
-                if gaps[nearest] <= AGENT_CONTACT_SLACK:
-                    kind, agent = CONTACT_AGENT, nearest
-            self.contacts.append(ContactEvent(self.times[-1], x, y, kind, agent))
 
-    def finish(self) -> EpisodeTrace:
+    def finish(self, contacts: list[ContactEvent]) -> EpisodeTrace:
         lidar = self.episode.lidar_info
         agent_count = max((len(a) for a in self.agents), default=0)
         agents = np.zeros((len(self.agents), agent_count, 2))
@@ -278,7 +233,7 @@ class _TraceRecorder:
             times=np.array(self.times), poses=np.array(self.poses).reshape(-1, 3),
             twists=np.array(self.twists).reshape(-1, 3),
             commands=np.array(self.commands).reshape(-1, 3), agents=agents,
-            contacts=list(self.contacts),
+            contacts=contacts,
             scans=np.stack(self.scans) if self.keep_scans and self.scans else None,
             lidar={'angle_min': float(lidar.angle_min),
                    'angle_increment': float(lidar.angle_increment),

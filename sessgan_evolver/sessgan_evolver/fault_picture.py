@@ -1,12 +1,14 @@
 """A picture of one fault that a user reads at a glance (PNG, matplotlib Agg).
 
 The map (free white, low obstacles grey, walls black), the certified route from start to
-goal (the route the validity certificate found, dashed blue), the robot's trajectory (orange,
+goal (the taut route of the route certificate, dashed blue), the robot's trajectory (orange,
 start circle, end square), the agents' paths (thin purple, their last positions as discs),
-every contact (red x) with the first fault event circled, and the coarse cell that keys the
-fault (red frame). :func:`scene_from_bag` reads all of it from a failure bag: the map from
-``/map``, the trajectory from ``/odom``, agents and contacts from episode.json's trace (a
-worker's bag without a trace shows map, route and trajectory).
+every contact the robot caused (red x; agents driving into it: grey x) with the first fault
+event circled, and the coarse cell that keys the fault (red frame).
+
+:func:`scene_from_bag` reads all of it from a failure bag: the map from ``/map``, the
+trajectory from ``/odom``, contacts from episode.json's metrics, agents from its trace (a
+worker's bag has no trace: it shows map, route, trajectory and contacts).
 """
 
 from __future__ import annotations
@@ -27,13 +29,8 @@ from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json  # 
 from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
 from sessgan_evolver.errors import SessganEvolverError  # noqa: E402
 from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
-from sessgan_gen.environment import Environment  # noqa: E402
-from sessgan_gen.navigation import (  # noqa: E402
-    inflate,
-    occupancy_passable_mask,
-    shortest_path_in_free,
-)
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
+from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
+from sessgan_gen.navigation import certify_environment  # noqa: E402
 from sessgan_sim.bag_recording import jazzy_typestore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -60,9 +57,9 @@ class FaultScene:
     agents: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
     """(n, agents, 2) agent centres."""
     contacts: list[dict[str, Any]] = field(default_factory=list)
-    """Contact events: x, y, kind, time."""
-    route: list[tuple[int, int]] = field(default_factory=list)
-    """Certified route, map cells (row, col)."""
+    """Contact events (sessgan_sim.metrics.ContactEvent.to_dict): x, y, kind, time, fault."""
+    route: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    """(n, 2) corners of the certified route, start to goal (empty: no certificate)."""
     fault: FaultKey | None = None
     rule: FaultRule = field(default_factory=FaultRule)
     title: str = ''
@@ -72,23 +69,24 @@ class FaultScene:
     """A short title for small pictures (default: the fault's kind)."""
 
 
-def certified_route(occupancy: np.ndarray, resolution: float, origin: tuple[float, float],
-                    scenario: str, start: tuple[float, float],
-                    goal: tuple[float, float]) -> list[tuple[int, int]]:
-    """The route the validity certificate finds: the 4-connected shortest path of the
-    robot's footprint (walls inflated by the scenario's robot radius), [] if none."""
-    spec = get_scenario(scenario)
-    free = inflate(occupancy_passable_mask(occupancy, spec), spec.robot_radius / resolution)
+def certified_route(environment: Environment) -> np.ndarray:
+    """Corners (n, 2) of the taut certified route of an environment's own start and goal
+    (sessgan_gen.navigation.certify_environment); empty when there is none."""
+    certificate = certify_environment(environment)
+    if certificate is None:
+        return np.zeros((0, 2))
+    return np.asarray(certificate.points, dtype=float).reshape(-1, 2)
 
-    def cell(point: tuple[float, float]) -> tuple[int, int]:
-        return (int(np.floor((point[1] - origin[1]) / resolution)),
-                int(np.floor((point[0] - origin[0]) / resolution)))
 
-    start_cell, goal_cell = cell(start), cell(goal)
-    for row, col in (start_cell, goal_cell):
-        if not (0 <= row < free.shape[0] and 0 <= col < free.shape[1]):
-            return []
-    return shortest_path_in_free(free, start_cell, goal_cell)
+def fault_place(contacts: Sequence[dict[str, Any]], trajectory: np.ndarray
+                ) -> tuple[float, float] | None:
+    """The first contact the robot caused, else where it ended."""
+    for contact in contacts:
+        if contact.get('fault', True):
+            return float(contact['x']), float(contact['y'])
+    if len(trajectory):
+        return float(trajectory[-1][0]), float(trajectory[-1][1])
+    return None
 
 
 def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[str, Any],
@@ -98,25 +96,23 @@ def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[
     start = (environment.start.x, environment.start.y)
     goal = (environment.goal.x, environment.goal.y)
     contacts = [contact.to_dict() for contact in trace.contacts]
-    place = ((contacts[0]['x'], contacts[0]['y']) if contacts else
-             (float(trace.poses[-1][0]), float(trace.poses[-1][1])))
+    trajectory = np.asarray(trace.poses)[:, :2]
     return FaultScene(
         environment.scenario, np.asarray(environment.occupancy), environment.resolution,
-        environment.origin, start, goal, np.asarray(trace.poses)[:, :2],
-        np.asarray(trace.agents), contacts,
-        certified_route(environment.occupancy, environment.resolution, environment.origin,
-                        environment.scenario, start, goal),
-        fault, rule or FaultRule(), title or default_title(metrics, fault), place)
+        environment.origin, start, goal, trajectory, np.asarray(trace.agents), contacts,
+        certified_route(environment), fault, rule or FaultRule(),
+        title or default_title(metrics, fault), fault_place(contacts, trajectory))
 
 
 def default_title(metrics: dict[str, Any], fault: FaultKey | None,
                   controller: str = '') -> str:
-    risk = metrics.get('risk_score')
+    risk = metrics.get('fault_risk_score')
     parts = [fault.kind.replace('_', ' ') if fault else str(metrics.get('outcome'))]
     if controller:
         parts.append(controller)
-    parts.append(f'{metrics.get("outcome")}, {metrics.get("collisions")} collisions'
-                 + (f', risk {risk:.2f}' if isinstance(risk, (int, float)) else ''))
+    parts.append(f'{metrics.get("outcome")}, {metrics.get("fault_collisions")} fault '
+                 f'collisions' + (f', fault risk {risk:.2f}' if isinstance(risk, (int, float))
+                                  else ''))
     return ' | '.join(parts)
 
 
@@ -141,25 +137,29 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
     if occupancy is None or resolution is None or origin is None:
         raise FaultPictureError(f'bag {bag} has no map message')
     scenario = str(episode.get('scenario') or 'factory')
-    start = tuple(episode.get('start', trajectory[0] if trajectory else (0.0, 0.0)))[:2]
-    goal = tuple(episode.get('goal', (0.0, 0.0)))[:2]
+    start = tuple(episode.get('start') or (*(trajectory[0] if trajectory else (0.0, 0.0)),
+                                            0.0))
+    goal = tuple(episode.get('goal') or (0.0, 0.0, 0.0))
+    environment = Environment(str(episode.get('environment_id', bag.name)), scenario,
+                              occupancy, resolution, Pose2D(*start[:3]), Pose2D(*goal[:3]),
+                              origin)
     trace = episode.get('trace') or {}
     if not trajectory and trace.get('robot'):
         trajectory = [tuple(row[:2]) for row in trace['robot']]
     metrics = episode.get('metrics') or {}
-    contacts = list(trace.get('contacts') or [])
+    contacts = list(metrics.get('contacts') or trace.get('contacts') or [])
     fault_data = episode.get('fault')
     fault = FaultKey(**fault_data) if isinstance(fault_data, dict) else None
     rule_data = episode.get('fault_rule')
     rule = FaultRule(**rule_data) if isinstance(rule_data, dict) else FaultRule()
-    place = ((contacts[0]['x'], contacts[0]['y']) if contacts else
-             (trajectory[-1] if trajectory else None))
+    path = np.asarray(trajectory, dtype=float).reshape(-1, 2)
     return FaultScene(
         scenario, occupancy, resolution, origin, (float(start[0]), float(start[1])),
-        (float(goal[0]), float(goal[1])), np.asarray(trajectory, dtype=float).reshape(-1, 2),
+        (float(goal[0]), float(goal[1])), path,
         np.asarray(trace.get('agents') or np.zeros((0, 0, 2)), dtype=float), contacts,
-        certified_route(occupancy, resolution, origin, scenario, start, goal), fault, rule,
-        default_title(metrics, fault, str(episode.get('controller', ''))), place)
+        certified_route(environment), fault, rule,
+        default_title(metrics, fault, str(episode.get('controller', ''))),
+        fault_place(contacts, path))
 
 
 def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool = False
@@ -170,11 +170,8 @@ def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool 
     extent = (left, left + width * scene.resolution, bottom, bottom + height * scene.resolution)
     axis.imshow(np.asarray(scene.occupancy, dtype=float), cmap=_MAP_COLOURS, norm=_MAP_NORM,
                 origin='lower', extent=extent, interpolation='nearest')
-    if scene.route:
-        route = np.array([((col + 0.5) * scene.resolution + left,
-                           (row + 0.5) * scene.resolution + bottom)
-                          for row, col in scene.route])
-        axis.plot(route[:, 0], route[:, 1], '--', color='#1f77b4', linewidth=1.2,
+    if len(scene.route):
+        axis.plot(scene.route[:, 0], scene.route[:, 1], '--', color='#1f77b4', linewidth=1.4,
                   label='certified route')
     agents = scene.agents
     if agents.ndim == 3 and agents.shape[0] and agents.shape[1]:
@@ -191,10 +188,16 @@ def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool 
               label='start')
     axis.plot(*scene.goal, '*', color='#2ca02c', markersize=13, markeredgecolor='black',
               label='goal')
-    if scene.contacts:
-        points = np.array([(c['x'], c['y']) for c in scene.contacts])
+    caused = [(c['x'], c['y']) for c in scene.contacts if c.get('fault', True)]
+    suffered = [(c['x'], c['y']) for c in scene.contacts if not c.get('fault', True)]
+    if caused:
+        points = np.array(caused)
         axis.plot(points[:, 0], points[:, 1], 'x', color='#d62728', markersize=8,
-                  markeredgewidth=2, label='contacts')
+                  markeredgewidth=2, label='contacts it caused')
+    if suffered:
+        points = np.array(suffered)
+        axis.plot(points[:, 0], points[:, 1], 'x', color='#7f7f7f', markersize=8,
+                  markeredgewidth=2, label='agent drove into it')
     if scene.fault_place is not None:
         axis.plot(*scene.fault_place, 'o', markersize=16, markerfacecolor='none',
                   markeredgecolor='#d62728', markeredgewidth=2, label='first fault')

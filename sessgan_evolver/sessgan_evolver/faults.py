@@ -1,14 +1,16 @@
 """Failures, distinct faults and their confirmation: how fault-finding is counted.
 
-**Failure** (the rule the simulator node uses to keep a failure bag): an episode with a
-collision, or one that ended ``timeout`` or ``stuck`` in a feasible map. A **valid failure**
-is a failure in a map that passed the validity certificate (``Environment.feasible``): only
-those count as controller faults.
+**Valid failure**: a controller failure as sessgan_sim defines it
+(``sessgan_sim.metrics.is_controller_failure``, the rule the simulator node keeps failure bags
+by): in a valid test (a map whose route certificate holds, ``Environment.feasible``), a
+contact the robot under test caused, or the goal not reached (timeout, stuck). An agent
+driving into a robot that stood still is recorded but is no failure.
 
 **Distinct faults.** A valid failure's *fault* is its first fault event: the first contact
-(kind ``collision_static`` or ``collision_agent``, at the robot's position when it began), or,
-without any contact, where the robot ended (kind ``stuck`` or ``timeout``). Two valid failures
-are the same fault when
+the robot caused (kind ``collision_static`` against a wall, barrier or low obstacle,
+``collision_agent`` when it moved into an agent; at the robot's position when the contact
+began), or, without one, where the robot ended (kind ``stuck`` or ``timeout``). Two valid
+failures are the same fault when
 
 1. their kinds are equal,
 2. their fault places fall into the same coarse cell (squares of ``FaultRule.coarse_cells``
@@ -33,18 +35,18 @@ import hashlib
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-from sessgan_evolver.episode_runner import ContactEvent, EpisodeTrace
+from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import SessganEvolverError
 from sessgan_gen.environment import Environment
+from sessgan_sim.metrics import ContactKind, is_controller_failure
 
-FAILURE_OUTCOMES = ('timeout', 'stuck')
-"""Outcomes that are failures in a feasible map even without a collision."""
-
-EXACT_FIELDS = ('outcome', 'collisions', 'ticks', 'risk_score', 'proximity_time')
+EXACT_FIELDS = ('outcome', 'collisions', 'fault_collisions', 'ticks', 'risk_score',
+                'proximity_time')
 """Metrics two runs must share to reproduce exactly."""
 
 OUTSIDE = -1
@@ -55,15 +57,12 @@ class FaultError(SessganEvolverError, ValueError):
     """A fault rule or a failure that cannot be keyed (bad cell sizes, no trace)."""
 
 
-def is_failure(metrics: Mapping[str, Any]) -> bool:
-    """A collision, or a timeout/stuck in a feasible map (the simulator node's bag rule)."""
-    return int(metrics.get('collisions') or 0) > 0 or (
-        bool(metrics.get('feasible')) and metrics.get('outcome') in FAILURE_OUTCOMES)
-
-
 def is_valid_failure(metrics: Mapping[str, Any]) -> bool:
-    """A failure in a map with a certified route: a controller fault."""
-    return bool(metrics.get('feasible')) and is_failure(metrics)
+    """sessgan_sim's controller-failure rule applied to a metrics dict."""
+    return is_controller_failure(SimpleNamespace(
+        feasible=bool(metrics.get('feasible')),
+        fault_collisions=int(metrics.get('fault_collisions') or 0),
+        outcome=metrics.get('outcome')))
 
 
 @dataclass(frozen=True)
@@ -116,13 +115,22 @@ class FaultEvent:
     """Sim seconds (the end of the episode for stuck and timeout)."""
 
 
+FAULT_KIND_OF_CONTACT = {ContactKind.STATIC.value: 'collision_static',
+                         ContactKind.ROBOT_INTO_AGENT.value: 'collision_agent'}
+"""Fault kinds of the contact kinds that are the robot's fault."""
+
+
 def first_fault_event(metrics: Mapping[str, Any], trace: EpisodeTrace) -> FaultEvent:
-    """The first contact, else where the robot ended (kind = the outcome)."""
-    if trace.contacts:
-        contact: ContactEvent = trace.contacts[0]
-        return FaultEvent(f'collision_{contact.kind}', contact.x, contact.y, contact.time)
-    if int(metrics.get('collisions') or 0) > 0:
-        raise FaultError('the metrics count a collision but the trace has no contact event')
+    """The first contact the robot caused (from the metrics' contact events), else where the
+    robot ended (kind = the outcome)."""
+    for contact in metrics.get('contacts') or ():
+        kind = FAULT_KIND_OF_CONTACT.get(str(contact.get('kind')))
+        if kind is not None:
+            return FaultEvent(kind, float(contact['x']), float(contact['y']),
+                              float(contact['time']))
+    if int(metrics.get('fault_collisions') or 0) > 0:
+        raise FaultError('the metrics count a fault collision but list no contact event the '
+                         'robot caused')
     if not len(trace.poses):
         raise FaultError('the trace has no robot pose')
     x, y, _ = (float(v) for v in trace.poses[-1])

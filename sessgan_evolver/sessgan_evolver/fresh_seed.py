@@ -12,9 +12,10 @@ simulator seed that no campaign used either:
   is reported;
 * every source sees the same seed pairs, so generators are compared on common random numbers.
 
-Per source: valid maps (certified route), valid failures (sessgan_evolver.faults), failure
-rate = valid failures / valid maps, mean collisions and risk over valid maps, TPKL of all its
-maps to the example map, their uniqueness, and the distinct faults among them.
+Per source: valid maps (certified route), valid failures (controller failures,
+sessgan_evolver.faults), failure rate = valid failures / valid maps, mean fault collisions,
+risk (the paper's) and fault risk over valid maps, TPKL of all its maps to the example map,
+their uniqueness, and the distinct faults among them.
 """
 
 from __future__ import annotations
@@ -230,10 +231,14 @@ class FreshSeedSummary:
     valid_failures: int
     failure_rate: float | None
     """Valid failures / valid maps (None without a valid map)."""
+    mean_fault_collisions: float | None
+    """Contacts the robot caused, mean over valid maps."""
     mean_collisions: float | None
-    """Over valid maps."""
+    """Every contact event, mean over valid maps."""
     mean_risk: float | None
-    """Over valid maps."""
+    """The paper's risk score, mean over valid maps."""
+    mean_fault_risk: float | None
+    """Fault risk score, mean over valid maps."""
     tpkl: float
     """Of all its maps to the example map, nats."""
     uniqueness: float
@@ -283,8 +288,10 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
         valid_fraction=len(valid) / len(records) if records else 0.0,
         valid_failures=len(failures),
         failure_rate=len(failures) / len(valid) if valid else None,
+        mean_fault_collisions=_mean([float(r.metrics['fault_collisions']) for r in valid]),
         mean_collisions=_mean([float(r.metrics['collisions']) for r in valid]),
         mean_risk=_mean([float(r.metrics['risk_score']) for r in valid]),
+        mean_fault_risk=_mean([float(r.metrics['fault_risk_score']) for r in valid]),
         tpkl=tile_pattern_kl(example, token_maps),
         uniqueness=uniqueness_report(token_maps).mean, distinct_faults=len(faults),
         wall_time=wall)
@@ -292,8 +299,9 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
 
 
 EPISODE_COLUMNS = ('generator', 'index', 'environment_id', 'map_seed', 'sim_seed', 'feasible',
-                   'outcome', 'collisions', 'proximity_time', 'simulation_time', 'risk_score',
-                   'valid_failure', 'fault', 'wall_time')
+                   'route_length', 'route_min_clearance', 'outcome', 'fault_collisions',
+                   'collisions', 'proximity_time', 'simulation_time', 'risk_score',
+                   'fault_risk_score', 'valid_failure', 'fault', 'wall_time')
 
 
 def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
@@ -305,10 +313,16 @@ def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
             'generator': result.summary.generator, 'index': record.index,
             'environment_id': record.environment.id, 'map_seed': record.environment.seed,
             'sim_seed': record.sim_seed, 'feasible': bool(metrics.get('feasible')),
-            'outcome': metrics.get('outcome'), 'collisions': metrics.get('collisions'),
+            'route_length': record.environment.route_length,
+            'route_min_clearance': record.environment.route_min_clearance,
+            'outcome': metrics.get('outcome'),
+            'fault_collisions': metrics.get('fault_collisions'),
+            'collisions': metrics.get('collisions'),
             'proximity_time': metrics.get('proximity_time'),
             'simulation_time': metrics.get('simulation_time'),
-            'risk_score': metrics.get('risk_score'), 'valid_failure': record.valid_failure,
+            'risk_score': metrics.get('risk_score'),
+            'fault_risk_score': metrics.get('fault_risk_score'),
+            'valid_failure': record.valid_failure,
             'fault': record.fault.label if record.fault else '',
             'wall_time': metrics.get('wall_time')})
     return rows
@@ -339,14 +353,15 @@ def _format(value: Any, digits: int = 3) -> str:
 
 def summary_table(summaries: Sequence[FreshSeedSummary]) -> str:
     """The summaries as a GitHub markdown table."""
-    lines = ['| generator | maps | valid | valid failures | failure rate | collisions | risk | '
-             'TPKL | uniqueness (%) | distinct faults |',
-             '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|']
+    lines = ['| generator | maps | valid | valid failures | failure rate | fault collisions | '
+             'risk | fault risk | TPKL | uniqueness (%) | distinct faults |',
+             '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|']
     for s in summaries:
         lines.append(
             f'| {s.generator} | {s.maps} | {s.valid_maps} ({s.valid_fraction:.0%}) | '
-            f'{s.valid_failures} | {_format(s.failure_rate)} | {_format(s.mean_collisions, 2)} '
-            f'| {_format(s.mean_risk)} | {s.tpkl:.3f} | {s.uniqueness:.2f} | '
+            f'{s.valid_failures} | {_format(s.failure_rate)} | '
+            f'{_format(s.mean_fault_collisions, 2)} | {_format(s.mean_risk)} | '
+            f'{_format(s.mean_fault_risk)} | {s.tpkl:.3f} | {s.uniqueness:.2f} | '
             f'{s.distinct_faults} |')
     return '\n'.join(lines)
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.campaign import EpisodeJob
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeRunner
-from sessgan_evolver.faults import is_failure
+from sessgan_evolver.faults import is_valid_failure
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.scenarios import get_scenario
@@ -48,8 +48,8 @@ def invalid_map_run(environment: Environment) -> EpisodeRun:
 class InProcessEvaluator:
     """Implements the campaign's Evaluator protocol in this process (module docstring).
 
-    ``record_directory``: write a failure bag per failure there (like the workers with
-    ``record_failures``); ``observer``: told about every episode (fault logs).
+    ``record_directory``: write a failure bag per controller failure there (like the workers
+    with ``record_failures``); ``observer``: told about every episode (fault logs).
     """
 
     def __init__(self, scenario: str, controller: str = '', time_limit: float = 0.0,
@@ -105,7 +105,7 @@ class InProcessEvaluator:
             directory = self.record_directory
             run = self.runner.run(environment, seed, trace=True,
                                   keep_scans=keep_scans or directory is not None)
-            if directory is not None and is_failure(run.metrics) and run.trace is not None:
+            if directory is not None and is_valid_failure(run.metrics) and run.trace is not None:
                 run.metrics['bag_path'] = str(self.write_bag(
                     directory / environment.id, environment, seed, run, origin))
                 if not keep_scans:

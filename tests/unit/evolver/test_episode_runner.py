@@ -33,7 +33,8 @@ def test_same_seed_same_episode_and_the_trace_matches_the_metrics(factory):
     assert len(trace.commands) == ticks
     assert np.array_equal(trace.poses, second.trace.poses)
     assert trace.scans is None and second.trace.scans.shape == (ticks + 1, 360)
-    assert len(trace.contacts) == first.metrics['collisions']
+    assert len(trace.contacts) == first.metrics['collisions'] == len(first.metrics['contacts'])
+    assert [c.to_dict() for c in trace.contacts] == first.metrics['contacts']
     assert trace.agents.shape[1] == 2  # the factory's two dummy agents
     assert trace.times[-1] == pytest.approx(first.metrics['simulation_time'])
     assert first.metrics['bag_path'] == '' and first.metrics['wall_time'] > 0

@@ -52,7 +52,8 @@ def test_a_trace_becomes_a_bag_of_the_workers_topics(episode, tmp_path):
     assert np.array_equal(np.asarray(grid.data).reshape(32, 32), environment.occupancy)
     facts = json.loads((bag / 'episode.json').read_text())
     assert facts['controller'] == 'nd' and facts['environment_id'] == 'example'
-    assert len(facts['trace']['contacts']) == run.metrics['collisions']
+    assert facts['trace']['contacts'] == run.metrics['contacts']
+    assert facts['route_length'] == environment.route_length
     run.trace.scans, scans = None, run.trace.scans
     try:
         with pytest.raises(BagExportError, match='keep_scans'):
@@ -63,17 +64,17 @@ def test_a_trace_becomes_a_bag_of_the_workers_topics(episode, tmp_path):
 
 def test_pictures_from_a_run_and_from_its_bag(episode, tmp_path):
     environment, run = episode
-    route = certified_route(environment.occupancy, environment.resolution, environment.origin,
-                            'factory', (environment.start.x, environment.start.y),
-                            (environment.goal.x, environment.goal.y))
-    assert route[0] == environment.cell_of(environment.start.x, environment.start.y)
-    assert route[-1] == environment.cell_of(environment.goal.x, environment.goal.y)
+    route = certified_route(environment)
+    assert np.allclose(route[0], (environment.start.x, environment.start.y))
+    assert np.allclose(route[-1], (environment.goal.x, environment.goal.y))
+    assert np.hypot(*np.diff(route, axis=0).T).sum() == pytest.approx(environment.route_length)
     scene = scene_from_run(environment, run.trace, run.metrics)
-    assert scene.route == route and len(scene.trajectory) == run.metrics['ticks'] + 1
+    assert np.array_equal(scene.route, route)
+    assert len(scene.trajectory) == run.metrics['ticks'] + 1
     bag = write_trace_bag(tmp_path / 'bag', environment, run.trace, {})
     from_bag = scene_from_bag(bag)
     assert np.allclose(from_bag.trajectory, scene.trajectory)
-    assert from_bag.route == route and len(from_bag.contacts) == len(scene.contacts)
+    assert np.allclose(from_bag.route, route) and from_bag.contacts == scene.contacts
     assert write_scene_png(from_bag, tmp_path / 'fault.png').stat().st_size > 10_000
     grid = write_scene_grid([('a', [scene, from_bag]), ('b', [])], tmp_path / 'grid.png', 3)
     assert grid.stat().st_size > 10_000

@@ -31,8 +31,9 @@ def fake_results(proposals, risks):
     for proposal, risk in zip(proposals, risks):
         environment = make_environment(proposal.cells, 'factory', 'x')
         results.append(Evaluated(proposal, environment, {
-            'feasible': True, 'collisions': 1, 'proximity_time': 1.0,
-            'simulation_time': 10.0, 'risk_score': float(risk), 'outcome': 'stuck'}))
+            'feasible': True, 'collisions': 1, 'fault_collisions': 1, 'proximity_time': 1.0,
+            'simulation_time': 10.0, 'risk_score': float(risk),
+            'fault_risk_score': float(risk), 'outcome': 'stuck'}))
     return results
 
 

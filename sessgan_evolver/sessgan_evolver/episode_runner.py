@@ -4,8 +4,12 @@ The episode the ROS graph runs in lockstep mode, minus the messages: every contr
 controller core (from sessgan_controllers' registry) turns the observation into the command
 applied during the next tick, as a controller node answering every scan does. The simulator
 settings are the simulator node's defaults (360-beam lidar at the 20 Hz control rate, the
-scenario's robot, agents and time limit), so an in-process episode is the lockstep episode
-of a worker running the same controller.
+scenario's robot, agents and time limit), and the controller sees its inputs exactly as the
+node decodes them from the messages (:func:`node_inputs`: the scan's geometry in float32 as
+LaserScan carries it, the yaw read back from the odometry quaternion, STOP once the
+controller says the goal is reached), so an in-process episode is, bit for bit, the lockstep
+episode of a worker running the same controller node: its failure bags re-simulate to the
+same result (``ros2 run sessgan_evolver replay <bag> --resimulate``).
 
 Deterministic: the same environment, seed and settings give the same metrics and trace
 (every random choice of the episode derives from the seed; the controllers keep no state
@@ -30,7 +34,7 @@ import numpy as np
 
 from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.registry import get_controller
-from sessgan_controllers.types import Goal, observed
+from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
 from sessgan_evolver.errors import SessganEvolverError
 from sessgan_gen.environment import Environment
 from sessgan_gen.scenarios import get_scenario
@@ -41,6 +45,31 @@ from sessgan_sim.metrics import ContactEvent
 
 class EpisodeRunnerError(SessganEvolverError):
     """An episode that cannot be run in process (unknown controller, bad settings)."""
+
+
+def _float32(value: float) -> float:
+    return float(np.float32(value))
+
+
+def node_inputs(observation: Observation) -> tuple[ScanData, RobotState]:
+    """The controller's inputs as its node decodes them from the simulator's messages.
+
+    LaserScan carries angle_min, angle_increment, range_min and range_max as float32 and
+    Odometry the heading as a quaternion; the controllers' own ``observed()`` passes the
+    float64 values through, which is a different (if tiny) input, and a controller's path
+    through a cluttered map amplifies any difference within seconds.
+    """
+    lidar, pose, twist = observation.lidar, observation.pose, observation.twist
+    scan = ScanData(np.asarray(observation.scan, dtype=float), _float32(lidar.angle_min),
+                    _float32(lidar.angle_increment), _float32(lidar.range_min),
+                    _float32(lidar.range_max))
+    # sessgan_sim.cdr.odometry writes (0, 0, sin(yaw/2), cos(yaw/2)); the node reads the yaw
+    # back with sessgan_controllers.messages.yaw_from_quaternion (same expression here).
+    x = y = 0.0
+    z, w = math.sin(pose.yaw / 2.0), math.cos(pose.yaw / 2.0)
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return scan, RobotState(float(pose.x), float(pose.y), yaw, float(twist.vx),
+                            float(twist.vy), float(twist.wz))
 
 
 @dataclass
@@ -173,8 +202,15 @@ class EpisodeRunner:
         started = self._clock()
         observation = episode.reset(environment, self.episode_config(seed))
         recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
+        goal_reached = False
         while not episode.done:
-            command = controller.compute_command(*observed(observation), goal)
+            scan, state = node_inputs(observation)
+            # As the controller node: STOP from the first tick the controller says the goal
+            # is reached, and for a non-finite command.
+            goal_reached = goal_reached or controller.goal_reached(state, goal)
+            command = STOP if goal_reached else controller.compute_command(scan, state, goal)
+            if not command.is_finite():
+                command = STOP
             values = (float(command.vx), float(command.vy), float(command.wz))
             observation = episode.step(values).observation
             if recorder is not None:

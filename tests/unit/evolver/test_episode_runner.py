@@ -66,3 +66,19 @@ def test_maps_without_a_certified_route_are_not_simulated_when_asked(factory):
         assert valid.metrics['ticks'] > 0 and evaluator.episodes == 2
     assert seen == [('walls', 7, 'invalid_environment', 'test'),
                     ('example', 7, valid.metrics['outcome'], 'test')]
+
+
+def test_the_controller_sees_what_its_node_decodes(factory):
+    from sessgan_evolver.episode_runner import node_inputs
+    from sessgan_sim.episode import Episode, EpisodeConfig
+
+    with Episode() as episode:
+        observation = episode.reset(factory, EpisodeConfig(seed=1))
+    scan, state = node_inputs(observation)
+    # LaserScan's float32 geometry, the yaw read back from the odometry quaternion.
+    assert scan.angle_increment == float(np.float32(observation.lidar.angle_increment))
+    assert scan.angle_increment != observation.lidar.angle_increment
+    assert scan.range_max == float(np.float32(observation.lidar.range_max))
+    assert np.array_equal(scan.ranges, observation.scan)
+    assert state.yaw == pytest.approx(observation.pose.yaw, abs=1e-12)
+    assert (state.x, state.y) == (observation.pose.x, observation.pose.y)

@@ -125,3 +125,23 @@ def distance_field(free: np.ndarray, source: Cell) -> np.ndarray:
     flat = np.asarray(dist, dtype=np.float64).reshape(-1, grid.stride)[1:-1, 1:-1]
     distance[flat >= 0] = flat[flat >= 0]
     return distance
+
+
+def descend(distance: np.ndarray, source: Cell) -> list[Cell]:
+    """Cells from ``source`` to the origin of a :func:`distance_field`, each step one less
+    (4-connected); [] when the source is outside the grid or unreachable."""
+    height, width = distance.shape
+    row, col = source
+    if not (0 <= row < height and 0 <= col < width) or not np.isfinite(distance[row, col]):
+        return []
+    path = [(row, col)]
+    while distance[row, col] > 0:
+        want = distance[row, col] - 1
+        for n_row, n_col in ((row - 1, col), (row + 1, col), (row, col - 1), (row, col + 1)):
+            if 0 <= n_row < height and 0 <= n_col < width and distance[n_row, n_col] == want:
+                row, col = n_row, n_col
+                break
+        else:  # a field that is not a BFS distance
+            raise ValueError(f'distance field has no descent at cell {(row, col)}')
+        path.append((row, col))
+    return path

@@ -38,14 +38,8 @@ import pybullet as p
 
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.grid_search import distance_field
-from sessgan_gen.route_certificate import (
-    CertificateGrid,
-    RouteCertificate,
-    certify,
-    map_clearance,
-    required_clearances,
-)
+from sessgan_gen.grid_search import descend, distance_field
+from sessgan_gen.route_certificate import CertificateGrid, map_clearance, required_clearances
 from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_sim.agents import AgentConfig, DummyAgents
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
@@ -252,6 +246,8 @@ class ProgressField(NamedTuple):
 
     grid: CertificateGrid
     steps: np.ndarray
+    route: list[tuple[int, int]]
+    """The certified route's cells from start to goal ([] without one)."""
 
 
 @dataclass
@@ -396,19 +392,17 @@ class Episode:
         grid = map_clearance(environment.occupancy, environment.resolution,
                              environment.origin, spec)
         route_need = required_clearances(spec)[1]
-        certificate = (certify(grid, grid.cell_of(environment.start.x, environment.start.y),
-                               grid.cell_of(environment.goal.x, environment.goal.y), route_need)
-                       if environment.feasible else None)
+        progress = self._progress_field(grid, environment, robot, route_need)
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
                            np.random.default_rng(agent_seed),
                            keep_clear=self._agent_keep_clear(environment, robot, config,
-                                                             certificate))
+                                                             progress, route_need))
         lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
         lidar.attach(client, robot, layout, self._agents)
         live = _Live(
             robot=robot, lidar=lidar,
             clearance=ClearanceSensor(client, robot, layout, clearance_range),
-            progress=self._progress_field(grid, environment, robot, route_need),
+            progress=progress,
             time_limit=float(config.time_limit or 0.0),
             proximity_distance=float(config.proximity_distance or 0.0),
             goal_tolerance=float(config.goal_tolerance or 0.0),
@@ -582,24 +576,24 @@ class Episode:
     def _progress_field(grid: CertificateGrid, environment: Environment, robot: Robot,
                         route_need: float) -> ProgressField:
         goal = grid.cell_of(environment.goal.x, environment.goal.y)
+        start = grid.cell_of(environment.start.x, environment.start.y)
         clearance = grid.clearance
         steps = distance_field(clearance >= route_need - 1e-9, goal)
-        start = grid.cell_of(environment.start.x, environment.start.y)
-        inside = 0 <= start[0] < steps.shape[0] and 0 <= start[1] < steps.shape[1]
-        if not (inside and math.isfinite(steps[start])):
+        route = descend(steps, start) if environment.feasible else []
+        if not route:
             return ProgressField(grid, distance_field(
-                clearance >= robot.footprint_radius * 0.75, goal))
+                clearance >= robot.footprint_radius * 0.75, goal), [])
         band = (clearance > 0.0) & ~np.isfinite(steps)
         for _ in range(int(math.ceil(route_need / grid.cell_size)) + 1):
             padded = np.pad(steps, 1, constant_values=np.inf)
             nearest = np.minimum.reduce([padded[:-2, 1:-1], padded[2:, 1:-1],
                                          padded[1:-1, :-2], padded[1:-1, 2:]]) + 1.0
             steps = np.where(band, np.minimum(steps, nearest), steps)
-        return ProgressField(grid, steps)
+        return ProgressField(grid, steps, route)
 
     @staticmethod
     def _agent_keep_clear(environment: Environment, robot: Robot, config: EpisodeConfig,
-                          certificate: RouteCertificate | None
+                          progress: ProgressField, route_need: float
                           ) -> list[tuple[float, float, float]]:
         """Discs (x, y, radius) where agents may neither start nor end a patrol leg: around
         the goal, and on the certified route's narrow passages (where the robot could not
@@ -607,16 +601,14 @@ class Episode:
         agents = config.agents
         goal = environment.goal
         discs = [(goal.x, goal.y, agents.min_start_distance)]
-        if certificate is None:
-            return discs
-        spec = get_scenario(environment.scenario)
-        narrow_below = agents.radius + robot.footprint_radius + spec.route_margin
+        # Narrow: the robot on the route could not pass an agent standing beside it.
+        narrow_below = agents.radius + route_need
         reach = agents.radius + robot.footprint_radius
-        grid_step = max(1, len(certificate.path) // 400)  # bound the disc count on long routes
-        clearance = certificate.grid.clearance
-        for row, col in certificate.path[::grid_step]:
-            if clearance[row, col] < narrow_below:
-                x, y = certificate.grid.centre((row, col))
+        grid = progress.grid
+        step = max(1, len(progress.route) // 400)  # bound the disc count on long routes
+        for row, col in progress.route[::step]:
+            if grid.clearance[row, col] < narrow_below:
+                x, y = grid.centre((row, col))
                 discs.append((x, y, reach))
         return discs
 

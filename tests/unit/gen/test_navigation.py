@@ -182,3 +182,18 @@ def test_a_short_route_is_not_a_valid_test():
     environment = make_environment(cells, 'factory', 'pocket')
     assert not environment.feasible
     assert environment.extra['rejection'] == 'no_far_goal'
+
+
+def test_descend_follows_a_distance_field_to_its_origin():
+    from sessgan_gen.grid_search import descend, distance_field
+
+    mask = free("""
+        .....
+        .###.
+        .....
+    """)
+    field = distance_field(mask, (0, 0))
+    path = descend(field, (2, 4))
+    assert path[0] == (2, 4) and path[-1] == (0, 0) and len(path) == 7
+    assert descend(field, (1, 2)) == []  # a wall
+    assert descend(field, (5, 5)) == []  # outside

@@ -74,7 +74,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser.add_argument('--simulate-invalid', action='store_true',
                         help='also simulate maps without a certified route')
     parser.add_argument('--fault-records', type=int, default=0,
-                        help='confirmed distinct faults per generator kept as bag + PNG')
+                        help='confirmed distinct faults per generator kept as bag + PNG '
+                             '(-1: every one)')
     parser.add_argument('--repeats', type=int, default=3,
                         help='re-runs that confirm a fault before it is recorded')
     parser.add_argument('--coarse-cells', type=int, default=FaultRule.coarse_cells,

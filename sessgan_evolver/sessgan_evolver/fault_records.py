@@ -29,11 +29,13 @@ def confirm_faults(entries: Sequence[FaultEntry], records: Sequence[EpisodeRecor
                    record_directory: str | Path | None = None, max_records: int = 0,
                    metadata: Mapping[str, Any] | None = None) -> list[Path]:
     """Confirm each fault (stored in ``entry.confirmation``) and write up to ``max_records``
-    records of confirmed faults under ``record_directory``; returns the record paths."""
+    records of confirmed faults under ``record_directory`` (a negative ``max_records``: one
+    per confirmed fault); returns the record paths."""
     written: list[Path] = []
     for number, entry in enumerate(entries):
         record = records[entry.first]
-        want_record = (record_directory is not None and len(written) < max_records)
+        want_record = record_directory is not None and (max_records < 0
+                                                        or len(written) < max_records)
         kept: dict[str, Any] = {}
 
         def rerun() -> tuple[Mapping[str, Any], Any, float]:

@@ -92,11 +92,11 @@ def test_confirmed_faults_get_a_bag_and_a_picture(tmp_path):
         written = confirm_faults(faults, log.records, evaluator, rule, repeats=2,
                                  record_directory=tmp_path, max_records=1,
                                  metadata={'method': 'test'})
+        assert all(entry.confirmation.confirmed and entry.confirmation.exact == 2
+                   for entry in faults)
         every = confirm_faults(faults, log.records, evaluator, rule, repeats=1,
                                record_directory=tmp_path / 'all', max_records=-1)
     assert len(every) == len(faults)
-    assert all(entry.confirmation.confirmed and entry.confirmation.exact == 2
-               for entry in faults)
     assert len(written) == 1 and (written[0] / PICTURE_FILE).stat().st_size > 10_000
     facts = json.loads((written[0] / 'episode.json').read_text())
     assert facts['fault'] == faults[0].key.to_dict() and facts['method'] == 'test'

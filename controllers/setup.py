@@ -1,6 +1,9 @@
 from setuptools import find_packages, setup
 
 package_name = 'sessgan_controllers'
+# One executable per registered controller (sessgan_controllers.registry), all running the same
+# node: the executable's name selects the controller.
+controllers = ('nearness_diagram', 'velocity_projection', 'race_controller')
 
 setup(
     name=package_name,
@@ -14,13 +17,12 @@ setup(
     zip_safe=True,
     maintainer='SESS-GAN developers',
     maintainer_email='sessgan@example.org',
-    description='Robot-under-test controllers for SESS-GAN, each its own node speaking only cmd_vel/odom/scan/goal_pose.',
+    description='Robot-under-test controllers for SESS-GAN, each its own node speaking only '
+                'cmd_vel/odom/scan/goal_pose.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'nearness_diagram = sessgan_controllers.nearness_diagram_node:main',
-            'velocity_projection = sessgan_controllers.velocity_projection_node:main',
-            'race_controller = sessgan_controllers.race_controller_node:main',
+            f'{name} = sessgan_controllers.controller_node:main' for name in controllers
         ],
     },
 )

@@ -14,7 +14,8 @@ setup(
     zip_safe=True,
     maintainer='SESS-GAN developers',
     maintainer_email='sessgan@example.org',
-    description='SESS-GAN evolver: GAN population, genetic operators, fitness, campaigns, failure bags, replay and reports.',
+    description='SESS-GAN evolver: GAN population, genetic operators, fitness, '
+                'campaigns, failure bags, replay and reports.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

@@ -15,13 +15,15 @@ setup(
     zip_safe=True,
     maintainer='SESS-GAN developers',
     maintainer_email='sessgan@example.org',
-    description='SESS-GAN generator: token maps, scenarios, the single-shot tokenized GAN (TOAD-GAN pyramid), environment metrics and the generator node.',
+    description='SESS-GAN generator: token maps, scenarios, the single-shot tokenized '
+                'GAN (TOAD-GAN pyramid), environment metrics and the generator node.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'generator = sessgan_gen.generator_node:main',
             'train = sessgan_gen.train_cli:main',
             'report = sessgan_gen.report_cli:main',
+            'export = sessgan_gen.export_cli:main',
         ],
     },
 )

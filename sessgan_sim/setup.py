@@ -9,12 +9,15 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', ['config/nav2_params.yaml']),
+        ('share/' + package_name + '/launch', ['launch/nav2_worker.launch.py']),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='SESS-GAN developers',
     maintainer_email='sessgan@example.org',
-    description='SESS-GAN simulator worker: pybullet world builder, robots, sensors, episode metrics and the simulator node.',
+    description='SESS-GAN simulator worker: pybullet world builder, robots, sensors, '
+                'episode metrics and the simulator node.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

@@ -17,6 +17,11 @@ the same position: a new episode may reuse a goal.
 
 The goal is read in its own frame; the simulator's map->odom transform is
 the identity (perfect localisation), so map and odom coordinates agree.
+
+Every built-in controller runs through :func:`main`, one entry point for all of them: the
+executable's name (``ros2 run sessgan_controllers nearness_diagram``) is the registry name of
+the controller it runs (:mod:`sessgan_controllers.registry`). Parameters: the fields of the
+controller's config plus ``use_stamped_cmd_vel`` and ``base_frame_id``.
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import rclpy
@@ -51,6 +58,7 @@ from sessgan_controllers.messages import (
 )
 from sessgan_controllers.registry import ControllerSpec, get_controller
 from sessgan_controllers.types import STOP, Goal, RobotState, VelocityCommand, config_help
+from sessgan_gen.node_help import exit_if_help
 
 GOAL_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -71,13 +79,16 @@ def _nanoseconds(stamp) -> int:
 
 
 class ControllerNode(Node):
-    """A controller core wrapped in the topic contract; one subclass per controller."""
+    """A registered controller core wrapped in the topic contract."""
 
     controller_name = ''
-    """Registry name of the controller; set by each subclass."""
+    """Registry name of the controller, unless given to the constructor (a subclass may set
+    it)."""
 
-    def __init__(self, **kwargs: Any) -> None:
-        spec = get_controller(self.controller_name)
+    def __init__(self, controller_name: str = '', **kwargs: Any) -> None:
+        """``controller_name``: registry name (also the node's default name); ``kwargs`` go to
+        rclpy's Node (context, namespace, parameter_overrides, ...)."""
+        spec = get_controller(controller_name or self.controller_name)
         super().__init__(spec.name, **kwargs)
         self._spec: ControllerSpec = spec
         self._config = self._declare_config(spec.config_type)
@@ -250,8 +261,9 @@ def spin(node: Node) -> None:
         executor.shutdown()
 
 
-def run(node_type: type[ControllerNode], args: list[str] | None = None) -> None:
-    """Spin ``node_type`` until shutdown, with Jazzy's shutdown idiom.
+def run(controller_name: str, args: Sequence[str] | None = None) -> None:
+    """Spin the node of controller ``controller_name`` until shutdown, with Jazzy's shutdown
+    idiom.
 
     Unusable parameters end the process with a one-line error and exit status 1.
     """
@@ -259,16 +271,37 @@ def run(node_type: type[ControllerNode], args: list[str] | None = None) -> None:
     node = None
     failure = ''
     try:
-        node = node_type()
+        node = ControllerNode(controller_name)
         spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, ParameterException) as err:
-        failure = f'cannot start {node_type.controller_name}: {err}'
+        failure = f'cannot start {controller_name}: {err}'
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     if failure:
-        rclpy.logging.get_logger(node_type.controller_name).fatal(failure)
+        rclpy.logging.get_logger(controller_name).fatal(failure)
         sys.exit(1)
+
+
+def main(args: Sequence[str] | None = None) -> None:
+    """Entry point of every built-in controller executable: the executable's name is the
+    controller's registry name."""
+    name = Path(sys.argv[0]).name
+    try:
+        spec = get_controller(name)
+    except KeyError as err:
+        print(f'{name}: {err}', file=sys.stderr)
+        sys.exit(2)
+    exit_if_help(f'sessgan_controllers {name}', f'{spec.description} For the {spec.robot} '
+                 'robot.\n\nSubscribes scan, odom and goal_pose; publishes one cmd_vel '
+                 '(Twist, or TwistStamped with use_stamped_cmd_vel) per scan. Run it with '
+                 'use_sim_time:=true beside a simulator worker in the same namespace.',
+                 lambda: ControllerNode(name), args)
+    run(name, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import struct
 
 import numpy as np
@@ -13,11 +12,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
 from sessgan_controllers.types import Goal, RobotState, ScanData, VelocityCommand
-
-
-def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
-    """Yaw in radians of a quaternion (rotation about z after any roll and pitch)."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+from sessgan_gen.quaternion import yaw_from_quaternion
 
 
 def scan_from_msg(msg: LaserScan) -> ScanData:

@@ -180,7 +180,7 @@ class RaceController(StatelessController):
         spacing = max(spacing, 1e-6)
         width = config.half_width + config.safety_margin
         edges = np.flatnonzero(np.abs(np.diff(ranges)) > config.disparity_threshold)
-        for edge in edges:
+        for edge in edges.tolist():  # ints, not numpy scalars
             near_index = edge if ranges[edge] < ranges[edge + 1] else edge + 1
             near = ranges[near_index]
             half_angle = math.asin(min(1.0, width / max(near, 1e-6)))

@@ -110,6 +110,29 @@ def iter_bag_messages(path: str | Path, topics: Collection[str] | None = None
         reader.close()
 
 
+def check_bag_complete(path: str | Path) -> int:
+    """Read every message of a bag; returns their number. BagReadError unless the storage
+    opens, every message decodes from it, and their number is the one metadata.yaml (and
+    episode.json, when there is one) recorded: a truncated or half-copied bag is refused
+    before anything trusts its episode.json."""
+    directory = bag_directory(path)
+    try:
+        topics = read_bag_topics(directory)
+        count = sum(1 for _ in iter_bag_messages(directory))
+    except BagReadError as err:
+        raise BagReadError(f'bag {directory} is incomplete or corrupt ({err})') from err
+    expected = sum(topic.message_count for topic in topics)
+    if count != expected:
+        raise BagReadError(f'bag {directory} is incomplete: {count} of the {expected} '
+                           'messages metadata.yaml lists can be read')
+    episode = read_episode_json(directory)
+    recorded = (episode or {}).get('messages', {}).get('count')
+    if recorded is not None and recorded != count:
+        raise BagReadError(f'bag {directory} is incomplete: it holds {count} messages, '
+                           f'episode.json recorded {recorded}')
+    return count
+
+
 def read_episode_json(path: str | Path) -> dict[str, Any] | None:
     """episode.json of a bag directory (None if the bag has none)."""
     directory = bag_directory(path)

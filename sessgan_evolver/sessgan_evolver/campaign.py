@@ -13,15 +13,16 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
+from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import CampaignError
 from sessgan_evolver.fitness import (
     FitnessConfig,
     generation_summary,
@@ -40,14 +41,17 @@ from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
-
-SOFTWARE_VERSION = '0.1.0'
+from sessgan_sim.bag_recording import BagStorage
 
 SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
 
-
-class CampaignError(SessganEvolverError):
-    """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""
+EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
+"""Wall seconds per map cell added to the default episode timeout for building the world: a
+simulator built a 4096 x 4096 map (16.8 M cells) in 262 s, 16 us a cell (a 1024 x 1024 map
+with 10 % walls: 21 us); more than twice that covers a busy host."""
+EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND = 1e-5
+"""Wall seconds per map cell and sim second of time limit added for stepping: the 1024 x 1024
+map took 5.6 wall s per sim second (5.3 us a cell); about twice that."""
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,8 @@ class CampaignConfig:
     time_limit: float = 0.0
     """[scenario's] Episode time limit in sim seconds."""
     episode_timeout: float = 0.0
-    """[max(30, 2 x time limit)] Wall seconds before an episode is retried elsewhere."""
+    """[max(30, 2 x time limit), plus 50 us + 10 us x time limit per map cell] Wall seconds
+    before an episode is retried elsewhere."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
     seed_schedule: str = 'fixed'
@@ -87,6 +92,14 @@ class CampaignConfig:
     """[0: 4 x maps per member] Rotating schedule: the number of seeds in the pool."""
     record_failures: bool = True
     """[True] Write every failure episode as a bag under bags/<run>/."""
+    mode: str = 'lockstep'
+    """[lockstep] Stepping mode of the simulators this campaign starts: lockstep or clocked."""
+    external: bool = False
+    """[False] Start no simulators or controllers: use every evaluate action server already
+    running (e.g. your own stack under /w0, /w1)."""
+    in_process: bool = False
+    """[False] No ROS graph: sample and run every episode in this process with the built-in
+    controller (lockstep, one episode at a time; workers and mode are ignored)."""
     elite_count: int = 1
     """[1] Members kept unchanged each generation."""
     tournament_size: int = 3
@@ -110,8 +123,14 @@ class CampaignConfig:
         if self.seed_pool < 0 or (self.seed_pool and self.seed_pool < self.maps_per_member):
             raise CampaignError(f'seed pool must be 0 (default) or at least maps_per_member '
                                 f'({self.maps_per_member}), got {self.seed_pool}')
-        if self.bag_storage not in ('mcap', 'sqlite3'):
-            raise CampaignError(f'bag storage must be mcap or sqlite3, got {self.bag_storage!r}')
+        if self.bag_storage not in set(BagStorage):
+            raise CampaignError(f'bag storage must be one of {[s.value for s in BagStorage]}, '
+                                f'got {self.bag_storage!r}')
+        if self.mode not in ('lockstep', 'clocked'):
+            raise CampaignError(f'mode must be lockstep or clocked, got {self.mode!r}')
+        if self.in_process and self.external:
+            raise CampaignError('in_process runs a built-in controller itself; it cannot use '
+                                'external workers')
         self.algorithm_config().validate()
         self.fitness.validate()
 
@@ -144,8 +163,18 @@ class CampaignConfig:
     def resolved_time_limit(self) -> float:
         return self.time_limit or get_scenario(self.scenario).time_limit
 
-    def resolved_episode_timeout(self) -> float:
-        return self.episode_timeout or max(30.0, 2.0 * self.resolved_time_limit())
+    def episode_timeout_for(self, cells: int) -> float:
+        """Wall seconds an episode on a map of ``cells`` cells may take before it is retried
+        on another worker: ``episode_timeout`` if set, else twice the time limit (a clocked
+        simulator runs at real time; at least 30 s) plus the world's build and stepping time,
+        which grow with the map (:data:`EPISODE_TIMEOUT_SECONDS_PER_CELL`,
+        :data:`EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND`)."""
+        if self.episode_timeout:
+            return self.episode_timeout
+        time_limit = self.resolved_time_limit()
+        per_cell = (EPISODE_TIMEOUT_SECONDS_PER_CELL
+                    + EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND * time_limit)
+        return max(30.0, 2.0 * time_limit) + per_cell * max(0, int(cells))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -193,18 +222,23 @@ class Campaign:
     """One run: ``runs/<run>/`` and ``bags/<run>/``, resumable."""
 
     def __init__(self, config: CampaignConfig, run_name: str, runs_root: Path, bags_root: Path,
-                 log: Callable[[str], None] = print) -> None:
+                 log: Callable[[str], None] = print,
+                 invocation: Mapping[str, Any] | None = None) -> None:
+        """``invocation``: how the campaign was started (command line, run and bag roots),
+        kept in config.json beside the config. Bad settings or an unreadable checkpoint raise
+        before anything is written."""
         config.validate()
         self.config = config
-        self.store = RunStore(runs_root, run_name)
-        self.bags_dir = Path(bags_root).resolve() / run_name
-        self.log = log
+        self.invocation = dict(invocation or {})
         scenario = get_scenario(config.scenario)
         self.scenario = scenario
         self.example = load_example_map(scenario.name).cells
         checkpoint = config.checkpoint or str(default_checkpoint_path(scenario.name))
         self.pyramid, self.metadata = load_checkpoint(checkpoint, scenario=scenario.name)
         self.template = {k: v.clone() for k, v in self.pyramid.state_dict().items()}
+        self.store = RunStore(runs_root, run_name)  # creates the run directory
+        self.bags_dir = Path(bags_root).resolve() / run_name
+        self.log = log
 
     def weights_of(self, genome: Genome) -> bytes:
         """Checkpoint bytes of a member: the pre-trained pyramid with the genome's tensors."""
@@ -215,11 +249,14 @@ class Campaign:
                                           dict[str, list[float]]]:
         """The algorithm to continue with, the TPKL reference (None before generation 0) and
         the fitness history of the current population's genomes (digest -> fitnesses)."""
-        self.store.write_config(self.config.to_dict(), self.config.seed, SOFTWARE_VERSION)
+        self.store.write_config(self.config.to_dict(), self.config.seed, __version__,
+                                invocation=self.invocation)
         point = self.store.resume() if resume else None
         if resume and point is None:
             self.log(f'nothing to resume in {self.store.run_dir}: starting at generation 0')
         if point is not None:
+            for line in point.set_aside:
+                self.log(f'{line}: going back to an earlier generation')
             self.log(f'resuming {self.store.run_dir} at generation {point.generation}')
             algorithm = GeneticAlgorithm.from_state_dict(point.checkpoint['algorithm'])
             extra = point.checkpoint['extra']

@@ -10,7 +10,6 @@ it started on exit, Ctrl-C or SIGTERM.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import signal
 import sys
@@ -19,82 +18,72 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError, EpisodeJob
 from sessgan_evolver.errors import SessganEvolverError
-from sessgan_evolver.fitness import FitnessConfig
-from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
+from sessgan_evolver.process_supervisor import (
+    ChildProcess,
+    ProcessSupervisor,
+    WorkerPair,
+    WorkerPool,
+    worker_cores,
+)
+from sessgan_gen.config_cli import build_parser, config_from_namespace
+from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.scenarios import get_scenario
 
+if TYPE_CHECKING:  # ROS types, imported where they are used so --help works without ROS
+    from rclpy.action import ActionClient
+    from rclpy.node import Node
+
+    from sessgan_interfaces.action import EvaluateEnvironment
+
 EVALUATE_TYPE = 'sessgan_interfaces/action/EvaluateEnvironment'
 GENERATOR_NAMESPACE = '/sessgan'
+SIMULATOR_READY_LOG = 'simulator ready'
+"""What a simulator logs once its action server is up (a restarted pair waits for it)."""
+CONTROLLER_UNRESPONSIVE = 'controller_unresponsive'
+GENERATOR_TIMEOUT = 120.0
+"""Wall seconds the generator may take to answer one request."""
+GOAL_ANSWER_TIMEOUT = 15.0
+"""Wall seconds a worker may take to accept or refuse a goal before it is sent again."""
+NO_WORKER_TIMEOUT = 60.0
+"""Wall seconds without any usable worker before the campaign gives up."""
+RESTART_READY_TIMEOUT = 120.0
+"""Wall seconds a restarted simulator may take to say it is ready."""
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        prog='ros2 run sessgan_evolver campaign', description=__doc__,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    defaults = CampaignConfig()
-    docs = field_docs(CampaignConfig)
-    for field in dataclasses.fields(CampaignConfig):
-        if field.name == 'fitness':
-            continue
-        flag = '--' + field.name.replace('_', '-')
-        default = getattr(defaults, field.name)
-        if isinstance(default, bool):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
-                                help=docs.get(field.name, ''))
-        else:
-            parser.add_argument(flag, type=type(default), default=default,
-                                help=docs.get(field.name, ''))
-    for field in dataclasses.fields(FitnessConfig):
-        parser.add_argument('--fitness-' + field.name.replace('_', '-'), type=float,
-                            default=field.default, help=field_docs(FitnessConfig).get(field.name))
+    return campaign_parser().parse_args(argv)
+
+
+def campaign_parser() -> argparse.ArgumentParser:
+    """The options: one per CampaignConfig field (its nested FitnessConfig as --fitness-...),
+    plus where the run goes and whether it resumes."""
+    parser = build_parser(CampaignConfig, prog='ros2 run sessgan_evolver campaign',
+                          description=__doc__ or '')
     parser.add_argument('--run', default='', help='run name (default: <scenario>-seed<seed>)')
-    parser.add_argument('--runs-root', type=Path, default=Path('runs'))
-    parser.add_argument('--bags-root', type=Path, default=Path('bags'))
+    parser.add_argument('--runs-root', type=Path, default=Path('runs'),
+                        help='directory of the run directories')
+    parser.add_argument('--bags-root', type=Path, default=Path('bags'),
+                        help='directory of the failure bag directories')
     parser.add_argument('--resume', action='store_true',
                         help='continue a killed run from its last completed generation')
-    parser.add_argument('--external', action='store_true',
-                        help='start no simulators or controllers: use every evaluate action '
-                             'server already running (e.g. your own stack under /w0, /w1)')
-    parser.add_argument('--mode', choices=('lockstep', 'clocked'), default='lockstep',
-                        help='stepping mode of the simulators this campaign starts')
-    parser.add_argument('--in-process', action='store_true',
-                        help='no ROS graph: sample and run every episode in this process with '
-                             'the built-in controller (lockstep, one episode at a time; '
-                             '--workers and --mode are ignored)')
-    args = parser.parse_args(argv)
-    if args.in_process and args.external:
-        parser.error('--in-process runs a built-in controller itself; it cannot use --external '
-                     'workers')
-    return args
-
-
-def field_docs(cls) -> dict[str, str]:
-    """Attribute docstrings of a dataclass (the string literal after each field)."""
-    import ast
-    import inspect
-
-    try:
-        tree = ast.parse(inspect.getsource(cls))
-    except (OSError, TypeError):
-        return {}
-    docs, body = {}, tree.body[0].body
-    for statement, following in zip(body, body[1:]):
-        if (isinstance(statement, ast.AnnAssign) and isinstance(following, ast.Expr)
-                and isinstance(following.value, ast.Constant)):
-            docs[statement.target.id] = ' '.join(str(following.value.value).split())
-    return docs
+    return parser
 
 
 def config_from_args(args: argparse.Namespace) -> CampaignConfig:
-    fitness = FitnessConfig(**{f.name: getattr(args, 'fitness_' + f.name)
-                               for f in dataclasses.fields(FitnessConfig)})
-    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(CampaignConfig)
-              if f.name != 'fitness'}
-    return CampaignConfig(fitness=fitness, **values)
+    return config_from_namespace(CampaignConfig, args)
+
+
+def invocation_of(args: argparse.Namespace, argv: Sequence[str]) -> dict[str, Any]:
+    """The options that are not settings (where the run goes, resume) and the command line,
+    kept in config.json beside the settings."""
+    return {'run': args.run, 'runs_root': str(args.runs_root),
+            'bags_root': str(args.bags_root), 'resume': bool(args.resume),
+            'command_line': ['ros2', 'run', 'sessgan_evolver', 'campaign', *argv]}
 
 
 # ---- the ROS evaluator -------------------------------------------------------------------
@@ -104,26 +93,33 @@ def config_from_args(args: argparse.Namespace) -> CampaignConfig:
 class Running:
     job: EpisodeJob
     started: float
-    send_future: object
-    goal_handle: object = None
-    result_future: object = None
+    send_future: Any
+    goal_handle: Any = None
+    result_future: Any = None
 
 
 class RosEvaluator:
     """Generator service + every discovered ``evaluate`` action server, dispatched in parallel.
 
-    A worker that refuses a goal, aborts it, dies or stalls past the episode timeout gets the
-    job taken away and retried on another worker; a worker that stalled is quarantined.
+    A worker that refuses a goal, aborts it or stalls past the episode timeout gets the job
+    taken away and retried on another worker; a worker that stalled is quarantined for a
+    minute. The simulator + controller pairs this campaign started (``pool``) are polled every
+    loop: when a process of a pair dies, the episode it was running is a harness failure, not
+    a result (it never reaches the fitness or the metrics); the pair is restarted and the
+    episode run again. A pair that keeps dying is quarantined for good.
     """
 
-    def __init__(self, node, config: CampaignConfig, record_directory: Path, controller: str,
-                 supervisor: ProcessSupervisor, log: Callable[[str], None]) -> None:
+    def __init__(self, node: Node, config: CampaignConfig, record_directory: Path,
+                 controller: str, supervisor: ProcessSupervisor,
+                 log: Callable[[str], None], pool: WorkerPool | None = None) -> None:
         from rclpy.action import ActionClient
 
         from sessgan_interfaces.srv import GenerateEnvironments
 
         self.node = node
         self.supervisor = supervisor
+        self.pool = pool if pool is not None else WorkerPool(supervisor)
+        self.generator_process: ChildProcess | None = None
         self.config = config
         self.record_directory = record_directory
         self.controller = controller
@@ -131,9 +127,12 @@ class RosEvaluator:
         self.action_client_class = ActionClient
         self.generator = node.create_client(GenerateEnvironments,
                                             f'{GENERATOR_NAMESPACE}/generate_environments')
-        self.clients: dict[str, object] = {}
+        self.clients: dict[str, ActionClient] = {}
         self.allowed: set[str] | None = None  # None: every discovered worker (--external)
         self.quarantine: dict[str, float] = {}
+        self.starting: dict[str, float] = {}
+        """Action names of restarted pairs whose new simulator is not ready yet, with the
+        monotonic time by which it must be."""
         self.max_attempts = 3
 
     def spin(self, seconds: float = 0.02) -> None:
@@ -141,9 +140,9 @@ class RosEvaluator:
         rclpy.spin_once(self.node, timeout_sec=seconds)
 
     def check_children(self) -> None:
-        """Fail fast when a process this campaign started has died."""
+        """Fail fast when a process this campaign started has died (while starting up)."""
         for child in self.supervisor.dead_children():
-            raise CampaignError(f'{child.name} exited with status {child.process.returncode}:'
+            raise CampaignError(f'{child.name} {child.exit_description()}:'
                                 f'\n{child.log_tail()}')
 
     def wait_for_generator(self, timeout: float) -> None:
@@ -164,6 +163,7 @@ class RosEvaluator:
     def wait_until_absent(self, names: list[str], timeout: float) -> None:
         """Wait for workers of an earlier (killed) campaign to go away before starting ours."""
         deadline = time.monotonic() + timeout
+        present: list[str] = []
         while time.monotonic() < deadline:
             present = sorted(set(names) & set(self.evaluate_servers()))
             if not present:
@@ -178,7 +178,7 @@ class RosEvaluator:
         for name in self.evaluate_servers():
             if self.allowed is not None and name not in self.allowed:
                 continue
-            if name not in self.clients:
+            if name not in self.clients and name not in self.starting:
                 from sessgan_interfaces.action import EvaluateEnvironment
                 self.clients[name] = self.action_client_class(
                     self.node, EvaluateEnvironment, name)
@@ -187,6 +187,7 @@ class RosEvaluator:
 
     def wait_for_workers(self, count: int, timeout: float) -> None:
         deadline = time.monotonic() + timeout
+        ready: list[str] = []
         while time.monotonic() < deadline:
             ready = [n for n in self.discover_workers() if self.clients[n].server_is_ready()]
             if len(ready) >= count:
@@ -196,7 +197,8 @@ class RosEvaluator:
         raise CampaignError(f'only {len(ready)} of {count} simulator workers answered within '
                             f'{timeout:.0f} s')
 
-    def sample(self, weights: bytes, seeds, generation: int, member: int):
+    def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
+               member: int) -> list[Environment]:
         from sessgan_gen.ros_conversion import environment_from_msg
         from sessgan_interfaces.srv import GenerateEnvironments
 
@@ -204,18 +206,38 @@ class RosEvaluator:
             scenario=self.config.scenario, seeds=[int(s) for s in seeds],
             generation=generation, member=member)
         request.weights = weights
-        future = self.generator.call_async(request)
-        deadline = time.monotonic() + 120.0
-        while not future.done():
-            if time.monotonic() > deadline:
-                raise CampaignError('the generator did not answer within 120 s')
-            self.spin(0.05)
+        for attempt in range(1, self.max_attempts + 1):
+            future = self.generator.call_async(request)
+            deadline = time.monotonic() + GENERATOR_TIMEOUT
+            while not future.done():
+                if self.generator_died(attempt):
+                    break
+                if time.monotonic() > deadline:
+                    raise CampaignError(
+                        f'the generator did not answer within {GENERATOR_TIMEOUT:.0f} s')
+                self.spin(0.05)
+            if future.done():
+                break
         response = future.result()
         if not response.success:
             raise CampaignError(f'the generator refused member {member}: {response.message}')
         return [environment_from_msg(msg) for msg in response.environments]
 
-    def goal_for(self, job: EpisodeJob):
+    def generator_died(self, attempt: int) -> bool:
+        """True (and the generator restarted) if the generator this campaign started died;
+        CampaignError if it died on each of ``max_attempts`` requests."""
+        child = self.generator_process
+        if child is None or child.alive:
+            return False
+        report = f'{child.name} {child.exit_description()}'
+        if attempt >= self.max_attempts:
+            raise CampaignError(f'{report} on {attempt} requests in a row:\n{child.log_tail()}')
+        self.log(f'{report}: restarting it and asking again')
+        self.generator_process = self.supervisor.restart(child)
+        self.wait_for_generator(timeout=120.0)
+        return True
+
+    def goal_for(self, job: EpisodeJob) -> EvaluateEnvironment.Goal:
         from sessgan_gen.ros_conversion import environment_to_msg
         from sessgan_interfaces.action import EvaluateEnvironment
 
@@ -227,14 +249,68 @@ class RosEvaluator:
         goal.record_directory = str(self.record_directory) if self.config.record_failures else ''
         return goal
 
-    def evaluate(self, jobs: Sequence[EpisodeJob], on_result) -> None:
+    def pair_of(self, name: str) -> WorkerPair | None:
+        """The pair this campaign started behind action ``name`` (None for external ones)."""
+        return self.pool.pairs.get(name.rsplit('/', 1)[0])
+
+    def drop_client(self, name: str) -> None:
+        client = self.clients.pop(name, None)
+        if client is not None:
+            client.destroy()
+
+    def take_back_from_dead_pairs(self, running: dict[str, Running]) -> list[EpisodeJob]:
+        """Restart every pair with a dead process; returns the jobs they were running, which
+        have no result (a harness failure, never an episode outcome)."""
+        taken = []
+        for pair in self.pool.dead_pairs():
+            name = f'{pair.namespace}/evaluate'
+            state = running.pop(name, None)
+            report = pair.death_report()
+            if state is not None:
+                taken.append(state.job)
+                self.log(f'worker {pair.namespace}: {report} during episode '
+                         f'{state.job.environment.id}: a harness failure, not a result; the '
+                         'episode will run again')
+            else:
+                self.log(f'worker {pair.namespace}: {report}')
+            self.drop_client(name)
+            self.starting.pop(name, None)
+            if self.pool.restart(pair):
+                self.starting[name] = time.monotonic() + RESTART_READY_TIMEOUT
+                self.log(f'worker {pair.namespace}: restarted its simulator and controller '
+                         f'(restart {pair.restarts} of {self.pool.max_restarts})')
+            else:
+                if self.allowed is not None:
+                    self.allowed.discard(name)
+                self.log(f'worker {pair.namespace}: died {pair.restarts + 1} times; quarantined '
+                         f'for the rest of the campaign (logs: {pair.simulator.log_path.parent})')
+                if not self.pool.pairs:
+                    raise CampaignError(f'every simulator worker died repeatedly; last: '
+                                        f'{report}:\n{pair.simulator.log_tail(1000)}\n'
+                                        f'{pair.controller.log_tail(1000)}')
+        for name, deadline in list(self.starting.items()):
+            restarted = self.pair_of(name)
+            if restarted is None:
+                self.starting.pop(name)
+            elif restarted.logged_since_start(SIMULATOR_READY_LOG):
+                self.starting.pop(name)  # discover_workers makes a new client for it
+            elif time.monotonic() > deadline:
+                # Stopped, its pair counts as dead in the next loop: restarted or quarantined.
+                self.log(f'worker {restarted.namespace}: its restarted simulator did not log '
+                         f'{SIMULATOR_READY_LOG!r} within {RESTART_READY_TIMEOUT:.0f} s')
+                self.supervisor.stop([restarted.simulator], grace_seconds=0.0)
+        return taken
+
+    def evaluate(self, jobs: Sequence[EpisodeJob],
+                 on_result: Callable[[EpisodeJob, dict], None]) -> None:
         from action_msgs.msg import GoalStatus
 
         pending = deque(jobs)
         attempts: dict[tuple[int, int], int] = {}
+        harness_failures: dict[tuple[int, int], int] = {}
         running: dict[str, Running] = {}
-        timeout = self.config.resolved_episode_timeout()
         last_discovery = 0.0
+        last_worker_seen = time.monotonic()
         while pending or running:
             now = time.monotonic()
             if now - last_discovery > 2.0:
@@ -247,10 +323,21 @@ class RosEvaluator:
                     continue
                 job = pending.popleft()
                 running[name] = Running(job, now, client.send_goal_async(self.goal_for(job)))
-            if not running and pending and not any(
+            if running or self.starting or any(
                     c.server_is_ready() for c in self.clients.values()):
-                raise CampaignError('no simulator worker is available any more')
+                last_worker_seen = now
+            elif now - last_worker_seen > NO_WORKER_TIMEOUT:
+                raise CampaignError(f'no simulator worker has been available for '
+                                    f'{NO_WORKER_TIMEOUT:.0f} s')
             self.spin(0.01)
+            for job in self.take_back_from_dead_pairs(running):
+                harness_failures[job.key] = harness_failures.get(job.key, 0) + 1
+                if harness_failures[job.key] >= self.max_attempts:
+                    raise CampaignError(
+                        f'episode {job.environment.id}: a worker process died under it '
+                        f'{harness_failures[job.key]} times; see the logs in '
+                        f'{self.supervisor.log_directory}')
+                pending.appendleft(job)
             for name, state in list(running.items()):
                 retry_reason = None
                 if state.goal_handle is None and state.send_future.done():
@@ -260,13 +347,24 @@ class RosEvaluator:
                     else:
                         state.goal_handle = handle
                         state.result_future = handle.get_result_async()
+                elif (state.goal_handle is None
+                      and time.monotonic() - state.started > GOAL_ANSWER_TIMEOUT):
+                    # A goal sent while discovery still showed a just-restarted worker's
+                    # predecessor is lost; send it again.
+                    retry_reason = f'did not answer the goal within {GOAL_ANSWER_TIMEOUT:.0f} s'
                 if state.result_future is not None and state.result_future.done():
                     response = state.result_future.result()
                     if response.status == GoalStatus.STATUS_SUCCEEDED:
+                        metrics = metrics_dict(response.result.metrics)
+                        pair = self.pair_of(name)
+                        if (metrics['outcome'] == CONTROLLER_UNRESPONSIVE and pair is not None
+                                and not pair.controller.alive):
+                            continue  # its controller died: the next loop re-runs it
                         del running[name]
-                        on_result(state.job, metrics_dict(response.result.metrics))
+                        on_result(state.job, metrics)
                         continue
                     retry_reason = f'ended the goal with status {response.status}'
+                timeout = self.config.episode_timeout_for(state.job.environment.occupancy.size)
                 if retry_reason is None and time.monotonic() - state.started > timeout:
                     retry_reason = f'gave no result within {timeout:.0f} s'
                     if state.goal_handle is not None:
@@ -306,29 +404,37 @@ def metrics_dict(msg) -> dict:
 # ---- processes ---------------------------------------------------------------------------
 
 
-def start_graph(supervisor: ProcessSupervisor, config: CampaignConfig, controller: str,
-                external: bool, mode: str, generator_running: bool) -> None:
+def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: CampaignConfig,
+                controller: str, generator_running: bool) -> ChildProcess | None:
+    """Start the generator (unless one runs) and, without ``config.external``, a simulator +
+    controller pair per worker; returns the generator process started, if any."""
+    generator = None
     if not generator_running:
         # No checkpoint parameter: the campaign sends every member's weights itself.
-        supervisor.start('generator', [
+        generator = supervisor.start('generator', [
             'ros2', 'run', 'sessgan_gen', 'generator', '--ros-args',
             '-r', f'__ns:={GENERATOR_NAMESPACE}', '-p', f'scenario:={config.scenario}',
             '-p', 'rate:=0.0'])
-    if external:
-        return
+    if config.external:
+        return generator
     for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'
         ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
-        supervisor.start(f'simulator_w{worker}', [
-            'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args, '-p', f'mode:={mode}',
-            '-p', f'bag_storage:={config.bag_storage}'], core=core, batch=True)
-        supervisor.start(f'{controller}_w{worker}', [
-            'ros2', 'run', 'sessgan_controllers', controller, *ros_args,
-            '-p', 'use_sim_time:=true'], core=core, batch=True)
+        pool.start_pair(
+            namespace,
+            (f'simulator_w{worker}', [
+                'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
+                '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}']),
+            (f'{controller}_w{worker}', [
+                'ros2', 'run', 'sessgan_controllers', controller, *ros_args,
+                '-p', 'use_sim_time:=true']),
+            core=core, batch=True)
+    return generator
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = parse_args(sys.argv[1:] if argv is None else argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parse_args(argv)
     try:
         config = config_from_args(args)
         config.validate()
@@ -337,21 +443,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     run_name = args.run or f'{config.scenario}-seed{config.seed}'
     controller = config.controller or get_scenario(config.scenario).controller
-    if args.external:
+    if config.external:
         controller = config.controller or 'external'
 
     def log(message: str) -> None:
         print(f'[campaign] {message}', file=sys.stderr, flush=True)
 
     try:
-        campaign = Campaign(config, run_name, args.runs_root, args.bags_root, log)
+        campaign = Campaign(config, run_name, args.runs_root, args.bags_root, log,
+                            invocation=invocation_of(args, argv))
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
 
     # SIGTERM ends the campaign like Ctrl-C, so the children are stopped too.
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
-    if args.in_process:
+    if config.in_process:
         return run_in_process(campaign, config, controller, run_name, args.resume, log)
 
     import rclpy
@@ -361,15 +468,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         evaluator = RosEvaluator(node, config, campaign.bags_dir, controller, supervisor, log)
         generator_running = evaluator.generator.wait_for_service(timeout_sec=1.0)
-        if not args.external:
+        if not config.external:
             evaluator.allowed = {f'/w{i}/evaluate' for i in range(config.workers)}
             evaluator.wait_until_absent(sorted(evaluator.allowed), timeout=15.0)
-        start_graph(supervisor, config, controller, args.external, args.mode, generator_running)
+        evaluator.generator_process = start_graph(
+            supervisor, evaluator.pool, config, controller, generator_running)
         log(f'run {run_name}: {config.generations} generations x {config.population} members x '
             f'{config.maps_per_member} maps, scenario {config.scenario}, controller '
             f'{controller}, ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
         evaluator.wait_for_generator(timeout=120.0)
-        evaluator.wait_for_workers(1 if args.external else config.workers, timeout=120.0)
+        evaluator.wait_for_workers(1 if config.external else config.workers, timeout=120.0)
         result = campaign.run(evaluator, resume=args.resume)
     except KeyboardInterrupt:
         log('interrupted: stopping every process this campaign started '
@@ -410,7 +518,7 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
     return 0
 
 
-def report_result(result, log: Callable[[str], None]) -> None:
+def report_result(result: Any, log: Callable[[str], None]) -> None:
     first, last = result.generations[0], result.generations[-1]
     log(f'done in {result.wall_time / 60:.1f} min: mean risk '
         f'{first["mean_risk_score"] or 0:.3f} (generation 0) -> '

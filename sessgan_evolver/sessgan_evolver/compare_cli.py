@@ -17,9 +17,9 @@ from pathlib import Path
 
 import torch
 
-from sessgan_evolver.campaign_cli import field_docs
 from sessgan_evolver.comparison import CompareConfig, run_comparison
 from sessgan_evolver.errors import SessganEvolverError
+from sessgan_gen.config_cli import field_docs
 from sessgan_gen.errors import SessganGenError
 
 

@@ -3,13 +3,14 @@
 The episode the ROS graph runs in lockstep mode, minus the messages: every control tick the
 controller core (from sessgan_controllers' registry) turns the observation into the command
 applied during the next tick, as a controller node answering every scan does. The simulator
-settings are the simulator node's defaults (360-beam lidar at the 20 Hz control rate, the
-scenario's robot, agents and time limit), and the controller sees its inputs exactly as the
-node decodes them from the messages (:func:`node_inputs`: the scan's geometry in float32 as
-LaserScan carries it, the yaw read back from the odometry quaternion, STOP once the
-controller says the goal is reached), so an in-process episode is, bit for bit, the lockstep
-episode of a worker running the same controller node: its failure bags re-simulate to the
-same result (``ros2 run sessgan_evolver replay <bag> --resimulate``).
+settings are a simulator worker's (sessgan_sim.simulator_settings.SimulatorSettings; by
+default the node's defaults: the scenario's robot, agents and time limit), and the
+controller sees its inputs exactly as the node decodes them from the messages
+(:func:`node_inputs`: the scan's geometry in float32 as LaserScan carries it, the yaw read
+back from the odometry quaternion, STOP once the controller says the goal is reached), so an
+in-process episode is, bit for bit, the lockstep episode of a worker running the same
+controller node: its failure bags re-simulate to the same result
+(``ros2 run sessgan_evolver replay <bag> --resimulate``).
 
 Deterministic: the same environment, seed and settings give the same metrics and trace
 (every random choice of the episode derives from the seed; the controllers keep no state
@@ -26,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
 
@@ -41,6 +42,7 @@ from sessgan_gen.scenarios import get_scenario
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import ContactEvent
+from sessgan_sim.simulator_settings import SimulatorSettings
 
 
 class EpisodeRunnerError(SessganEvolverError):
@@ -134,12 +136,13 @@ class EpisodeRunner:
     """Owns one simulator (a pybullet client) and runs episodes one at a time.
 
     ``controller``: a name of sessgan_controllers' registry ('' = the scenario's);
-    ``time_limit``: sim seconds (0 = the scenario's); ``episode_config``: the base config
-    whose ``seed`` and ``time_limit`` each run replaces (default: the simulator node's).
+    ``time_limit``: sim seconds (0 = the settings', else the scenario's); ``settings``: the
+    simulator worker's settings each episode's config is built from (default: the node's
+    defaults; only lockstep makes sense in process).
     """
 
     def __init__(self, scenario: str, controller: str = '', time_limit: float = 0.0,
-                 episode_config: EpisodeConfig | None = None,
+                 settings: SimulatorSettings | None = None,
                  clock: Callable[[], float] = time.perf_counter) -> None:
         spec = get_scenario(scenario)
         self.scenario = spec.name
@@ -151,9 +154,13 @@ class EpisodeRunner:
         if not (math.isfinite(time_limit) and time_limit >= 0):
             raise EpisodeRunnerError(f'time limit must be >= 0 s (0: the scenario default), got '
                                      f'{time_limit}')
-        self.time_limit = float(time_limit) or spec.time_limit
-        self.base_config = episode_config or EpisodeConfig()
-        self.base_config.validate()
+        self.settings = settings or SimulatorSettings()
+        if self.settings.mode != 'lockstep':
+            raise EpisodeRunnerError('in-process episodes are lockstep episodes; the settings '
+                                     f'ask for {self.settings.mode!r}')
+        self.time_limit = float(time_limit) or float(self.settings.time_limit) \
+            or spec.time_limit
+        self.episode_config(0).validate()
         self._clock = clock
         self._episode: Episode | None = None
 
@@ -179,8 +186,10 @@ class EpisodeRunner:
     # --- episodes ---------------------------------------------------------------------------
 
     def episode_config(self, seed: int) -> EpisodeConfig:
-        """The config of an episode with simulator seed ``seed``."""
-        return replace(self.base_config, seed=int(seed), time_limit=self.time_limit)
+        """The config of an episode with simulator seed ``seed`` (as a worker builds it for an
+        evaluate goal with this runner's time limit), scenario defaults filled in."""
+        return self.settings.episode_config(time_limit=self.time_limit, seed=int(seed)) \
+            .resolved(get_scenario(self.scenario))
 
     def run(self, environment: Environment, seed: int, trace: bool = False,
             keep_scans: bool = False) -> EpisodeRun:

@@ -28,3 +28,7 @@ class BagReadError(SessganEvolverError):
 
 class ReportError(SessganEvolverError):
     """A report that cannot be written from the run's metrics."""
+
+
+class CampaignError(SessganEvolverError):
+    """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""

@@ -64,10 +64,10 @@ def write_fault_record(directory: Path, record: EpisodeRecord, run: Any,
                        metadata: Mapping[str, Any] | None = None) -> Path:
     """The fault's bag (from ``run``, traced with scans) and its picture."""
     facts = {
-        'episode_seed': record.sim_seed, 'controller': evaluator.controller,
+        **evaluator.episode_facts(record.sim_seed), 'controller': evaluator.controller,
         'metrics': {k: v for k, v in run.metrics.items() if k != 'bag_path'},
-        'time_limit': evaluator.runner.time_limit, 'origin': record.origin,
-        'in_process': True, 'fault': record.fault.to_dict() if record.fault else None,
+        'origin': record.origin,
+        'fault': record.fault.to_dict() if record.fault else None,
         'fault_rule': asdict(rule), 'search_episode': record.index,
         'confirmation': asdict(confirmation) if confirmation else None,
         **dict(metadata or {}),

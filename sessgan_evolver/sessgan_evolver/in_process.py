@@ -24,9 +24,9 @@ from sessgan_evolver.episode_runner import EpisodeRun, EpisodeRunner
 from sessgan_evolver.faults import is_valid_failure
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.scenarios import get_scenario
-from sessgan_sim.episode import EpisodeConfig
+from sessgan_sim.bag_recording import episode_bag_directory
 from sessgan_sim.metrics import EpisodeMetrics, Outcome
+from sessgan_sim.simulator_settings import SimulatorSettings, episode_config_record
 
 EpisodeObserver = Callable[[Environment, int, EpisodeRun, str], None]
 """Called after every episode with (environment, simulator seed, run, origin label)."""
@@ -54,10 +54,10 @@ class InProcessEvaluator:
 
     def __init__(self, scenario: str, controller: str = '', time_limit: float = 0.0,
                  record_directory: str | Path | None = None, bag_storage: str = 'mcap',
-                 simulate_invalid: bool = True, episode_config: EpisodeConfig | None = None,
+                 simulate_invalid: bool = True, settings: SimulatorSettings | None = None,
                  observer: EpisodeObserver | None = None) -> None:
         self.scenario = scenario
-        self.runner = EpisodeRunner(scenario, controller, time_limit, episode_config)
+        self.runner = EpisodeRunner(scenario, controller, time_limit, settings)
         self.sampler = EnvironmentSampler()
         self.record_directory = Path(record_directory) if record_directory else None
         self.bag_storage = bag_storage
@@ -107,7 +107,8 @@ class InProcessEvaluator:
                                   keep_scans=keep_scans or directory is not None)
             if directory is not None and is_valid_failure(run.metrics) and run.trace is not None:
                 run.metrics['bag_path'] = str(self.write_bag(
-                    directory / environment.id, environment, seed, run, origin))
+                    episode_bag_directory(directory, environment.id), environment, seed, run,
+                    origin))
                 if not keep_scans:
                     run.trace.scans = None  # a campaign keeps no scans in memory
         self.episodes += 1
@@ -120,8 +121,16 @@ class InProcessEvaluator:
         """The episode's failure bag (``run`` must have been traced with its scans)."""
         assert run.trace is not None
         return write_trace_bag(directory, environment, run.trace, {
-            'episode_seed': int(seed), 'controller': self.controller,
+            **self.episode_facts(seed), 'controller': self.controller,
             'metrics': {k: v for k, v in run.metrics.items() if k != 'bag_path'},
-            'robot': self.runner.base_config.robot or get_scenario(self.scenario).robot,
-            'time_limit': self.runner.time_limit, 'origin': origin, 'in_process': True,
+            'origin': origin,
         }, storage=self.bag_storage)
+
+    def episode_facts(self, seed: int) -> dict:
+        """What a worker's failure bag says about its simulator (sessgan_sim.worker
+        .failure_bags), so ``replay --resimulate`` rebuilds the same one."""
+        config = self.runner.episode_config(seed)
+        return {'episode_seed': int(seed), 'robot': config.robot,
+                'time_limit': config.time_limit, 'mode': 'lockstep', 'sim_time_origin': 0.0,
+                'sim_time_origin_ns': 0, 'simulator': self.runner.settings.to_dict(),
+                'episode_config': episode_config_record(config), 'in_process': True}

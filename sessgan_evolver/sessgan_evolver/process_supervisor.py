@@ -10,6 +10,11 @@ bare rclpy lockstep tick on the machines measured) and as batch processes (a wok
 does not preempt the one that woke it until that one waits: the simulator publishes a whole
 tick before the controller reads it). ``worker_cores`` spreads worker pairs over the cores this
 process may use.
+
+A :class:`WorkerPool` watches simulator + controller pairs: the campaign asks it every loop
+which pairs have a dead process (a poll of its own children, so a death is seen at once, not
+after an episode timeout), restarts such a pair as a whole, and quarantines a pair that keeps
+dying.
 """
 
 from __future__ import annotations
@@ -28,10 +33,36 @@ class ChildProcess:
     command: list[str]
     process: subprocess.Popen
     log_path: Path
+    core: int | None = None
+    batch: bool = False
+    log_offset: int = 0
+    """Size of the log file when this process started: its own output begins there (a
+    restarted process appends to its predecessor's log)."""
 
     @property
     def alive(self) -> bool:
         return self.process.poll() is None
+
+    def exit_description(self) -> str:
+        """'is running', 'exited with status 1' or 'was killed by SIGKILL'."""
+        code = self.process.poll()
+        if code is None:
+            return 'is running'
+        if code < 0:
+            try:
+                return f'was killed by {signal.Signals(-code).name}'
+            except ValueError:
+                return f'was killed by signal {-code}'
+        return f'exited with status {code}'
+
+    def output(self) -> str:
+        """What this process wrote to its log so far."""
+        try:
+            with open(self.log_path, 'rb') as log_file:
+                log_file.seek(self.log_offset)
+                return log_file.read().decode(errors='replace')
+        except OSError:
+            return ''
 
     def log_tail(self, characters: int = 2000) -> str:
         try:
@@ -54,6 +85,7 @@ class ProcessSupervisor:
         """Start ``command``; ``core``: pin it (and its threads) to that CPU; ``batch``: run it
         with the SCHED_BATCH policy (both inherited across exec)."""
         log_path = self.log_directory / f'{name}.log'
+        log_offset = log_path.stat().st_size if log_path.exists() else 0
 
         def prepare_child() -> None:
             die_with_parent()
@@ -66,19 +98,20 @@ class ProcessSupervisor:
             process = subprocess.Popen(
                 command, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                 env=self.env, start_new_session=True, preexec_fn=prepare_child)
-        child = ChildProcess(name, command, process, log_path)
+        child = ChildProcess(name, command, process, log_path, core, batch, log_offset)
         self.children.append(child)
         return child
 
     def dead_children(self) -> list[ChildProcess]:
         return [child for child in self.children if not child.alive]
 
-    def stop_all(self, grace_seconds: float = 5.0) -> None:
-        """SIGINT to every process group, then SIGKILL to those still alive after the grace."""
-        for child in reversed(self.children):
+    def stop(self, children: list[ChildProcess], grace_seconds: float = 5.0) -> None:
+        """SIGINT to each child's process group, then SIGKILL to the groups after the grace;
+        the children are forgotten."""
+        for child in reversed(children):
             _signal_group(child.process.pid, signal.SIGINT)
         deadline = time.monotonic() + grace_seconds
-        for child in reversed(self.children):
+        for child in reversed(children):
             try:
                 child.process.wait(timeout=max(0.05, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
@@ -89,13 +122,95 @@ class ProcessSupervisor:
                 child.process.wait(timeout=5.0)
             except subprocess.TimeoutExpired:
                 pass
-        self.children.clear()
+        stopped = {id(child) for child in children}
+        self.children = [child for child in self.children if id(child) not in stopped]
+
+    def restart(self, child: ChildProcess, grace_seconds: float = 2.0) -> ChildProcess:
+        """Stop ``child`` if it still runs and start its command again (same core, same
+        scheduling, output appended to the same log); returns the new child."""
+        self.stop([child], grace_seconds)
+        return self.start(child.name, child.command, child.core, child.batch)
+
+    def stop_all(self, grace_seconds: float = 5.0) -> None:
+        """SIGINT to every process group, then SIGKILL to those still alive after the grace."""
+        self.stop(list(self.children), grace_seconds)
 
     def __enter__(self) -> ProcessSupervisor:
         return self
 
     def __exit__(self, *exc_info) -> None:
         self.stop_all()
+
+
+@dataclass
+class WorkerPair:
+    """A simulator worker and the controller under test beside it, in one namespace."""
+
+    namespace: str
+    simulator: ChildProcess
+    controller: ChildProcess
+    restarts: int = 0
+    """How often the pair was restarted after one of its processes died."""
+
+    @property
+    def alive(self) -> bool:
+        return self.simulator.alive and self.controller.alive
+
+    def death_report(self) -> str:
+        """Which of the pair's processes died and how, e.g. 'nearness_diagram_w0 (pid 42) was
+        killed by SIGKILL'; empty while both live."""
+        return '; '.join(f'{child.name} (pid {child.process.pid}) {child.exit_description()}'
+                         for child in (self.simulator, self.controller) if not child.alive)
+
+    def logged_since_start(self, text: str) -> bool:
+        """True once the pair's current simulator process has logged ``text``."""
+        return text in self.simulator.output()
+
+
+class WorkerPool:
+    """The simulator + controller pairs a campaign started: death checks, restarts, quarantine.
+
+    ``dead_pairs`` polls every pair's processes (cheap: a waitpid each), so the campaign sees a
+    death in its next loop, whatever the pair was doing. ``restart`` starts a dead pair's
+    processes again, both of them (a fresh controller for a fresh simulator, so no state of the
+    old episode survives); a pair that has died ``max_restarts`` times already is stopped and
+    dropped instead (quarantined for the rest of the campaign).
+    """
+
+    def __init__(self, supervisor: ProcessSupervisor, max_restarts: int = 3) -> None:
+        self.supervisor = supervisor
+        self.max_restarts = max_restarts
+        self.pairs: dict[str, WorkerPair] = {}
+        """Live pairs by namespace ('/w0')."""
+        self.quarantined: dict[str, WorkerPair] = {}
+
+    def start_pair(self, namespace: str, simulator: tuple[str, list[str]],
+                   controller: tuple[str, list[str]], core: int | None = None,
+                   batch: bool = False) -> WorkerPair:
+        """Start a pair; ``simulator`` and ``controller`` are (log name, command)."""
+        pair = WorkerPair(namespace, self.supervisor.start(*simulator, core=core, batch=batch),
+                          self.supervisor.start(*controller, core=core, batch=batch))
+        self.pairs[namespace] = pair
+        return pair
+
+    def dead_pairs(self) -> list[WorkerPair]:
+        """The pairs with a process that is no longer running."""
+        return [pair for pair in self.pairs.values() if not pair.alive]
+
+    def restart(self, pair: WorkerPair) -> bool:
+        """Restart both processes of ``pair``; False (and the pair stopped and quarantined) if
+        it was restarted ``max_restarts`` times already."""
+        if pair.restarts >= self.max_restarts:
+            self.supervisor.stop([pair.simulator, pair.controller], grace_seconds=2.0)
+            self.quarantined[pair.namespace] = self.pairs.pop(pair.namespace)
+            return False
+        # The survivor goes first, so the new simulator never meets the old controller.
+        self.supervisor.stop([pair.simulator, pair.controller], grace_seconds=2.0)
+        pair.simulator, pair.controller = (
+            self.supervisor.start(child.name, child.command, child.core, child.batch)
+            for child in (pair.simulator, pair.controller))
+        pair.restarts += 1
+        return True
 
 
 def worker_cores(workers: int) -> list[int | None]:

@@ -2,7 +2,7 @@
 
 Layout of ``<runs_root>/<run_name>/``::
 
-    config.json                      campaign config, seed, software version
+    config.json                      campaign config, seed, software version, invocation
     checkpoints/generation_0003.pt   algorithm state ready to evaluate generation 3
     metrics.jsonl                    every metrics row, one JSON object per line, with 'kind'
     metrics_episodes.csv             the 'episode' rows (one per map and member)
@@ -42,6 +42,8 @@ import torch
 from sessgan_evolver import __version__
 from sessgan_evolver.errors import RunStoreError
 from sessgan_gen.atomic_files import atomic_write_bytes
+from sessgan_gen.checkpoint import check_checkpoint_file, not_a_checkpoint_message
+from sessgan_gen.errors import CheckpointError
 from sessgan_gen.json_data import to_json_data
 
 CHECKPOINT_FORMAT = 'sessgan_evolver.checkpoint/1'
@@ -70,6 +72,9 @@ class ResumePoint:
     checkpoint: dict[str, Any]
     """The payload of ``save_checkpoint``: 'algorithm' (the state dict) and 'extra'."""
     path: Path
+    set_aside: tuple[str, ...] = ()
+    """One line per newer checkpoint that could not be read and was renamed to
+    ``*.pt.corrupt`` (the run continues from an earlier generation instead)."""
 
 
 class RunStore:
@@ -113,13 +118,16 @@ class RunStore:
     # -- config ---------------------------------------------------------------------------
 
     def write_config(self, config: Mapping[str, Any], seed: int,
-                     software_version: str = __version__) -> None:
+                     software_version: str = __version__,
+                     invocation: Mapping[str, Any] | None = None) -> None:
         """Write config.json once. Writing the same config and seed again is a no-op (a
         resumed run; the recorded software version stays the original one); a different
         config or seed raises RunStoreError listing what differs, so a run name is never
-        reused with other settings by accident."""
+        reused with other settings by accident. ``invocation`` (command line, paths) is
+        stored for the record but not compared."""
         document = {'config': _plain(config), 'seed': int(seed),
-                    'software_version': software_version}
+                    'software_version': software_version,
+                    'invocation': _plain(dict(invocation or {}))}
         if self.config_path.exists():
             existing = self.read_config()
             differences = _differences({'config': existing.get('config'),
@@ -175,12 +183,15 @@ class RunStore:
         """Load a checkpoint (by generation or path) with ``weights_only=True``."""
         path = (self.checkpoint_path(generation_or_path)
                 if isinstance(generation_or_path, int) else Path(generation_or_path))
+        label = f'population checkpoint {path}'
+        try:
+            check_checkpoint_file(path, label)
+        except CheckpointError as err:
+            raise RunStoreError(str(err)) from err
         try:
             payload = torch.load(path, map_location='cpu', weights_only=True)
-        except FileNotFoundError as err:
-            raise RunStoreError(f'checkpoint {path} does not exist') from err
         except Exception as err:  # torch raises many types for a corrupt file
-            raise RunStoreError(f'checkpoint {path} is corrupt or unreadable: {err}') from err
+            raise RunStoreError(not_a_checkpoint_message(label, err)) from err
         if not isinstance(payload, dict) or payload.get('format') != CHECKPOINT_FORMAT:
             raise RunStoreError(f'{path} is not a sessgan_evolver population checkpoint')
         return payload
@@ -268,23 +279,45 @@ class RunStore:
         that generation and later, checkpoints of later generations, and stray temporary
         files. The caller restores the algorithm from ``checkpoint['algorithm']`` and
         evaluates ``generation`` next.
+
+        A latest checkpoint that cannot be read (truncated or corrupted on disk) is renamed
+        to ``*.pt.corrupt`` and the run goes back to the newest readable one; evaluating from
+        there gives the same results, as every generation does (see ``set_aside``). When no
+        checkpoint is readable, RunStoreError says how to start over; nothing is changed.
         """
         self.remove_stray_temporary_files()
+        set_aside: list[str] = []
         if generation is None:
-            info = self.latest_checkpoint()
-            if info is None:
+            found = self.checkpoints()
+            if not found:
                 return None
+            errors = []
+            for info in reversed(found):
+                try:
+                    payload = self.load_checkpoint(info.path)
+                    break
+                except RunStoreError as err:
+                    errors.append(str(err))
+            else:
+                raise RunStoreError(
+                    f'run {self.run_name!r} cannot be resumed: none of its {len(found)} '
+                    f'checkpoints is readable (latest: {errors[0]}). Start it over: remove '
+                    f'{self.run_dir} (and its failure bags), or run with another --run name')
+            for newer, error in zip(reversed(found), errors, strict=False):
+                corrupt = newer.path.with_name(newer.path.name + '.corrupt')
+                os.replace(newer.path, corrupt)
+                set_aside.append(f'{error}; renamed to {corrupt.name}')
         else:
             info = CheckpointInfo(generation, self.checkpoint_path(generation))
             if not info.path.is_file():
                 raise RunStoreError(f'run {self.run_name!r} has no checkpoint of generation '
                                     f'{generation}')
-        payload = self.load_checkpoint(info.path)
+            payload = self.load_checkpoint(info.path)
         for later in self.checkpoints():
             if later.generation > info.generation:
                 later.path.unlink()
         self.truncate_metrics(info.generation)
-        return ResumePoint(info.generation, payload, info.path)
+        return ResumePoint(info.generation, payload, info.path, tuple(set_aside))
 
     def delete(self) -> None:
         """Remove the whole run directory (for a fresh start under the same name)."""

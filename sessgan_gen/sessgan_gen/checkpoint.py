@@ -106,6 +106,27 @@ def save_checkpoint(
     return path
 
 
+def check_checkpoint_file(path: Path, label: str) -> None:
+    """CheckpointError unless ``path`` is an existing regular file: says whether it is
+    missing, a directory or something else."""
+    if path.is_dir():
+        raise CheckpointError(f'{label} is a directory, not a checkpoint file')
+    if not path.exists():
+        raise CheckpointError(f'{label} does not exist')
+    if not path.is_file():
+        raise CheckpointError(f'{label} is not a regular file')
+
+
+def not_a_checkpoint_message(label: str, err: BaseException) -> str:
+    """The message for a file torch cannot load with ``weights_only=True``.
+
+    PyTorch's own message advises loading with ``weights_only=False``, which runs any code
+    the file holds: never do that with a file from elsewhere, so the advice is left out.
+    """
+    return (f'{label} is not a valid checkpoint: it is truncated, corrupt or not a '
+            f'checkpoint at all ({type(err).__name__})')
+
+
 def read_checkpoint(source: str | Path | bytes) -> dict[str, Any]:
     """Read and check the raw payload of a checkpoint file or bytes (no pyramid built)."""
     if isinstance(source, (bytes, bytearray, memoryview)):
@@ -114,16 +135,14 @@ def read_checkpoint(source: str | Path | bytes) -> dict[str, Any]:
     else:
         path = Path(source)
         label = f'checkpoint {str(path)!r}'
-        if not path.is_file():
-            raise CheckpointError(f'{label} does not exist')
+        check_checkpoint_file(path, label)
         stream = path
     if isinstance(stream, io.BytesIO) and not stream.getbuffer().nbytes:
         raise CheckpointError(f'{label} is empty')
     try:
         payload = torch.load(stream, map_location='cpu', weights_only=True)
     except Exception as err:  # torch raises many types for a truncated or foreign file
-        reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise CheckpointError(f'{label} is corrupt or truncated: {reason}') from err
+        raise CheckpointError(not_a_checkpoint_message(label, err)) from err
     if not isinstance(payload, dict) or payload.get('format') != CHECKPOINT_FORMAT:
         raise CheckpointError(f'{label} is not a sessgan_gen generator checkpoint')
     version = payload.get('format_version')

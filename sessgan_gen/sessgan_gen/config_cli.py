@@ -1,7 +1,9 @@
 """Command lines from typed config dataclasses (CleanRL style: field docs become --help).
 
 A field ``iterations: int = 0`` followed by a docstring becomes ``--iterations``
-with that docstring as its help; bools become ``--name`` / ``--no-name``.
+with that docstring as its help; bools become ``--name`` / ``--no-name``; a field that is
+itself a config dataclass contributes its fields as ``--<field>-<name>``. Every command
+(train, report, campaign) builds its options this way.
 """
 
 from __future__ import annotations
@@ -38,6 +40,46 @@ def field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
+def add_config_arguments(parser: argparse.ArgumentParser, cls: type,
+                         prefix: str = '') -> None:
+    """Add one option per field of dataclass ``cls`` to ``parser``.
+
+    A field that is itself a dataclass adds its fields with the prefix ``<field>_``
+    (``fitness: FitnessConfig`` gives ``--fitness-tpkl-weight``, ...).
+    """
+    docs = field_docs(cls)
+    hints = typing.get_type_hints(cls)
+    for field in dataclasses.fields(cls):
+        kind = hints[field.name]
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            add_config_arguments(parser, kind, f'{prefix}{field.name}_')
+            continue
+        name = prefix + field.name
+        option = '--' + name.replace('_', '-')
+        default = _default_of(field)
+        help_text = docs.get(field.name, ' ').replace('%', '%%')  # argparse formats help
+        if kind is bool:
+            parser.add_argument(option, dest=name, default=default, help=help_text,
+                                action=argparse.BooleanOptionalAction)
+        else:
+            parser.add_argument(option, dest=name, type=_base_type(kind), default=default,
+                                help=help_text, metavar=field.name.upper())
+
+
+def config_from_namespace(cls: type[ConfigT], namespace: argparse.Namespace,
+                          prefix: str = '') -> ConfigT:
+    """The ``cls`` instance of the options :func:`add_config_arguments` added."""
+    hints = typing.get_type_hints(cls)
+    values: dict[str, Any] = {}
+    for field in dataclasses.fields(cls):  # type: ignore[arg-type]
+        kind = hints[field.name]
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            values[field.name] = config_from_namespace(kind, namespace, f'{prefix}{field.name}_')
+        else:
+            values[field.name] = getattr(namespace, prefix + field.name)
+    return cls(**values)
+
+
 def build_parser(
     cls: type, prog: str | None = None, description: str = ''
 ) -> argparse.ArgumentParser:
@@ -45,20 +87,7 @@ def build_parser(
     parser = argparse.ArgumentParser(
         prog=prog, description=description,
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    docs = field_docs(cls)
-    hints = typing.get_type_hints(cls)
-    for field in dataclasses.fields(cls):
-        option = '--' + field.name.replace('_', '-')
-        kind = hints[field.name]
-        default = field.default
-        help_text = docs.get(field.name, ' ').replace('%', '%%')  # argparse formats help
-        if kind is bool:
-            parser.add_argument(option, default=default, help=help_text,
-                                action=argparse.BooleanOptionalAction)
-        else:
-            base = _base_type(kind)
-            parser.add_argument(option, type=base, default=default, help=help_text,
-                                metavar=field.name.upper())
+    add_config_arguments(parser, cls)
     return parser
 
 
@@ -67,7 +96,15 @@ def parse_config(
 ) -> ConfigT:
     """Parse ``argv`` (default: sys.argv[1:]) into an instance of dataclass ``cls``."""
     namespace = build_parser(cls, prog, description).parse_args(argv)
-    return cls(**vars(namespace))
+    return config_from_namespace(cls, namespace)
+
+
+def _default_of(field: dataclasses.Field) -> Any:
+    if field.default is not dataclasses.MISSING:
+        return field.default
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    raise TypeError(f'config field {field.name!r} needs a default to become an option')
 
 
 def _base_type(kind: Any) -> Any:

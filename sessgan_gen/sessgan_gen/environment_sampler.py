@@ -11,9 +11,13 @@ from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
-from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
-from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
-from sessgan_gen.errors import CheckpointError, SessganGenError
+from sessgan_gen.checkpoint import (
+    check_checkpoint_file,
+    default_checkpoint_path,
+    load_checkpoint,
+)
+from sessgan_gen.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
+from sessgan_gen.errors import CheckpointError, SamplingRequestError
 from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
@@ -21,9 +25,11 @@ from sessgan_gen.scenarios import get_scenario
 
 MAX_SEEDS_PER_REQUEST = 4096
 
-
-class SamplingRequestError(SessganGenError, ValueError):
-    """A request the sampler cannot serve: absurd size, too many seeds, unknown scenario."""
+DEFAULT_MAX_CELLS_PER_REQUEST = 4 * 1024 * 1024
+"""Default cap on the cells of all maps of one request (4,194,304: four 1024 x 1024 maps or
+4096 factory maps of 32 x 32). Sampling costs about 6.5 us per cell on one core (a
+1024 x 1024 map 6.4 s, 1024 maps of 32 x 32 6.8 s), so a request stays within half a
+minute, well inside the campaign's 120 s wait for the generator."""
 
 
 def environment_id(scenario: str, generation: int, member: int, seed: int) -> str:
@@ -36,9 +42,16 @@ def environment_id(scenario: str, generation: int, member: int, seed: int) -> st
 class EnvironmentSampler:
     """Loads pyramids (cached) and turns seeds into Environments."""
 
-    def __init__(self, device: str = 'cpu', cache_size: int = 4) -> None:
+    def __init__(self, device: str = 'cpu', cache_size: int = 4,
+                 max_cells_per_request: int = DEFAULT_MAX_CELLS_PER_REQUEST) -> None:
+        """``max_cells_per_request``: most cells (seeds x height x width) one ``sample`` call
+        may produce; larger requests are refused before any sampling."""
+        if max_cells_per_request < 1:
+            raise SamplingRequestError(
+                f'max_cells_per_request must be >= 1, got {max_cells_per_request}')
         self.device = device
         self.cache_size = cache_size
+        self.max_cells_per_request = int(max_cells_per_request)
         self._cache: OrderedDict[str, tuple[GeneratorPyramid, dict]] = OrderedDict()
 
     def load(self, checkpoint: str | Path | bytes | None = None,
@@ -52,10 +65,12 @@ class EnvironmentSampler:
             key = 'bytes:' + hashlib.sha256(checkpoint).hexdigest()
         else:
             path = Path(checkpoint)
+            check_checkpoint_file(path, f'checkpoint {str(path)!r}')
             try:
                 key = f'path:{path.resolve()}:{path.stat().st_mtime_ns}'
             except OSError as err:
-                raise CheckpointError(f'checkpoint {str(path)!r} cannot be read: {err}') from err
+                raise CheckpointError(f'checkpoint {str(path)!r} cannot be read: '
+                                      f'{err.strerror}') from err
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]
@@ -82,6 +97,8 @@ class EnvironmentSampler:
                 f'{len(seeds)} seeds in one request; at most {MAX_SEEDS_PER_REQUEST}')
         pyramid, metadata = self.load(checkpoint, scenario)
         scenario_name = scenario or metadata.get('scenario')
+        if not scenario_name:
+            raise SamplingRequestError('the checkpoint names no scenario: give one')
         spec = get_scenario(scenario_name)
         if size is None or size == (0, 0):
             size = spec.default_size
@@ -90,8 +107,16 @@ class EnvironmentSampler:
         if not all(min_side <= side <= MAX_CELLS_PER_SIDE for side in (height, width)):
             raise SamplingRequestError(
                 f'size {height}x{width} cells is outside {min_side}..{MAX_CELLS_PER_SIDE} per '
-                f'side '
-                f'for this {scenario_name} generator')
+                f'side for this {scenario_name} generator')
+        if height * width > MAX_TOTAL_CELLS:
+            raise SamplingRequestError(
+                f'size {height}x{width} is {height * width:,} cells a map, more than the '
+                f'{MAX_TOTAL_CELLS:,} a simulator accepts')
+        if len(seeds) * height * width > self.max_cells_per_request:
+            raise SamplingRequestError(
+                f'{len(seeds)} maps of {height}x{width} are {len(seeds) * height * width:,} '
+                f'cells, more than {self.max_cells_per_request:,} per request '
+                '(max_cells_per_request): ask for fewer or smaller maps at a time')
         maps = sample_token_maps(pyramid, [int(s) for s in seeds], size=(height, width))
         return [
             make_environment(cells, spec, environment_id(spec.name, generation, member, int(seed)),

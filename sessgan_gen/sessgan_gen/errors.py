@@ -22,3 +22,8 @@ class InvalidEnvironmentError(SessganGenError, ValueError):
 
 class CheckpointError(SessganGenError):
     """A missing, corrupt or incompatible generator checkpoint."""
+
+
+class SamplingRequestError(SessganGenError, ValueError):
+    """A request the sampler cannot serve: absurd size, too many seeds or cells, unknown
+    scenario."""

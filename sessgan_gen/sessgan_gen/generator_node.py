@@ -11,13 +11,15 @@ from __future__ import annotations
 
 import rclpy
 from nav_msgs.msg import OccupancyGrid
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import environment_to_msg
+from sessgan_gen.ros_spin import exit_process, run_node
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 from sessgan_interfaces.srv import GenerateEnvironments
 
@@ -36,7 +38,14 @@ class GeneratorNode(Node):
         self.declare_parameter('seed', 0)         # first seed; each publication uses the next
         self.declare_parameter('rate', 0.0)       # Hz; 0 publishes one environment at start
         self.declare_parameter('device', 'cpu')
-        self.sampler = EnvironmentSampler(device=self.get_parameter('device').value)
+        # Most cells (seeds x height x width) one generate_environments request may ask for.
+        self.declare_parameter('max_cells_per_request', DEFAULT_MAX_CELLS_PER_REQUEST)
+        self.sampler = EnvironmentSampler(
+            device=self.get_parameter('device').value,
+            max_cells_per_request=int(self.get_parameter('max_cells_per_request').value))
+        checkpoint = self.get_parameter('checkpoint').value
+        if checkpoint:  # an unreadable checkpoint ends the node at once, with the reason
+            self.sampler.load(checkpoint, self.get_parameter('scenario').value)
         self.next_seed = int(self.get_parameter('seed').value)
         self.environment_publisher = self.create_publisher(EnvironmentMsg, 'environments', 10)
         self.map_publisher = self.create_publisher(OccupancyGrid, 'environment', MAP_QOS)
@@ -86,14 +95,13 @@ class GeneratorNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
+    """Spin the generator until a signal (which ends it at once and cleanly, also while it
+    samples: sessgan_gen.ros_spin); an unusable scenario, checkpoint or parameter ends the
+    process with a one-line error and exit status 1."""
+    exit_if_help('sessgan_gen generator', __doc__ or '', GeneratorNode, args)
     try:
-        node = GeneratorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        status = run_node(GeneratorNode, args=args)
+    except (SessganGenError, ValueError, ParameterException) as err:
+        rclpy.logging.get_logger('sessgan_gen').fatal(f'cannot start the generator: {err}')
+        status = 1
+    exit_process(status)

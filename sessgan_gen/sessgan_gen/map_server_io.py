@@ -26,6 +26,7 @@ written atomically (temporary file, then os.replace).
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from collections.abc import Sequence
@@ -34,6 +35,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import yaml
+from PIL import Image
 
 from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
@@ -117,7 +119,13 @@ def _pgm_header(data: bytes, source: str) -> tuple[str, list[int], int]:
 
 
 def read_pgm(path: str | os.PathLike) -> tuple[np.ndarray, int]:
-    """Read a PGM (P5 or P2) image: (uint16 array (height, width), top row first; maxval)."""
+    """Read a PGM (P5 or P2) image: (uint16 array (height, width), top row first; maxval).
+
+    Not Pillow: it rescales an image whose maxval is not 255 (or 65535) to 8 (16) bits and
+    drops the maxval, while map_server's thresholds apply to value / maxval exactly; with
+    maxval 100, the value 35 (occ 0.65, unknown under the default occupied_thresh 0.65)
+    became 89 / 255 (occ 0.651: occupied). Writing, where we choose the format, uses Pillow.
+    """
     source = str(path)
     try:
         data = Path(path).read_bytes()
@@ -165,10 +173,11 @@ def read_pgm(path: str | os.PathLike) -> tuple[np.ndarray, int]:
 
 
 def encode_pgm(pixels: np.ndarray) -> bytes:
-    """Encode an 8-bit (height, width) array, top row first, as a binary P5 PGM."""
-    array = np.asarray(pixels, dtype=np.uint8)
-    header = f'P5\n# written by sessgan_gen\n{array.shape[1]} {array.shape[0]}\n255\n'
-    return header.encode('ascii') + np.ascontiguousarray(array).tobytes()
+    """Encode an 8-bit (height, width) array, top row first, as a binary P5 PGM (maxval
+    255)."""
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(pixels, dtype=np.uint8), mode='L').save(buffer, 'PPM')
+    return buffer.getvalue()
 
 
 # --- YAML ---------------------------------------------------------------------------------------
@@ -419,4 +428,36 @@ def import_map_server(yaml_path: str | os.PathLike, scenario: ScenarioLike,
     cells = occupancy_to_tokens(loaded.occupancy, spec)
     if size is not None:
         cells = resample_tokens(cells, spec, size)
+    return TokenMap(scenario=spec.name, cells=cells)
+
+
+def cells_at_cell_size(pixels: tuple[int, int], resolution: float,
+                       cell_size: float) -> tuple[int, int]:
+    """(height, width) in cells of ``cell_size`` metres of an image of ``pixels`` (height,
+    width) at ``resolution`` metres per pixel: the nearest whole number, at least one."""
+    if not (math.isfinite(cell_size) and cell_size > 0):
+        raise MapFormatError(f'cell size must be a positive number of metres, got {cell_size}')
+    height, width = (max(1, round(count * resolution / cell_size)) for count in pixels)
+    return height, width
+
+
+def import_map_server_for_scenario(yaml_path: str | os.PathLike,
+                                   scenario: ScenarioLike) -> TokenMap:
+    """A map_server map as a token map of ``scenario`` at the scenario's cell size.
+
+    :func:`import_map_server` with the size that keeps the map's metres: an image of h x w
+    pixels at r m/px becomes round(h*r/cell) x round(w*r/cell) cells of the scenario's
+    ``cell_size`` (a 0.05 m/px map of a 16 m room becomes 32 x 32 cells of 0.5 m). The map's
+    origin does not matter to the token map (tokens have no position). MapFormatError when the
+    result would exceed the grid limits.
+    """
+    spec = resolve_scenario(scenario)
+    loaded = read_map_server(yaml_path)
+    size = cells_at_cell_size(loaded.occupancy.shape, loaded.resolution, spec.cell_size)
+    if max(size) > MAX_CELLS_PER_SIDE:
+        raise MapFormatError(
+            f'{yaml_path}: {loaded.occupancy.shape[1]}x{loaded.occupancy.shape[0]} pixels at '
+            f'{loaded.resolution} m/px make {size[1]}x{size[0]} cells of {spec.cell_size} m, '
+            f'more than {MAX_CELLS_PER_SIDE} per side')
+    cells = resample_tokens(occupancy_to_tokens(loaded.occupancy, spec), spec, size)
     return TokenMap(scenario=spec.name, cells=cells)

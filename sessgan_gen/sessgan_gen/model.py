@@ -335,7 +335,7 @@ class GeneratorPyramid(nn.Module):
         entry of ``state_dict`` compared with this pyramid."""
         check_state_dict_against(self.state_dict(), state_dict)
 
-    def load_state_dict(  # type: ignore[override]
+    def load_state_dict(
         self, state_dict: Mapping[str, torch.Tensor], strict: bool = True, assign: bool = False
     ):
         """Validate (CheckpointError naming the bad key), then load like nn.Module."""

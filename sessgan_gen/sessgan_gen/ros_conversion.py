@@ -8,8 +8,9 @@ import numpy as np
 from geometry_msgs.msg import Pose
 from nav_msgs.msg import OccupancyGrid
 
-from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment, Pose2D
+from sessgan_gen.environment import Environment, Pose2D, check_grid_size
 from sessgan_gen.errors import InvalidEnvironmentError
+from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 
 
@@ -17,15 +18,15 @@ def pose_to_msg(pose: Pose2D) -> Pose:
     msg = Pose()
     msg.position.x = float(pose.x)
     msg.position.y = float(pose.y)
-    msg.orientation.z = math.sin(pose.yaw / 2.0)
-    msg.orientation.w = math.cos(pose.yaw / 2.0)
+    q = msg.orientation
+    q.x, q.y, q.z, q.w = quaternion_from_yaw(pose.yaw)
     return msg
 
 
 def pose_from_msg(msg: Pose) -> Pose2D:
     q = msg.orientation
-    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-    return Pose2D(float(msg.position.x), float(msg.position.y), yaw)
+    return Pose2D(float(msg.position.x), float(msg.position.y),
+                  yaw_from_quaternion(q.x, q.y, q.z, q.w))
 
 
 def occupancy_grid_msg(environment: Environment, frame_id: str = 'map',
@@ -50,10 +51,10 @@ def occupancy_from_grid_msg(grid: OccupancyGrid) -> tuple[np.ndarray, float, tup
     """(occupancy array, resolution, origin) of a grid; InvalidEnvironmentError if malformed."""
     width, height = int(grid.info.width), int(grid.info.height)
     resolution = float(grid.info.resolution)
-    if not (1 <= width <= MAX_CELLS_PER_SIDE and 1 <= height <= MAX_CELLS_PER_SIDE):
-        raise InvalidEnvironmentError(
-            f'occupancy grid of {width}x{height} cells is outside 1..{MAX_CELLS_PER_SIDE} per '
-            f'side')
+    try:
+        check_grid_size(width, height)  # before anything is built from the data
+    except InvalidEnvironmentError as err:
+        raise InvalidEnvironmentError(f'occupancy grid: {err}') from err
     if len(grid.data) != width * height:
         raise InvalidEnvironmentError(
             f'occupancy grid data has {len(grid.data)} cells but info says '

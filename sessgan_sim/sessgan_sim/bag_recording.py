@@ -10,7 +10,12 @@
 
 Everything is written under ``<directory>.tmp-<pid>/`` and moved into place with one
 ``os.replace`` of a finished directory, so a reader (or a killed writer) never sees a
-half-written bag. The messages arrive already CDR-serialized (the node serializes them
+half-written bag. A bag's directory is ``<record directory>/<episode id>``
+(:func:`episode_bag_directory`); the id must be a safe name
+(``sessgan_gen.environment.check_environment_id``: no path separators, no '..', at most 128
+characters), checked before anything on disk is touched. An existing directory is replaced
+(``overwrite``) only if it is itself a failure bag (:func:`is_episode_bag`), never a
+directory someone else made. The messages arrive already CDR-serialized (the node serializes them
 with ``rclpy.serialization``); this module imports no rclpy and no message types.
 
 QoS recorded per topic (what ``ros2 bag play`` will offer on replay): ``map`` and
@@ -30,6 +35,7 @@ from pathlib import Path
 from typing import Any, Final, Literal, NamedTuple
 
 import numpy as np
+import yaml
 from rosbags.interfaces import (
     Connection,
     Qos,
@@ -44,10 +50,12 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from sessgan_gen.atomic_files import fsync_directory, fsync_tree
+from sessgan_gen.environment import check_environment_id
+from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_gen.json_data import to_json_data
 from sessgan_gen.map_server_io import write_map_server
 from sessgan_sim import __version__
-from sessgan_sim.errors import SessganSimError
+from sessgan_sim.errors import BagWriteError
 
 BAG_VERSION: Final[Literal[9]] = 9
 """rosbag2 metadata version; Jazzy's ``ros2 bag`` reads version 9."""
@@ -60,14 +68,12 @@ VOLATILE_DEPTH = 10
 
 EPISODE_FILE = 'episode.json'
 MAP_YAML_FILE = 'map.yaml'
+METADATA_FILE = 'metadata.yaml'
+_BAG_SIDE_FILES = frozenset({EPISODE_FILE, MAP_YAML_FILE, 'map.pgm', METADATA_FILE})
 
 # rmw's "infinite" duration as Jazzy's rosbag2 writes it in metadata.yaml.
 _INFINITE = QosTime(sec=9223372036, nsec=854775807)
 _UNSPECIFIED = QosTime(sec=0, nsec=0)
-
-
-class BagWriteError(SessganSimError):
-    """A failure bag that cannot be written (bad record, unknown type, file system)."""
 
 
 class BagStorage(StrEnum):
@@ -123,6 +129,39 @@ def jazzy_typestore() -> Typestore:
     return _JAZZY_TYPESTORE
 
 
+def episode_bag_directory(record_directory: str | Path, episode_id: str) -> Path:
+    """``<record_directory>/<episode_id>``, the directory of an episode's failure bag.
+
+    BagWriteError if ``record_directory`` is empty or ``episode_id`` is not a safe name
+    (empty, absolute, with '/' or '..', too long: see ``check_environment_id``), so a bag
+    never lands outside its record directory or on the record directory itself.
+    """
+    if not str(record_directory):
+        raise BagWriteError('no record directory given for the failure bag')
+    try:
+        check_environment_id(episode_id)
+    except InvalidEnvironmentError as err:
+        raise BagWriteError(f'refusing to write a failure bag: {err}') from err
+    return Path(record_directory) / episode_id
+
+
+def is_episode_bag(directory: str | Path) -> bool:
+    """True if ``directory`` is a failure bag :func:`write_episode_bag` wrote: a directory of
+    plain files holding episode.json and metadata.yaml, and nothing but the bag's own files
+    (so a directory a user put other things in is never taken for one)."""
+    path = Path(directory)
+    if path.is_symlink() or not path.is_dir():
+        return False
+    names = set()
+    for entry in path.iterdir():
+        if entry.is_symlink() or not entry.is_file():
+            return False
+        if entry.name not in _BAG_SIDE_FILES and not entry.name.startswith(f'{path.name}.'):
+            return False
+        names.add(entry.name)
+    return {EPISODE_FILE, METADATA_FILE} <= names
+
+
 def write_episode_bag(directory: str | Path,
                       records: Iterable[BagRecord | tuple[str, str, int, bytes]],
                       metadata: Mapping[str, Any],
@@ -141,18 +180,28 @@ def write_episode_bag(directory: str | Path,
     (unless given), the map geometry and per-topic message counts are added.
     ``map_occupancy``: int8 (height, width) OccupancyGrid values; ``resolution``: metres per
     cell; ``origin``: map-frame (x, y[, yaw]) of cell (0, 0). ``overwrite``: replace an
-    existing ``directory`` (the old one stays complete until the new one is in place);
-    otherwise an existing directory is an error. ``typestore``: message definitions
-    (default: ROS 2 Jazzy).
+    existing ``directory`` that is a failure bag (:func:`is_episode_bag`; the old one stays
+    complete until the new one is in place); any other existing directory is an error.
+    ``typestore``: message definitions (default: ROS 2 Jazzy).
+
+    ``directory``'s last component must be a safe episode id and no component may be '..'
+    (build it with :func:`episode_bag_directory`); both are checked before anything on disk
+    is touched.
     """
     final = Path(directory)
+    if '..' in final.parts:
+        raise BagWriteError(f'refusing to write a failure bag to {final}: the path has a ".." '
+                            'component')
+    try:
+        check_environment_id(final.name)
+    except InvalidEnvironmentError as err:
+        raise BagWriteError(f'refusing to write a failure bag to {final}: {err}') from err
     try:
         storage = BagStorage(storage)
     except ValueError as err:
         raise BagWriteError(f'unknown bag storage {storage!r}; expected one of '
                             f'{[s.value for s in BagStorage]}') from err
-    if final.exists() and not overwrite:
-        raise BagWriteError(f'{final} exists already (pass overwrite=True to replace it)')
+    _check_replaceable(final, overwrite)
     if not (math.isfinite(resolution) and resolution > 0):
         raise BagWriteError(f'map resolution must be a positive number of metres, '
                             f'got {resolution}')
@@ -163,7 +212,9 @@ def write_episode_bag(directory: str | Path,
     staging.mkdir()
     bag_path = staging / final.name
     try:
-        counts, first_ns, last_ns = _write_bag(bag_path, records, storage, store)
+        custom_data = {'sessgan.episode': final.name, 'sessgan.software_version': __version__}
+        counts, first_ns, last_ns = _write_bag(bag_path, records, storage, store, custom_data)
+        _describe_as_jazzy(bag_path / METADATA_FILE)
         origin_values = [float(value) for value in origin]
         write_map_server(bag_path / MAP_YAML_FILE, np.asarray(map_occupancy), float(resolution),
                          origin_values)
@@ -179,9 +230,8 @@ def write_episode_bag(directory: str | Path,
         (bag_path / EPISODE_FILE).write_text(
             json.dumps(episode, indent=2, sort_keys=True, allow_nan=False) + '\n')
         fsync_tree(bag_path)
-        if final.exists():
-            if not overwrite:
-                raise BagWriteError(f'{final} appeared while the bag was being written')
+        if final.exists() or final.is_symlink():
+            _check_replaceable(final, overwrite)
             os.replace(final, staging / 'replaced')
         os.replace(bag_path, final)
         fsync_directory(final.parent)
@@ -192,6 +242,16 @@ def write_episode_bag(directory: str | Path,
         raise
     shutil.rmtree(staging, ignore_errors=True)
     return final
+
+
+def _check_replaceable(final: Path, overwrite: bool) -> None:
+    """BagWriteError unless ``final`` is absent, or a failure bag and ``overwrite`` is set."""
+    if not (final.exists() or final.is_symlink()):
+        return
+    if not is_episode_bag(final):
+        raise BagWriteError(f'{final} exists and is not a failure bag: refusing to replace it')
+    if not overwrite:
+        raise BagWriteError(f'{final} exists already (pass overwrite=True to replace it)')
 
 
 def remove_stale_staging_directories(parent: str | Path) -> list[Path]:
@@ -209,7 +269,7 @@ def remove_stale_staging_directories(parent: str | Path) -> list[Path]:
 
 
 def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int, bytes]],
-               storage: BagStorage, store: Typestore
+               storage: BagStorage, store: Typestore, custom_data: Mapping[str, str]
                ) -> tuple[dict[str, int], int | None, int | None]:
     """Stream the records into a new bag; returns per-topic counts and the time span."""
     connections: dict[tuple[str, str], Connection] = {}
@@ -217,6 +277,8 @@ def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int
     first_ns: int | None = None
     last_ns: int | None = None
     with Writer(bag_path, version=BAG_VERSION, storage_plugin=storage.plugin) as writer:
+        for name, value in custom_data.items():
+            writer.set_custom_data(name, value)
         for index, record in enumerate(records):
             topic, msgtype, timestamp_ns, data = _checked_record(index, record)
             key = (topic, msgtype)
@@ -234,6 +296,17 @@ def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int
             first_ns = timestamp_ns if first_ns is None else min(first_ns, timestamp_ns)
             last_ns = timestamp_ns if last_ns is None else max(last_ns, timestamp_ns)
     return counts, first_ns, last_ns
+
+
+def _describe_as_jazzy(metadata_path: Path) -> None:
+    """Make metadata.yaml read as Jazzy's recorder writes it: ``ros_distro: jazzy`` (rosbags
+    writes its own name there), ``custom_data`` a mapping."""
+    document = yaml.safe_load(metadata_path.read_text(encoding='utf-8'))
+    information = document['rosbag2_bagfile_information']
+    information['ros_distro'] = 'jazzy'
+    information['custom_data'] = dict(information.get('custom_data') or {})
+    metadata_path.write_text(yaml.safe_dump(document, default_flow_style=False, sort_keys=False),
+                             encoding='utf-8')
 
 
 def _checked_record(index: int, record: BagRecord | tuple[str, str, int, bytes]

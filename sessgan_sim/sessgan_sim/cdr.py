@@ -11,10 +11,11 @@ tests/unit/sim/test_cdr.py checks that each reads back as the message rclpy woul
 
 from __future__ import annotations
 
-import math
 import struct
 
 import numpy as np
+
+from sessgan_gen.quaternion import quaternion_from_yaw
 
 ENCAPSULATION = b'\x00\x01\x00\x00'
 _ZERO_COVARIANCE = bytes(36 * 8)
@@ -55,7 +56,7 @@ def odometry(time: tuple[int, int], frame_id: str, child_frame_id: str, x: float
     buffer = _header(time, frame_id)
     _string(buffer, child_frame_id)
     _align(buffer, 8)
-    buffer += struct.pack('<7d', x, y, z, 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
+    buffer += struct.pack('<7d', x, y, z, *quaternion_from_yaw(yaw))
     buffer += _ZERO_COVARIANCE
     buffer += struct.pack('<6d', vx, vy, 0.0, 0.0, 0.0, wz)
     buffer += _ZERO_COVARIANCE

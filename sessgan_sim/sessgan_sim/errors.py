@@ -22,3 +22,8 @@ class WorldError(SessganSimError):
 
 class EpisodeError(SessganSimError):
     """An episode driven out of order: stepped before reset, after it ended, or while closed."""
+
+
+class BagWriteError(SessganSimError):
+    """A failure bag that cannot be written (bad record, unknown type, unsafe name, file
+    system)."""

@@ -41,6 +41,7 @@ from typing import Any, ClassVar, NamedTuple
 import pybullet as p
 
 from sessgan_gen.environment import Pose2D
+from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_gen.scenarios import FREE, LOW_OBSTACLE
 from sessgan_sim.errors import InvalidConfigError, UnknownRobotError
 from sessgan_sim.world import ROBOT_MASK, CollisionGroup
@@ -214,12 +215,12 @@ class Robot(abc.ABC):
                                                                      physicsClientId=client)
         linear, angular = p.getBaseVelocity(self.body_id, physicsClientId=client)
         x, y, z = position
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        yaw = yaw_from_quaternion(qx, qy, qz, qw)
         if (abs(z - self.ride_height) > DRIFT_TOLERANCE or abs(qx) > DRIFT_TOLERANCE
                 or abs(qy) > DRIFT_TOLERANCE):
             p.resetBasePositionAndOrientation(
                 self.body_id, [x, y, self.ride_height],
-                [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)], physicsClientId=client)
+                quaternion_from_yaw(yaw), physicsClientId=client)
         cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
         self._x, self._y, self._yaw = x, y, yaw
         self._cos_yaw, self._sin_yaw = cos_yaw, sin_yaw

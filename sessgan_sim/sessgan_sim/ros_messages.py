@@ -3,12 +3,11 @@
 
 from __future__ import annotations
 
-import math
-
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TransformStamped, Twist
 from tf2_msgs.msg import TFMessage
 
+from sessgan_gen.quaternion import quaternion_from_yaw
 from sessgan_sim import cdr
 
 MAP_FRAME = 'map'
@@ -24,8 +23,7 @@ def time_msg(seconds: float) -> Time:
 
 
 def _set_yaw(quaternion, yaw: float) -> None:
-    quaternion.z = math.sin(yaw / 2.0)
-    quaternion.w = math.cos(yaw / 2.0)
+    quaternion.x, quaternion.y, quaternion.z, quaternion.w = quaternion_from_yaw(yaw)
 
 
 def transform(stamp: Time, parent: str, child: str, x: float = 0.0, y: float = 0.0,

@@ -22,10 +22,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
-from sessgan_controllers.controller_node import GOAL_QOS  # noqa: E402
-from sessgan_controllers.nearness_diagram_node import NearnessDiagramNode  # noqa: E402
-from sessgan_controllers.race_controller_node import RaceControllerNode  # noqa: E402
-from sessgan_controllers.velocity_projection_node import VelocityProjectionNode  # noqa: E402
+from sessgan_controllers.controller_node import GOAL_QOS, ControllerNode  # noqa: E402
 
 pytestmark = pytest.mark.graph
 
@@ -65,11 +62,11 @@ def goal_msg(x: float, y: float) -> PoseStamped:
 class Harness:
     """A controller node and a probe node playing the simulator, sharing one executor."""
 
-    def __init__(self, node_type, namespace: str, parameters: list[Parameter] = ()) -> None:
+    def __init__(self, controller: str, namespace: str, parameters: list[Parameter] = ()) -> None:
         self.context = Context()
         rclpy.init(context=self.context)
-        self.node = node_type(context=self.context, namespace=namespace,
-                              parameter_overrides=list(parameters))
+        self.node = ControllerNode(controller, context=self.context, namespace=namespace,
+                                   parameter_overrides=list(parameters))
         self.probe = rclpy.create_node('probe', namespace=namespace, context=self.context)
         stamped = self.node.get_parameter('use_stamped_cmd_vel').value
         self.commands: list = []
@@ -109,8 +106,8 @@ class Harness:
 def harness(request):
     created = []
 
-    def make(node_type=NearnessDiagramNode, parameters=()):
-        item = Harness(node_type, f'/ctl_test_{len(created)}_{id(created) % 10000}', parameters)
+    def make(controller='nearness_diagram', parameters=()):
+        item = Harness(controller, f'/ctl_test_{len(created)}_{id(created) % 10000}', parameters)
         created.append(item)
         return item
 
@@ -141,9 +138,9 @@ def test_scan_waits_for_a_goal_then_drives_to_the_goal(harness):
     assert run.tick().linear.x > 0.0
 
 
-@pytest.mark.parametrize('node_type', [VelocityProjectionNode, RaceControllerNode])
-def test_stamped_commands(harness, node_type):
-    run = harness(node_type, [Parameter('use_stamped_cmd_vel', value=True)])
+@pytest.mark.parametrize('controller', ['velocity_projection', 'race_controller'])
+def test_stamped_commands(harness, controller):
+    run = harness(controller, [Parameter('use_stamped_cmd_vel', value=True)])
     odom = odom_msg()
     odom.header.stamp.sec = 42  # the odometry of the scan's tick
     run.odom.publish(odom)

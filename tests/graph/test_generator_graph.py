@@ -72,3 +72,32 @@ def test_generate_environments_service(node_processes, ros_node):
     assert list(again.environments[0].map.data) == list(response.environments[0].map.data), \
         'the same seed must give the same map'
     assert generator.process.poll() is None
+
+
+def test_requests_beyond_the_cell_cap_are_refused(node_processes, ros_node):
+    from sessgan_interfaces.srv import GenerateEnvironments
+
+    start_generator(node_processes, '/gen_c', 'scenario:=factory',
+                    f'max_cells_per_request:={2 * 32 * 32}')
+    client = ros_node.create_client(GenerateEnvironments, '/gen_c/generate_environments')
+    refused = call_service(ros_node, client, GenerateEnvironments.Request(seeds=[1, 2, 3]))
+    assert not refused.success
+    assert '3 maps of 32x32 are 3,072 cells' in refused.message
+    assert 'max_cells_per_request' in refused.message
+    too_big = call_service(ros_node, client, GenerateEnvironments.Request(
+        seeds=[1], width=2048, height=1024))
+    assert not too_big.success and 'more than the 1,048,576' in too_big.message
+    accepted = call_service(ros_node, client, GenerateEnvironments.Request(seeds=[1, 2]))
+    assert accepted.success and len(accepted.environments) == 2
+
+
+def test_an_unreadable_checkpoint_parameter_ends_the_node_with_the_reason(node_processes,
+                                                                         tmp_path):
+    corrupt = tmp_path / 'corrupt.pt'
+    corrupt.write_bytes(b'not a checkpoint')
+    for checkpoint, reason in ((tmp_path / 'missing.pt', 'missing.pt'),
+                               (corrupt, 'not a valid checkpoint')):
+        generator = start_generator(node_processes, '/gen_d', f'checkpoint:={checkpoint}')
+        assert generator.wait(timeout=60) == 1, generator.output()
+        assert 'cannot start the generator' in generator.output()
+        assert reason in generator.output(), generator.output()

@@ -15,8 +15,6 @@ pytestmark = pytest.mark.graph
 EXTERNAL_CONTROLLER = Path(__file__).with_name('external_controller.py')
 ROUTE_FOLLOWER = Path(__file__).with_name('route_follower.py')
 DOG_LEG_MAP = Path(__file__).parents[1] / 'data' / 'narrow_dog_leg.txt'
-OUTCOMES = {'goal_reached', 'collision_limit', 'timeout', 'stuck', 'controller_unresponsive',
-            'invalid_environment'}
 
 
 def room(size: int = 16) -> np.ndarray:
@@ -102,6 +100,14 @@ def test_bad_input_gets_clear_results_and_node_keeps_serving(node_processes, ros
     metrics, _ = evaluate(ros_node, '/bad', in_wall)
     assert metrics.outcome == 'invalid_environment', metrics.detail
 
+    # More cells than a simulator accepts: refused before anything is built.
+    huge = environment_msg(room(), 'factory', 'huge')
+    huge.map.info.width, huge.map.info.height = 2048, 1024
+    huge.map.data = bytes(2048 * 1024)
+    metrics, _ = evaluate(ros_node, '/bad', huge, timeout=30)
+    assert metrics.outcome == 'invalid_environment'
+    assert '2,097,152 cells, more than the 1,048,576' in metrics.detail, metrics.detail
+
     unknown = environment_msg(room(), 'factory', 'moon')
     unknown.scenario = 'moon'
     metrics, _ = evaluate(ros_node, '/bad', unknown)
@@ -119,6 +125,35 @@ def test_bad_input_gets_clear_results_and_node_keeps_serving(node_processes, ros
     assert metrics.outcome in ('timeout', 'stuck'), metrics.detail
     assert 'NaN' in metrics.detail
     assert metrics.distance_travelled < 0.05
+
+
+def test_unsafe_environment_ids_are_refused_and_touch_no_files(node_processes, ros_node,
+                                                               tmp_path):
+    """Ids name bag directories: '../victim', an absolute path and '' are invalid_environment,
+    and no file under the record directory or beside it changes."""
+    files = tmp_path / 'files'  # tmp_path itself holds the processes' logs
+    record = files / 'bags' / 'run'
+    (record / 'earlier').mkdir(parents=True)
+    (record / 'earlier' / 'episode.json').write_text('{}')
+    victim = files / 'bags' / 'victim'
+    victim.mkdir()
+    (victim / 'precious.txt').write_text('keep me')
+    outside = files / 'outside'
+    outside.mkdir()
+
+    def snapshot():
+        return sorted((str(path), path.read_bytes() if path.is_file() else b'')
+                      for path in files.rglob('*'))
+
+    before = snapshot()
+    start_simulator(node_processes, '/ids', 'dummy_agents:=0', 'controller_startup_timeout:=2.0')
+    for unsafe in ('../victim', str(outside), ''):
+        metrics, _ = evaluate(ros_node, '/ids', environment_msg(room(), 'factory', unsafe),
+                              record_directory=str(record), timeout=30)
+        assert metrics.outcome == 'invalid_environment', (unsafe, metrics.outcome)
+        assert 'environment id' in metrics.detail, metrics.detail
+        assert not metrics.bag_path
+    assert snapshot() == before
 
 
 NOT_YET_CALIBRATED = pytest.mark.xfail(

@@ -26,18 +26,24 @@ def campaign(tmp_path: Path, run: str, *extra: str) -> list[str]:
             '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags'), *extra]
 
 
-def episode_rows(run_dir: Path) -> list[dict]:
-    with open(run_dir / 'metrics_episodes.csv') as handle:
+def episode_rows(run_dir: Path, kind: str = 'episodes') -> list[dict]:
+    with open(run_dir / f'metrics_{kind}.csv') as handle:
         return [{k: v for k, v in row.items() if k not in IGNORED_COLUMNS}
                 for row in csv.DictReader(handle)]
 
 
-def test_campaign_resumes_after_sigkill_with_identical_results(ros_workspace, tmp_path):
-    complete = subprocess.run(campaign(tmp_path, 'straight'), capture_output=True, text=True,
+@pytest.fixture(scope='module')
+def straight(ros_workspace, tmp_path_factory) -> Path:
+    """The run directory of an undisturbed TINY campaign, to compare disturbed runs with."""
+    root = tmp_path_factory.mktemp('straight')
+    complete = subprocess.run(campaign(root, 'straight'), capture_output=True, text=True,
                               timeout=600)
     assert complete.returncode == 0, complete.stderr[-3000:]
     assert 'report:' in complete.stdout and 'failure bags:' in complete.stdout
-    straight = tmp_path / 'runs' / 'straight'
+    return root / 'runs' / 'straight'
+
+
+def test_campaign_resumes_after_sigkill_with_identical_results(straight, tmp_path):
     report = straight / 'report'
     for name in ('report.md', 'generation_metrics.png', 'maps.png'):
         assert (report / name).stat().st_size > 0
@@ -63,6 +69,61 @@ def test_campaign_resumes_after_sigkill_with_identical_results(ros_workspace, tm
     assert episode_rows(tmp_path / 'runs' / 'killed') == episode_rows(straight)
 
 
+def child_of(parent_pid: int, *markers: str) -> int:
+    """The pid of the child process of ``parent_pid`` whose command line has every marker."""
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / 'stat').read_text()
+            command = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode()
+        except OSError:
+            continue
+        parent = int(stat.rsplit(')', 1)[1].split()[1])
+        if parent == parent_pid and all(marker in command for marker in markers):
+            return int(entry.name)
+    raise AssertionError(f'no child of {parent_pid} runs {markers}')
+
+
+@pytest.mark.parametrize('victim', ['controller', 'simulator'])
+def test_a_worker_process_killed_mid_episode_is_restarted_and_the_episode_rerun(
+        straight, tmp_path, victim):
+    """SIGKILL of worker /w0's controller (or simulator) while it runs an episode: the campaign
+    sees the death at once (not after the episode timeout), restarts the pair, runs the
+    episode again, and ends with the rows of the undisturbed run: nothing of the dead pair's
+    episode reaches the metrics."""
+    stderr_path = tmp_path / 'campaign.err'
+    with open(stderr_path, 'wb') as stderr:
+        run = subprocess.Popen(campaign(tmp_path, 'disturbed'), stdout=subprocess.DEVNULL,
+                               stderr=stderr, start_new_session=True)
+    try:
+        controller_log = tmp_path / 'runs' / 'disturbed' / 'logs' / 'nearness_diagram_w0.log'
+        deadline = time.monotonic() + 300
+        # The controller logs every goal it gets: kill as soon as /w0's second episode began.
+        while not (controller_log.exists()
+                   and controller_log.read_text(errors='replace').count('New goal') >= 2):
+            assert run.poll() is None, stderr_path.read_text()[-3000:]
+            assert time.monotonic() < deadline, 'worker /w0 never got a second episode'
+            time.sleep(0.01)
+        markers = (('sessgan_controllers/nearness_diagram',) if victim == 'controller'
+                   else ('sessgan_sim/simulator',))
+        os.kill(child_of(run.pid, *markers, '__ns:=/w0'), signal.SIGKILL)
+        assert run.wait(timeout=600) == 0, stderr_path.read_text()[-3000:]
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+    log = stderr_path.read_text()
+    assert 'a harness failure, not a result; the episode will run again' in log, log[-3000:]
+    assert 'worker /w0: restarted its simulator and controller (restart 1 of' in log
+    assert 'gave no result within' not in log, 'the death was noticed only at the timeout'
+    rows = episode_rows(tmp_path / 'runs' / 'disturbed')
+    assert 'controller_unresponsive' not in {row['outcome'] for row in rows}
+    assert rows == episode_rows(straight)
+    for kind in ('members', 'generations'):  # fitness, and what evolution made of it
+        assert episode_rows(tmp_path / 'runs' / 'disturbed', kind) == \
+            episode_rows(straight, kind)
+
+
 def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, tmp_path):
     result = subprocess.run(campaign(tmp_path, 'bags', '--generations', '1'),
                             capture_output=True, text=True, timeout=600)
@@ -82,11 +143,19 @@ def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, 
     again = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag),
                             '--resimulate'], capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stdout + again.stderr[-2000:]
-    assert 'as expected' in again.stdout
+    assert again.stdout.strip().splitlines()[-1] == 'as expected'  # not 'NOT as expected'
 
     bad = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(tmp_path / 'nothing')],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and 'does not exist' in bad.stderr
+
+    # Half a bag: refused before its episode.json is trusted (no simulator is started).
+    storage = next(bag.glob('*.mcap'))
+    storage.write_bytes(storage.read_bytes()[:storage.stat().st_size // 2])
+    half = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag),
+                           '--resimulate'], capture_output=True, text=True, timeout=60)
+    assert half.returncode == 2, half.stdout + half.stderr[-2000:]
+    assert 'incomplete or corrupt' in half.stderr and 'recorded' not in half.stdout
 
 
 def test_campaign_rejects_bad_settings_clearly(ros_workspace, tmp_path):

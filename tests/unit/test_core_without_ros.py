@@ -16,8 +16,7 @@ PACKAGES = {'sessgan_gen': ROOT / 'sessgan_gen', 'sessgan_sim': ROOT / 'sessgan_
             'sessgan_controllers': ROOT / 'controllers'}
 # Modules that are ROS adapters by design: nodes, CLIs that start nodes, message conversion.
 ROS_MODULES = {'generator_node', 'ros_conversion', 'simulator_node', 'ros_messages',
-               'controller_node', 'messages', 'nearness_diagram_node', 'race_controller_node',
-               'velocity_projection_node', 'campaign_cli', 'replay_cli'}
+               'controller_node', 'messages', 'campaign_cli', 'replay_cli'}
 BLOCKED = ['rclpy', 'std_msgs', 'geometry_msgs', 'nav_msgs', 'sensor_msgs', 'rosgraph_msgs',
            'tf2_msgs', 'builtin_interfaces', 'sessgan_interfaces']
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import re
+from pathlib import Path
 
 import pytest
 
@@ -43,3 +45,13 @@ def test_make_applies_overrides_and_validates(name):
     controller.reset()
     with pytest.raises(InvalidConfigError, match='goal_tolerance'):
         spec.make(goal_tolerance=-1.0)
+
+
+def test_every_registered_controller_has_an_executable_of_the_one_node():
+    """setup.py installs one executable per registry name, each running controller_node.main
+    (which picks the controller by the executable's name)."""
+    setup = (Path(__file__).resolve().parents[3] / 'controllers' / 'setup.py').read_text()
+    names = re.search(r'^controllers = \((.*?)\)', setup, re.MULTILINE | re.DOTALL).group(1)
+    assert sorted(re.findall(r"'(\w+)'", names)) == sorted(CONTROLLERS)
+    assert "f'{name} = sessgan_controllers.controller_node:main' for name in controllers" \
+        in setup

@@ -4,6 +4,7 @@ controller, so sampling, fitness, checkpoints, resume and the report are exercis
 from __future__ import annotations
 
 import csv
+import json
 
 import pytest
 import torch
@@ -11,8 +12,15 @@ import torch
 from sessgan_controllers.registry import get_controller
 from sessgan_controllers.types import Goal, observed
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError
+from sessgan_evolver.campaign_cli import (
+    campaign_parser,
+    config_from_args,
+    invocation_of,
+    parse_args,
+)
 from sessgan_gen.checkpoint import save_checkpoint
 from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.errors import CheckpointError
 from sessgan_gen.model import GeneratorPyramid, pyramid_scale_shapes
 from sessgan_sim.episode import Episode, EpisodeConfig
 
@@ -102,3 +110,59 @@ def test_resume_after_interruption_gives_the_uninterrupted_results(checkpoint, t
 
     assert comparable(resumed.run_dir) == comparable(straight.run_dir)
     assert resumed.generations == straight.generations
+
+
+def test_episode_timeout_grows_with_the_map_and_the_time_limit():
+    short = CampaignConfig(scenario='factory', time_limit=20.0)
+    assert short.episode_timeout_for(32 * 32) == pytest.approx(40.0 + 32 * 32 * 25e-5)
+    assert CampaignConfig(time_limit=5.0).episode_timeout_for(0) == 30.0  # at least 30 s
+    assert CampaignConfig(time_limit=200.0).episode_timeout_for(0) == 400.0
+    # The largest map a simulator accepts took 22 s to build and 5.6 s per sim second:
+    # measured times, with margin, fit into its timeout.
+    cells = 1024 * 1024
+    assert short.episode_timeout_for(cells) > 1.5 * (22.0 + 5.6 * 20.0)
+    assert CampaignConfig(time_limit=60.0).episode_timeout_for(cells) > 1.5 * (22 + 5.6 * 60)
+    assert CampaignConfig(episode_timeout=7.0).episode_timeout_for(cells) == 7.0
+
+
+def test_a_bad_checkpoint_is_refused_before_a_run_directory_exists(tmp_path):
+    (tmp_path / 'a_directory.pt').mkdir()
+    for bad, reason in ((tmp_path / 'missing.pt', 'does not exist'),
+                        (tmp_path / 'a_directory.pt', 'is a directory')):
+        bad_config = CampaignConfig(scenario='factory', checkpoint=str(bad))
+        with pytest.raises(CheckpointError, match=f'{bad.name}.* {reason}'):
+            Campaign(bad_config, 'bad', tmp_path / 'runs', tmp_path / 'bags', log=lambda _: None)
+    assert not (tmp_path / 'runs').exists() and not (tmp_path / 'bags').exists()
+
+
+def test_every_campaign_option_is_in_config_json(checkpoint, tmp_path):
+    argv = ['--scenario', 'factory', '--generations', '1', '--population', '2',
+            '--maps-per-member', '1', '--workers', '1', '--seed', '11', '--checkpoint',
+            checkpoint, '--time-limit', '4', '--mode', 'clocked', '--external',
+            '--fitness-tpkl-tolerance', '0.2', '--run', 'options', '--runs-root',
+            str(tmp_path / 'runs')]
+    args = parse_args(argv)
+    config = config_from_args(args)
+    assert (config.mode, config.external, config.fitness.tpkl_tolerance) == ('clocked', True, 0.2)
+    Campaign(config, args.run, args.runs_root, tmp_path / 'bags', log=lambda _: None,
+             invocation=invocation_of(args, argv)).run(InProcessEvaluator())
+    document = json.loads((tmp_path / 'runs' / 'options' / 'config.json').read_text())
+    assert document['config']['mode'] == 'clocked' and document['config']['external'] is True
+    assert document['config']['fitness']['tpkl_tolerance'] == 0.2
+    assert document['invocation']['command_line'][4:] == argv
+    assert document['invocation']['runs_root'] == str(tmp_path / 'runs')
+    # Every option of the command line is a config field or an invocation entry.
+    options = {action.dest for action in campaign_parser()._actions}
+    stored = set(document['config']) | {f'fitness_{name}' for name in
+                                        document['config']['fitness']}
+    assert options - {'help'} <= stored | set(document['invocation'])
+
+
+
+def test_bag_storage_is_checked_against_the_storage_registry():
+    from sessgan_sim.bag_recording import BagStorage
+
+    for storage in BagStorage:
+        CampaignConfig(bag_storage=storage.value).validate()
+    with pytest.raises(CampaignError, match=r"one of \['mcap', 'sqlite3'\], got 'zip'"):
+        CampaignConfig(bag_storage='zip').validate()

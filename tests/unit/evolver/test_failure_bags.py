@@ -7,17 +7,23 @@ import os
 
 import numpy as np
 import pytest
+import yaml
 from rosbags.typesys import Stores, get_typestore
 
 from sessgan_evolver.bag_reading import (
+    check_bag_complete,
     iter_bag_messages,
     read_bag_topics,
     read_episode_bag,
 )
 from sessgan_evolver.errors import BagReadError
+from sessgan_gen.environment import check_environment_id
+from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_sim.bag_recording import (
     BagRecord,
     BagWriteError,
+    episode_bag_directory,
+    is_episode_bag,
     remove_stale_staging_directories,
     write_episode_bag,
 )
@@ -252,3 +258,124 @@ def test_episode_json_is_plain_json(tmp_path):
     write_episode_bag(target, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN)
     document = json.loads((target / 'episode.json').read_text())
     assert document['generation'] == 3 and document['map']['origin'] == list(ORIGIN)
+
+
+# ---- ids are safe names: a bag never escapes its record directory or replaces foreign data
+
+UNSAFE_IDS = ['', '../victim', '/tmp/elsewhere', 'a/b', '..', '.hidden', 'a..b', 'x' * 129,
+              'g1.tmp-123', 'with space', 'tab\tid', 'é', '-leading-dash']
+
+
+@pytest.mark.parametrize('episode_id', ['g003-m07-s12', 'factory-g000-m00-s5', 'free-3', 'A',
+                                        'a.b_c-d', 'x' * 128])
+def test_safe_ids_are_accepted(episode_id):
+    assert check_environment_id(episode_id) == episode_id
+
+
+@pytest.mark.parametrize('episode_id', UNSAFE_IDS + [None, 7])
+def test_unsafe_ids_are_rejected(episode_id):
+    with pytest.raises(InvalidEnvironmentError, match='environment id'):
+        check_environment_id(episode_id)
+
+
+def fill_record_directory(tmp_path):
+    """A record directory with an earlier bag, and a victim directory beside it."""
+    record = tmp_path / 'bags' / 'run'
+    write_episode_bag(record / 'earlier', serialized_records(), METADATA, OCCUPANCY,
+                      RESOLUTION, ORIGIN)
+    victim = tmp_path / 'bags' / 'victim'
+    victim.mkdir()
+    (victim / 'precious.txt').write_text('keep me')
+    return record, victim
+
+
+def snapshot(root):
+    return sorted((str(path.relative_to(root)), path.read_bytes() if path.is_file() else None)
+                  for path in root.rglob('*'))
+
+
+@pytest.mark.parametrize('episode_id', ['../victim', 'ABSOLUTE', ''])
+def test_the_issue_cases_touch_nothing(tmp_path, episode_id):
+    """An evaluate goal with id '../victim' replaced a sibling directory, an absolute path one
+    outside the record directory, an empty id the record directory itself: now each is refused
+    before the file system is touched."""
+    record, victim = fill_record_directory(tmp_path)
+    outside = tmp_path / 'outside'
+    write_episode_bag(outside, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN)
+    if episode_id == 'ABSOLUTE':
+        episode_id = str(outside)
+    before = snapshot(tmp_path)
+    with pytest.raises(BagWriteError, match='refusing'):
+        write_episode_bag(episode_bag_directory(record, episode_id), serialized_records(),
+                          METADATA, OCCUPANCY, RESOLUTION, ORIGIN, overwrite=True)
+    assert snapshot(tmp_path) == before
+    if episode_id != str(outside):
+        # The naive join the simulator used to make ('..' in the path, or the record
+        # directory itself, which is no failure bag) is refused by the writer, too.
+        with pytest.raises(BagWriteError):
+            write_episode_bag(record / episode_id, serialized_records(), METADATA, OCCUPANCY,
+                              RESOLUTION, ORIGIN, overwrite=True)
+        assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize('episode_id', UNSAFE_IDS)
+def test_episode_bag_directory_refuses_every_unsafe_id(tmp_path, episode_id):
+    with pytest.raises(BagWriteError, match='environment id'):
+        episode_bag_directory(tmp_path, episode_id)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_overwrite_replaces_only_a_failure_bag(tmp_path):
+    record, _ = fill_record_directory(tmp_path)
+    foreign = record / 'g003-m07-s12'
+    foreign.mkdir()
+    (foreign / 'notes.txt').write_text('not a bag')
+    (foreign / 'episode.json').write_text('{}')
+    (foreign / 'metadata.yaml').write_text('looks like a bag, but holds more')
+    assert not is_episode_bag(foreign) and is_episode_bag(record / 'earlier')
+    before = snapshot(tmp_path)
+    with pytest.raises(BagWriteError, match='not a failure bag'):
+        write_episode_bag(foreign, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN,
+                          overwrite=True)
+    assert snapshot(tmp_path) == before
+    # An earlier failure bag of the same episode (a resumed campaign) is replaced.
+    write_episode_bag(record / 'earlier', serialized_records()[:3], METADATA, OCCUPANCY,
+                      RESOLUTION, ORIGIN, storage='sqlite3', overwrite=True)
+    assert read_episode_bag(record / 'earlier').episode['messages']['count'] == 3
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_metadata_reads_as_jazzy_writes_it(tmp_path, storage):
+    target = tmp_path / 'g003-m07-s12'
+    write_episode_bag(target, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN,
+                      storage=storage)
+    information = yaml.safe_load((target / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']
+    assert information['ros_distro'] == 'jazzy'
+    assert information['version'] == 9
+    assert information['custom_data'] == {'sessgan.episode': 'g003-m07-s12',
+                                          'sessgan.software_version': '0.1.0'}
+    assert check_bag_complete(target) == len(serialized_records())
+
+
+@pytest.mark.parametrize(('storage', 'suffix'), [('mcap', '.mcap'), ('sqlite3', '.db3')])
+def test_a_truncated_bag_is_refused_as_incomplete(tmp_path, storage, suffix):
+    target = tmp_path / 'episode'
+    records = serialized_records() * 40  # large enough that half of it is mid-message
+    write_episode_bag(target, records, METADATA, OCCUPANCY, RESOLUTION, ORIGIN,
+                      storage=storage)
+    assert check_bag_complete(target) == len(records)
+    storage_file = target / f'episode{suffix}'
+    storage_file.write_bytes(storage_file.read_bytes()[:storage_file.stat().st_size // 2])
+    with pytest.raises(BagReadError, match='incomplete'):
+        check_bag_complete(target)
+
+
+def test_a_bag_with_fewer_messages_than_its_episode_json_is_refused(tmp_path):
+    target = tmp_path / 'episode'
+    write_episode_bag(target, serialized_records(), METADATA, OCCUPANCY, RESOLUTION, ORIGIN)
+    episode = json.loads((target / 'episode.json').read_text())
+    episode['messages']['count'] += 1
+    (target / 'episode.json').write_text(json.dumps(episode))
+    with pytest.raises(BagReadError, match='episode.json recorded'):
+        check_bag_complete(target)

@@ -151,6 +151,43 @@ def test_resume_from_an_earlier_generation_drops_later_state(tmp_path, state_dic
         store.resume(generation=7)
 
 
+def test_a_truncated_latest_checkpoint_falls_back_to_the_previous_generation(tmp_path,
+                                                                           state_dict):
+    initial = Genome.from_state_dict(state_dict)
+    uninterrupted_store = RunStore(tmp_path / 'a', 'run')
+    uninterrupted = campaign(uninterrupted_store, initial, generations=5)
+    store = RunStore(tmp_path / 'b', 'run')
+    with pytest.raises(Killed):
+        campaign(store, initial, generations=5, kill_at=('episode', 3, 2, 1))
+    latest = store.checkpoint_path(3)
+    latest.write_bytes(latest.read_bytes()[:100])  # a disk that lost the file's end
+
+    point = store.resume()
+    assert point is not None and point.generation == 2
+    assert len(point.set_aside) == 1
+    assert 'generation_0003.pt is not a valid checkpoint' in point.set_aside[0]
+    assert 'renamed to generation_0003.pt.corrupt' in point.set_aside[0]
+    assert (store.checkpoints_dir / 'generation_0003.pt.corrupt').is_file()
+    assert {row['generation'] for row in store.read_rows()} == {0, 1}
+    # Going on from generation 2 ends where the uninterrupted run ended.
+    resumed = campaign(RunStore(tmp_path / 'b', 'run'), initial, generations=5, resume=True)
+    assert files_of(store) == {**files_of(uninterrupted_store),
+                               'checkpoints/generation_0003.pt.corrupt':
+                                   files_of(store)['checkpoints/generation_0003.pt.corrupt']}
+    assert resumed.history == uninterrupted.history
+
+
+def test_no_readable_checkpoint_says_how_to_start_over_and_changes_nothing(tmp_path):
+    store = RunStore(tmp_path, 'run')
+    for generation in (0, 1):
+        store.checkpoint_path(generation).write_bytes(b'torn data')
+    before = sorted(path.name for path in store.checkpoints_dir.iterdir())
+    with pytest.raises(RunStoreError, match=r'cannot be resumed: none of its 2 checkpoints is '
+                                            r'readable .*remove .*run.* another --run name'):
+        store.resume()
+    assert sorted(path.name for path in store.checkpoints_dir.iterdir()) == before
+
+
 def test_latest_checkpoint_ignores_temporary_and_foreign_files(tmp_path):
     store = RunStore(tmp_path, 'run')
     store.save_checkpoint(1, {'x': 1})
@@ -182,8 +219,11 @@ def test_a_failed_atomic_write_keeps_the_old_file(tmp_path, monkeypatch):
 def test_a_corrupt_checkpoint_is_reported(tmp_path):
     store = RunStore(tmp_path, 'run')
     store.checkpoint_path(3).write_bytes(b'garbage')
-    with pytest.raises(RunStoreError, match='corrupt'):
+    with pytest.raises(RunStoreError, match='is not a valid checkpoint') as caught:
         store.load_checkpoint(3)
+    assert 'weights_only' not in str(caught.value)
+    with pytest.raises(RunStoreError, match='is a directory, not a checkpoint file'):
+        store.load_checkpoint(tmp_path)
     other = tmp_path / 'other.pt'
     torch.save({'weights': torch.ones(1)}, other)
     with pytest.raises(RunStoreError, match='not a sessgan_evolver'):

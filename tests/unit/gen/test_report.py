@@ -66,7 +66,10 @@ def test_compute_and_write_the_report(checkpoints, tmp_path):
     assert set(data.uniqueness) == set(REPORT_SCENARIOS)
     for name in REPORT_SCENARIOS:
         assert data.samples[name].maps.shape == (3, 16, 16)
-        assert 0.0 <= data.uniqueness[name][16] <= 100.0
+        # 16x16 maps hold one 16x16 patch each: uniqueness = distinct maps / maps.
+        maps = data.samples[name].maps
+        distinct = len({m.tobytes() for m in maps})
+        assert data.uniqueness[name][16] == pytest.approx(100.0 * distinct / len(maps))
     written = write_report(data, tmp_path / 'report')
     names = sorted(path.name for path in written)
     assert names == sorted(['tpkl_matrix.md', 'uniqueness.md', 'tpkl_matrix.png',

@@ -1,0 +1,170 @@
+"""The campaign's evaluator with its worker pairs: a result from a pair whose process died is
+never a result.
+
+The worker processes are real (stand-ins that sleep; one says 'simulator ready'), the action
+clients are fakes whose results the test hands out, so the test decides exactly when a process
+dies and what the dead pair answers. Marked ``graph``: the evaluator is built on a real rclpy
+node (it needs the built workspace), though nothing travels over DDS.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
+from sessgan_evolver.process_supervisor import ProcessSupervisor, WorkerPool
+
+pytestmark = pytest.mark.graph
+
+SIMULATOR = [sys.executable, '-c',
+             "import time; print('simulator ready', flush=True); time.sleep(120)"]
+CONTROLLER = [sys.executable, '-c', 'import time; time.sleep(120)']
+
+
+class Future:
+    def __init__(self, value=None, done=False) -> None:
+        self.value, self._done = value, done
+
+    def done(self) -> bool:
+        return self._done
+
+    def result(self):
+        return self.value
+
+    def finish(self, value) -> None:
+        self.value, self._done = value, True
+
+
+class FakeClient:
+    """An action client whose goals are accepted at once and finished by the test."""
+
+    def __init__(self, goals: list) -> None:
+        self.goals = goals
+
+    def server_is_ready(self) -> bool:
+        return True
+
+    def send_goal_async(self, job):
+        result = Future()
+        handle = SimpleNamespace(accepted=True, get_result_async=lambda: result,
+                                 cancel_goal_async=lambda: None)
+        self.goals.append((job, result))
+        return Future(handle, done=True)
+
+    def destroy(self) -> None:
+        pass
+
+
+def finished(outcome: str):
+    from action_msgs.msg import GoalStatus
+
+    from sessgan_interfaces.msg import EpisodeMetrics
+
+    metrics = EpisodeMetrics(outcome=outcome, collisions=1 if outcome != 'timeout' else 0)
+    return SimpleNamespace(status=GoalStatus.STATUS_SUCCEEDED,
+                           result=SimpleNamespace(metrics=metrics))
+
+
+@pytest.fixture
+def evaluator(ros_node, tmp_path):
+    from sessgan_evolver.campaign_cli import RosEvaluator
+
+    with ProcessSupervisor(tmp_path / 'logs') as supervisor:
+        pool = WorkerPool(supervisor)
+        pool.start_pair('/w0', ('simulator_w0', SIMULATOR), ('controller_w0', CONTROLLER))
+        logs: list[str] = []
+        # A long episode timeout: a death must be seen without waiting for it.
+        config = CampaignConfig(episode_timeout=600.0)
+        evaluator = RosEvaluator(ros_node, config, tmp_path / 'bags', 'controller', supervisor,
+                                 logs.append, pool)
+        evaluator.goals = []
+        evaluator.logs = logs
+        evaluator.allowed = {'/w0/evaluate'}
+        evaluator.evaluate_servers = lambda: ['/w0/evaluate']
+        evaluator.action_client_class = lambda node, kind, name: FakeClient(evaluator.goals)
+        evaluator.goal_for = lambda job: job
+        yield evaluator
+
+
+def run_with(evaluator, script) -> list:
+    """Evaluate one job; ``script(goal_number, result_future)`` acts on each goal sent."""
+    environment = SimpleNamespace(id='factory-g000-m00-s1', occupancy=np.zeros((32, 32)))
+    job = EpisodeJob(0, 0, 0, environment, 1)
+    results = []
+    handled = set()
+    deadline = time.monotonic() + 60.0
+
+    def spin(seconds: float = 0.02) -> None:
+        assert time.monotonic() < deadline, f'no result; log: {evaluator.logs}'
+        time.sleep(seconds)
+        for number, (_, result) in enumerate(evaluator.goals):
+            if number not in handled:
+                handled.add(number)
+                script(number, result)
+
+    evaluator.spin = spin
+    evaluator.discover_workers()
+    evaluator.evaluate([job], lambda job, metrics: results.append(metrics['outcome']))
+    return results
+
+
+def test_controller_unresponsive_from_a_dead_controller_is_rerun_not_recorded(evaluator):
+    pair = evaluator.pool.pairs['/w0']
+    first_controller = pair.controller.process
+
+    def script(number, result):
+        if number == 0:  # the controller dies; its simulator reports it as unresponsive
+            os.kill(first_controller.pid, signal.SIGKILL)
+            first_controller.wait()
+            result.finish(finished('controller_unresponsive'))
+        else:
+            result.finish(finished('collision_limit'))
+
+    assert run_with(evaluator, script) == ['collision_limit']
+    assert len(evaluator.goals) == 2 and pair.restarts == 1
+    assert pair.controller.process.pid != first_controller.pid and pair.alive
+    assert any('controller_w0' in line and 'killed by SIGKILL' in line
+               and 'a harness failure, not a result' in line for line in evaluator.logs)
+
+
+def test_a_dead_simulator_is_seen_at_once_and_its_episode_rerun(evaluator):
+    pair = evaluator.pool.pairs['/w0']
+    first_simulator = pair.simulator.process
+
+    def script(number, result):
+        if number == 0:  # the simulator dies mid-episode: no result will ever come
+            os.kill(first_simulator.pid, signal.SIGKILL)
+        else:
+            result.finish(finished('timeout'))
+
+    # run_with fails after 60 s, long before the 600 s episode timeout could act.
+    assert run_with(evaluator, script) == ['timeout']
+    assert pair.restarts == 1 and pair.simulator.process.pid != first_simulator.pid
+    assert not any('gave no result' in line for line in evaluator.logs)
+
+
+def test_a_restarted_pair_that_never_gets_ready_is_quarantined(evaluator, monkeypatch):
+    from sessgan_evolver import campaign_cli
+    from sessgan_evolver.campaign import CampaignError
+
+    monkeypatch.setattr(campaign_cli, 'RESTART_READY_TIMEOUT', 1.0)
+    pool = evaluator.pool
+    pool.max_restarts = 1
+    pair = pool.pairs['/w0']
+    # From now on the simulator never says it is ready.
+    pair.simulator.command = [sys.executable, '-c', 'import time; time.sleep(120)']
+
+    def script(number, result):
+        os.kill(pair.controller.process.pid, signal.SIGKILL)
+
+    with pytest.raises(CampaignError, match='every simulator worker died repeatedly'):
+        run_with(evaluator, script)
+    assert any("did not log 'simulator ready' within 1 s" in line for line in evaluator.logs)
+    assert pool.pairs == {} and '/w0' in pool.quarantined

@@ -35,7 +35,15 @@ import numpy as np
 
 from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.registry import get_controller
-from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
+from sessgan_controllers.types import (
+    STOP,
+    Controller,
+    Goal,
+    MapData,
+    RobotState,
+    ScanData,
+    accepts_map,
+)
 from sessgan_evolver.errors import SessganEvolverError
 from sessgan_gen.environment import Environment
 from sessgan_gen.scenarios import get_scenario
@@ -160,7 +168,12 @@ class EpisodeRunner:
                                      f'ask for {self.settings.mode!r}')
         self.time_limit = float(time_limit) or float(self.settings.time_limit) \
             or spec.time_limit
-        self.episode_config(0).validate()
+        config = self.episode_config(0)
+        config.validate()
+        self.robot = str(config.robot)
+        if not self.controller_spec.drives(self.robot):
+            raise EpisodeRunnerError(f'controller {self.controller_name!r} does not drive the '
+                                     f'{self.robot} robot of the {self.scenario} scenario')
         self._clock = clock
         self._episode: Episode | None = None
 
@@ -191,6 +204,21 @@ class EpisodeRunner:
         return self.settings.episode_config(time_limit=self.time_limit, seed=int(seed)) \
             .resolved(get_scenario(self.scenario))
 
+    def make_controller(self, environment: Environment) -> Controller:
+        """A fresh controller for an episode in ``environment``, set up as its node would be:
+        told which robot it drives (a controller of several), given the map as the ``map``
+        topic carries it (a controller that plans on one), reset for the new goal."""
+        spec = self.controller_spec
+        controller = spec.make(robot=self.robot) if spec.robots else spec.make()
+        if accepts_map(controller):
+            # OccupancyGrid carries the resolution as float32.
+            controller.set_map(MapData(np.asarray(environment.occupancy, dtype=np.int8),
+                                       _float32(environment.resolution),
+                                       (float(environment.origin[0]),
+                                        float(environment.origin[1]))))
+        controller.reset()
+        return controller
+
     def run(self, environment: Environment, seed: int, trace: bool = False,
             keep_scans: bool = False) -> EpisodeRun:
         """Run one episode of ``environment`` with simulator seed ``seed``.
@@ -205,8 +233,7 @@ class EpisodeRunner:
         self.open()
         episode = self._episode
         assert episode is not None
-        controller = self.controller_spec.make()
-        controller.reset()
+        controller = self.make_controller(environment)
         goal = Goal(environment.goal.x, environment.goal.y)
         started = self._clock()
         observation = episode.reset(environment, self.episode_config(seed))

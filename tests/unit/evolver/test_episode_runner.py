@@ -82,3 +82,14 @@ def test_the_controller_sees_what_its_node_decodes(factory):
     assert np.array_equal(scan.ranges, observation.scan)
     assert state.yaw == pytest.approx(observation.pose.yaw, abs=1e-12)
     assert (state.x, state.y) == (observation.pose.x, observation.pose.y)
+
+
+def test_a_controller_of_several_robots_gets_its_robot_and_the_map(factory):
+    with EpisodeRunner('factory', controller='reference_navigator', time_limit=30.0) as runner:
+        controller = runner.make_controller(factory)
+        assert controller.config.robot == 'diff_drive'
+        run = runner.run(factory, seed=0)
+    # The reference navigator crosses the example map (the controllers' own tests say so).
+    assert run.metrics['outcome'] == 'goal_reached' and run.metrics['fault_collisions'] == 0
+    with pytest.raises(EpisodeRunnerError, match='does not drive'):
+        EpisodeRunner('factory', controller='race_controller')

@@ -23,6 +23,7 @@ setup(
             'generator = sessgan_gen.generator_node:main',
             'train = sessgan_gen.train_cli:main',
             'report = sessgan_gen.report_cli:main',
+            'export = sessgan_gen.export_cli:main',
         ],
     },
 )

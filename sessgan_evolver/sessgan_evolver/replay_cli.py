@@ -4,10 +4,15 @@ Replay republishes every recorded message with its recorded timing (scaled by ``
 including ``/clock``, for RViz or any subscriber. Topics recorded under a worker namespace
 (``/w0/scan``) are republished under ``--namespace`` (default: the root, ``/scan``).
 
-``--resimulate`` runs the bag's map, start, goal and seed again through a simulator worker and
-its controller and compares the outcome with the recorded one. Exit codes: 0 as expected
-(``--expect same``: same outcome and collision count; ``--expect pass``: no failure any more),
-1 not as expected, 2 on an error (unreadable bag, no worker).
+``--resimulate`` runs the bag's map, start, goal and seed again and compares the outcome with
+the recorded one. It starts a simulator rebuilt from the settings episode.json records (mode,
+rates, lidar, agents, robot parameters, clock origin; sessgan_sim.simulator_settings) and the
+recorded built-in controller. For a bag recorded with your own controller, run that controller
+under a namespace and pass ``--external`` (``--namespace /w0``; default: the recorded one): only
+the simulator is started there. ``--worker /w0`` uses a simulator that already runs, with its
+own settings. Exit codes: 0 as expected (``--expect same``: same outcome and collision count;
+``--expect pass``: no failure any more), 1 not as expected, 2 on an error (unreadable bag, no
+worker, settings that cannot be rebuilt).
 """
 
 from __future__ import annotations
@@ -29,14 +34,20 @@ def parse_args(argv):
     parser.add_argument('bag', type=Path, help='failure bag directory (bags/<run>/<episode>)')
     parser.add_argument('--rate', type=float, default=1.0,
                         help='playback speed factor (replay; default 1.0 = recorded timing)')
-    parser.add_argument('--namespace', default='/',
-                        help='namespace to republish under (replay; default /)')
+    parser.add_argument('--namespace', default='',
+                        help='replay: namespace to republish under (default /); --resimulate '
+                             '--external: namespace of your controller (default: the recorded '
+                             'one)')
     parser.add_argument('--loop', action='store_true', help='replay until interrupted')
     parser.add_argument('--resimulate', action='store_true',
                         help="run the bag's map again against a live controller and compare")
     parser.add_argument('--worker', default='',
-                        help='namespace of a running simulator worker to use (e.g. /w0); '
-                             'default: start a simulator and the recorded built-in controller')
+                        help='namespace of a running simulator worker to use as it is (e.g. '
+                             '/w0; its settings, not the recorded ones); default: start a '
+                             'simulator with the recorded settings')
+    parser.add_argument('--external', action='store_true',
+                        help='the recorded controller is yours: start only the simulator, '
+                             'under --namespace, where your controller runs')
     parser.add_argument('--controller', default='',
                         help='built-in controller to start (default: the recorded one)')
     parser.add_argument('--expect', choices=('same', 'pass'), default='same',
@@ -80,7 +91,7 @@ def replay(args, episode) -> int:
                 depth=max(1, topic.depth or 10), reliability=ReliabilityPolicy.RELIABLE,
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                 else DurabilityPolicy.VOLATILE)
-            name = republished_topic(topic.topic, recorded_namespace, args.namespace)
+            name = republished_topic(topic.topic, recorded_namespace, args.namespace or '/')
             publishers[topic.topic] = node.create_publisher(
                 message_class(topic.msgtype), name, qos)
         total = sum(topic.message_count for topic in topics)
@@ -128,33 +139,62 @@ def resimulate(args, episode: dict) -> int:
     import rclpy
     from rclpy.action import ActionClient
 
+    from sessgan_controllers.registry import CONTROLLERS
     from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
     from sessgan_gen.ros_conversion import environment_to_msg
     from sessgan_gen.scenarios import get_scenario
     from sessgan_interfaces.action import EvaluateEnvironment
+    from sessgan_sim.errors import InvalidConfigError
     from sessgan_sim.metrics import is_controller_failure
+    from sessgan_sim.simulator_settings import resimulation_settings
 
     environment = bag_environment(args.bag, episode)
     recorded = episode['metrics']
-    namespace = args.worker or f'/replay_{os.getpid()}'
     controller = args.controller or episode.get('controller') or \
         get_scenario(environment.scenario).controller
-    with ProcessSupervisor(Path(tempfile.mkdtemp(prefix='sessgan-replay-'))) as supervisor:
-        if not args.worker:
-            ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
-            core = worker_cores(1)[0]
-            supervisor.start('simulator', ['ros2', 'run', 'sessgan_sim', 'simulator', *ros_args],
-                             core=core, batch=True)
-            supervisor.start('controller', ['ros2', 'run', 'sessgan_controllers', controller,
-                                            *ros_args, '-p', 'use_sim_time:=true'],
-                             core=core, batch=True)
+    try:
+        settings, notes = resimulation_settings(episode)
+    except InvalidConfigError as err:
+        print(f'error: cannot rebuild the simulator of {args.bag}: {err}', file=sys.stderr)
+        return EXIT_ERROR
+    if args.worker:
+        namespace = args.worker
+        notes.append(f'using the running worker {namespace} with its own settings, not the '
+                     'recorded ones')
+    elif args.external:
+        namespace = args.namespace or episode.get('namespace') or '/'
+    else:
+        if controller not in CONTROLLERS:
+            print(f'error: {args.bag} was recorded with controller {controller!r}, which is not '
+                  f'a built-in one ({", ".join(sorted(CONTROLLERS))}): start your controller '
+                  'under a namespace and pass --external --namespace <it>', file=sys.stderr)
+            return EXIT_ERROR
+        namespace = f'/replay_{os.getpid()}'
+    action_name = f'{namespace.rstrip("/")}/evaluate'
+    changed = settings.changed_from_defaults()
+    if not args.worker and changed:
+        print('re-simulating with the recorded settings: ' +
+              ', '.join(f'{name}={value}' for name, value in sorted(changed.items())),
+              file=sys.stderr)
+    for note in notes:
+        print(f'note: {note}', file=sys.stderr)
+    log_directory = Path(tempfile.mkdtemp(prefix='sessgan-replay-'))
+    with ProcessSupervisor(log_directory) as supervisor:
         rclpy.init()
         node = rclpy.create_node('sessgan_resimulate')
         try:
-            client = ActionClient(node, EvaluateEnvironment, f'{namespace}/evaluate')
+            if not args.worker:
+                if args.external and action_present(node, action_name, wait=2.0):
+                    print(f'error: a simulator already serves {action_name}: stop it (the '
+                          're-simulation starts one with the recorded settings there) or pass '
+                          f'--worker {namespace} to use it as it is', file=sys.stderr)
+                    return EXIT_ERROR
+                start_resimulation_graph(supervisor, settings, namespace, log_directory,
+                                         None if args.external else controller, worker_cores)
+            client = ActionClient(node, EvaluateEnvironment, action_name)
             if not client.wait_for_server(timeout_sec=60.0):
                 logs = ''.join(child.log_tail(800) for child in supervisor.children)
-                print(f'error: no simulator answers at {namespace}/evaluate\n{logs}',
+                print(f'error: no simulator answers at {action_name}\n{logs}',
                       file=sys.stderr)
                 return EXIT_ERROR
             goal = EvaluateEnvironment.Goal()
@@ -178,20 +218,55 @@ def resimulate(args, episode: dict) -> int:
         finally:
             node.destroy_node()
             rclpy.try_shutdown()
-    print(f'{"":12}{"recorded":>18}{"re-simulated":>18}')
-    for label, old, now in (('outcome', recorded['outcome'], new.outcome),
-                            ('collisions', recorded['collisions'], new.collisions),
-                            ('risk score', f'{recorded["risk_score"]:.3f}',
-                             f'{new.risk_score:.3f}'),
-                            ('sim time', f'{recorded["simulation_time"]:.2f}',
-                             f'{new.simulation_time:.2f}')):
-        print(f'{label:12}{str(old):>18}{str(now):>18}')
+    print(f'{"":16}{"recorded":>18}{"re-simulated":>18}')
+    for label, old, now in (
+            ('outcome', recorded['outcome'], new.outcome),
+            ('collisions', recorded['collisions'], new.collisions),
+            ('fault collisions', recorded.get('fault_collisions', '-'), new.fault_collisions),
+            ('risk score', f'{recorded["risk_score"]:.3f}', f'{new.risk_score:.3f}'),
+            ('sim time', f'{recorded["simulation_time"]:.2f}', f'{new.simulation_time:.2f}'),
+            ('travelled m', f'{recorded["distance_travelled"]:.3f}',
+             f'{new.distance_travelled:.3f}'),
+            ('ticks', recorded['ticks'], new.ticks)):
+        print(f'{label:16}{str(old):>18}{str(now):>18}')
     same = (new.outcome == recorded['outcome']
             and int(new.collisions) == int(recorded['collisions']))
     failed = is_controller_failure(new)
     ok = same if args.expect == 'same' else not failed
     print('as expected' if ok else f'NOT as expected (--expect {args.expect})')
     return EXIT_AS_EXPECTED if ok else EXIT_DIFFERENT
+
+
+def action_present(node, name: str, wait: float) -> bool:
+    """Whether discovery shows action server ``name`` within ``wait`` seconds."""
+    from rclpy.action import get_action_names_and_types
+
+    deadline = time.monotonic() + wait
+    while True:
+        if any(found == name for found, _ in get_action_names_and_types(node)):
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.1)
+
+
+def start_resimulation_graph(supervisor, settings, namespace: str, log_directory: Path,
+                             controller: str | None, worker_cores) -> None:
+    """A simulator with ``settings`` under ``namespace`` and, unless None, the built-in
+    ``controller`` beside it (one core, batch scheduling, like a campaign's workers)."""
+    import yaml
+
+    params_file = log_directory / 'simulator_params.yaml'
+    params_file.write_text(yaml.safe_dump({'/**': {'ros__parameters': settings.to_dict()}}))
+    ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
+    core = worker_cores(1)[0]
+    supervisor.start('simulator', ['ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
+                                   '--params-file', str(params_file)], core=core, batch=True)
+    if controller is not None:
+        stamped = ['-p', 'use_stamped_cmd_vel:=true'] if settings.use_stamped_cmd_vel else []
+        supervisor.start('controller', ['ros2', 'run', 'sessgan_controllers', controller,
+                                        *ros_args, '-p', 'use_sim_time:=true', *stamped],
+                         core=core, batch=True)
 
 
 def main(argv=None) -> int:

@@ -9,12 +9,9 @@ Serves ``generate_environments`` (sessgan_interfaces/GenerateEnvironments).
 
 from __future__ import annotations
 
-import sys
-
 import rclpy
 from nav_msgs.msg import OccupancyGrid
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -22,6 +19,7 @@ from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, Envir
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import environment_to_msg
+from sessgan_gen.ros_spin import exit_process, run_node
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 from sessgan_interfaces.srv import GenerateEnvironments
 
@@ -97,23 +95,13 @@ class GeneratorNode(Node):
 
 
 def main(args=None) -> None:
-    """Spin the generator until shutdown; an unusable scenario, checkpoint or parameter ends
-    the process with a one-line error and exit status 1."""
+    """Spin the generator until a signal (which ends it at once and cleanly, also while it
+    samples: sessgan_gen.ros_spin); an unusable scenario, checkpoint or parameter ends the
+    process with a one-line error and exit status 1."""
     exit_if_help('sessgan_gen generator', __doc__ or '', GeneratorNode, args)
-    rclpy.init(args=args)
-    node = None
-    failure = ''
     try:
-        node = GeneratorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        status = run_node(GeneratorNode, args=args)
     except (SessganGenError, ValueError, ParameterException) as err:
-        failure = f'cannot start the generator: {err}'
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if failure:
-        rclpy.logging.get_logger('sessgan_gen').fatal(failure)
-        sys.exit(1)
+        rclpy.logging.get_logger('sessgan_gen').fatal(f'cannot start the generator: {err}')
+        status = 1
+    exit_process(status)

@@ -429,3 +429,35 @@ def import_map_server(yaml_path: str | os.PathLike, scenario: ScenarioLike,
     if size is not None:
         cells = resample_tokens(cells, spec, size)
     return TokenMap(scenario=spec.name, cells=cells)
+
+
+def cells_at_cell_size(pixels: tuple[int, int], resolution: float,
+                       cell_size: float) -> tuple[int, int]:
+    """(height, width) in cells of ``cell_size`` metres of an image of ``pixels`` (height,
+    width) at ``resolution`` metres per pixel: the nearest whole number, at least one."""
+    if not (math.isfinite(cell_size) and cell_size > 0):
+        raise MapFormatError(f'cell size must be a positive number of metres, got {cell_size}')
+    height, width = (max(1, round(count * resolution / cell_size)) for count in pixels)
+    return height, width
+
+
+def import_map_server_for_scenario(yaml_path: str | os.PathLike,
+                                   scenario: ScenarioLike) -> TokenMap:
+    """A map_server map as a token map of ``scenario`` at the scenario's cell size.
+
+    :func:`import_map_server` with the size that keeps the map's metres: an image of h x w
+    pixels at r m/px becomes round(h*r/cell) x round(w*r/cell) cells of the scenario's
+    ``cell_size`` (a 0.05 m/px map of a 16 m room becomes 32 x 32 cells of 0.5 m). The map's
+    origin does not matter to the token map (tokens have no position). MapFormatError when the
+    result would exceed the grid limits.
+    """
+    spec = resolve_scenario(scenario)
+    loaded = read_map_server(yaml_path)
+    size = cells_at_cell_size(loaded.occupancy.shape, loaded.resolution, spec.cell_size)
+    if max(size) > MAX_CELLS_PER_SIDE:
+        raise MapFormatError(
+            f'{yaml_path}: {loaded.occupancy.shape[1]}x{loaded.occupancy.shape[0]} pixels at '
+            f'{loaded.resolution} m/px make {size[1]}x{size[0]} cells of {spec.cell_size} m, '
+            f'more than {MAX_CELLS_PER_SIDE} per side')
+    cells = resample_tokens(occupancy_to_tokens(loaded.occupancy, spec), spec, size)
+    return TokenMap(scenario=spec.name, cells=cells)

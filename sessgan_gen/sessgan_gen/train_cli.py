@@ -1,5 +1,6 @@
-"""`ros2 run sessgan_gen train`: train a TOAD-GAN pyramid on a scenario's example map or a
-token map file, checkpointing after every scale (resume with --resume)."""
+"""`ros2 run sessgan_gen train`: train a TOAD-GAN pyramid on a scenario's example map, a token
+map file (--map-file) or a map_server map (--map-yaml), checkpointing after every scale (resume
+with --resume)."""
 
 from __future__ import annotations
 
@@ -33,7 +34,14 @@ def load_training_map(config: TrainConfig) -> tuple[np.ndarray, Scenario, str]:
     from sessgan_gen import token_map  # the other half of the package; imported on use
 
     scenario = get_scenario(config.scenario)
-    if config.map_file:
+    if config.map_file and config.map_yaml:
+        raise SessganGenError('give --map-file or --map-yaml, not both')
+    if config.map_yaml:
+        from sessgan_gen.map_server_io import import_map_server_for_scenario
+
+        loaded = import_map_server_for_scenario(config.map_yaml, scenario)
+        source = str(Path(config.map_yaml).resolve())
+    elif config.map_file:
         loaded = token_map.read_token_map(config.map_file)
         source = str(Path(config.map_file).resolve())
     else:
@@ -46,6 +54,27 @@ def load_training_map(config: TrainConfig) -> tuple[np.ndarray, Scenario, str]:
             f'map {source} is a {loaded_name!r} map, but --scenario is {scenario.name!r}')
     cells = np.asarray(loaded.cells, dtype=np.int64)
     return cells, scenario, source
+
+
+def imported_map_paths(output: Path) -> tuple[Path, Path]:
+    """Where train writes the token map a --map-yaml became: (<output>.map.txt,
+    <output>.map.yaml)."""
+    return output.with_suffix('.map.txt'), output.with_suffix('.map.yaml')
+
+
+def write_imported_map(output: Path, cells: np.ndarray, scenario: Scenario) -> None:
+    """Write the token map learned from a map_server map next to the checkpoint: as tokens and
+    as the map_server map it is at the scenario's cell size (to compare with the original)."""
+    from sessgan_gen.map_server_io import export_token_map
+    from sessgan_gen.token_map import TokenMap, write_token_map
+
+    text_path, yaml_path = imported_map_paths(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    token_map = TokenMap(scenario=scenario.name, cells=cells)
+    write_token_map(text_path, token_map)
+    export_token_map(yaml_path, token_map)
+    print(f'train: the map as learned ({token_map.width}x{token_map.height} cells of '
+          f'{scenario.cell_size} m): {text_path} and {yaml_path}', file=sys.stderr)
 
 
 class TotalEta:
@@ -99,6 +128,8 @@ def train(config: TrainConfig) -> int:
     cells, scenario, source = load_training_map(config)
     output = Path(config.output)
     seed_everything(config.seed, config.deterministic)
+    if config.map_yaml:
+        write_imported_map(output, cells, scenario)
 
     pyramid = None
     state = None

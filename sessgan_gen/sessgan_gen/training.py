@@ -56,6 +56,10 @@ class TrainConfig:
     without --map-file, the example map to learn."""
     map_file: str = ''
     """Token text file to train on instead of the scenario's example map."""
+    map_yaml: str = ''
+    """map_server map (YAML with its PGM) to train on instead, resampled to the scenario's cell
+    size; the token map it becomes is written next to the checkpoint (<output>.map.txt, and
+    <output>.map.yaml/.pgm as it looks at that cell size)."""
     output: str = ''
     """Checkpoint file (.pt; the .json metadata goes next to it). Empty: <scenario>.pt."""
     iterations: int = 0
@@ -150,10 +154,12 @@ def config_dict(config: TrainConfig) -> dict[str, Any]:
 
 
 def same_training(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    """Names of the config fields that differ between two runs and change the result."""
+    """Names of the config fields that differ between two runs and change the result (a field
+    one of them lacks, from an older version, counts as its default)."""
+    defaults = config_dict(TrainConfig())
     names = set(a) | set(b)
-    return sorted(name for name in names
-                  if name not in RESULT_FIELDS and a.get(name) != b.get(name))
+    return sorted(name for name in names if name not in RESULT_FIELDS
+                  and a.get(name, defaults.get(name)) != b.get(name, defaults.get(name)))
 
 
 @dataclass

@@ -10,6 +10,11 @@ cruise altitude for the flyer) and are seen by its lidar. No agent starts within
 ``min_start_distance`` of the robot's start, and no patrol begins or ends inside the
 ``keep_clear`` discs the episode names (around the goal and on the certified route's narrow
 passages, so an agent never parks where the robot must pass).
+
+Two behaviours (``AgentConfig.behaviour``): ``blind`` agents (the default, the paper's) keep
+moving whatever is in their way; ``cautious`` agents behave like factory AGVs with a safety
+scanner: an agent waits while the robot or another agent stands within ``safety_distance``
+ahead of it along its motion, so any contact with a cautious agent is the robot's doing.
 """
 
 from __future__ import annotations
@@ -28,6 +33,8 @@ from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.robots import Robot
 from sessgan_sim.world import CollisionGroup
 
+AGENT_BEHAVIOURS = ('blind', 'cautious')
+
 PATH_TRIES = 8
 """Random destinations tried per agent before it settles for the best path found."""
 
@@ -44,6 +51,10 @@ class AgentConfig:
     min_patrol_cells: int = 4
     """Shortest patrol path sought, in cells; shorter ones are kept only when nothing longer
     is found."""
+    behaviour: str = 'blind'
+    """'blind' (drive on whatever is ahead) or 'cautious' (wait while something is ahead)."""
+    safety_distance: float = 0.5
+    """m between a cautious agent's body and whatever makes it wait."""
 
     def validate(self) -> None:
         for name in ('speed', 'radius', 'height'):
@@ -53,6 +64,12 @@ class AgentConfig:
         if not (math.isfinite(self.min_start_distance) and self.min_start_distance >= 0):
             raise InvalidConfigError(f'agents: min_start_distance must be >= 0 m, got '
                                      f'{self.min_start_distance}')
+        if self.behaviour not in AGENT_BEHAVIOURS:
+            raise InvalidConfigError(f'agents: behaviour must be one of {AGENT_BEHAVIOURS}, '
+                                     f'got {self.behaviour!r}')
+        if not (math.isfinite(self.safety_distance) and self.safety_distance >= 0):
+            raise InvalidConfigError(f'agents: safety_distance must be >= 0 m, got '
+                                     f'{self.safety_distance}')
         if self.min_patrol_cells < 1:
             raise InvalidConfigError(f'agents: min_patrol_cells must be >= 1, got '
                                      f'{self.min_patrol_cells}')
@@ -97,7 +114,9 @@ class DummyAgents:
         self.positions = np.zeros((0, 2))
         self._client = -1
         self._height = 0.0
-        self._travelled = 0.0
+        self._travelled: list[float] = []
+        """Metres each agent has moved along its patrol."""
+        self._robot_radius = 0.0
         self._index_of_body: dict[int, int] = {}
 
     def spawn(self, client: int, environment: Environment, robot: Robot, count: int,
@@ -111,7 +130,7 @@ class DummyAgents:
             raise InvalidConfigError(f'agents: count must be >= 0, got {count}')
         self._client = client
         self._height = robot.ride_height
-        self._travelled = 0.0
+        self._robot_radius = robot.footprint_radius
         self.body_ids, self.paths = [], []
         self._index_of_body = {}
         if count == 0:
@@ -158,6 +177,7 @@ class DummyAgents:
                 int(CollisionGroup.ROBOT | CollisionGroup.RAY), physicsClientId=client)
             self.body_ids.append(body)
         self.positions = np.array([path.position(0.0) for path in self.paths])
+        self._travelled = [0.0] * len(self.paths)
         self._index_of_body = {body: index for index, body in enumerate(self.body_ids)}
         return len(self.body_ids)
 
@@ -165,16 +185,44 @@ class DummyAgents:
         """Index of the agent whose pybullet body is ``body_id``; None for any other body."""
         return self._index_of_body.get(body_id)
 
-    def advance(self, dt: float) -> None:
-        """Move every agent ``dt`` seconds further along its patrol."""
+    def advance(self, dt: float, robot_position: tuple[float, float] | None = None) -> None:
+        """Move every agent ``dt`` seconds further along its patrol (a cautious agent waits
+        while the robot at ``robot_position`` or another agent is ahead of it)."""
         if not self.body_ids:
             return
-        self._travelled += self.config.speed * dt
+        step = self.config.speed * dt
+        cautious = self.config.behaviour == 'cautious'
         client, height, travelled = self._client, self._height, self._travelled
         positions = self.positions
         for index, (body, path) in enumerate(zip(self.body_ids, self.paths, strict=True)):
-            x, y = path.position(travelled)
+            x, y = path.position(travelled[index] + step)
+            if cautious and self._blocked(index, x, y, robot_position):
+                continue
+            travelled[index] += step
             positions[index, 0] = x
             positions[index, 1] = y
             p.resetBasePositionAndOrientation(body, [x, y, height], [0.0, 0.0, 0.0, 1.0],
                                               physicsClientId=client)
+
+    def _blocked(self, index: int, next_x: float, next_y: float,
+                 robot_position: tuple[float, float] | None) -> bool:
+        """Whether something stands within the safety distance ahead of agent ``index``
+        moving to (next_x, next_y): inside a corridor as wide as both bodies."""
+        x, y = self.positions[index]
+        dx, dy = next_x - x, next_y - y
+        norm = math.hypot(dx, dy)
+        if norm == 0.0:
+            return False
+        dx, dy = dx / norm, dy / norm
+        radius = self.config.radius
+        others = [(float(ox), float(oy), radius) for other, (ox, oy)
+                  in enumerate(self.positions) if other != index]
+        if robot_position is not None:
+            others.append((robot_position[0], robot_position[1], self._robot_radius))
+        for ox, oy, other_radius in others:
+            ahead = (ox - x) * dx + (oy - y) * dy
+            beside = abs((ox - x) * dy - (oy - y) * dx)
+            reach = radius + other_radius
+            if 0.0 < ahead < reach + self.config.safety_distance and beside < reach:
+                return True
+        return False

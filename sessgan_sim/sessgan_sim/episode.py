@@ -441,7 +441,7 @@ class Episode:
         step_time = record.ticks * config.control_period
         travelled = 0.0
         for _ in range(config.physics_steps_per_tick):
-            advance_agents(dt)
+            advance_agents(dt, (x, y))
             x_before, y_before = x, y
             apply(command, dt)
             step_simulation(physicsClientId=client)

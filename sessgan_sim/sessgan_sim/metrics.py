@@ -42,6 +42,8 @@ class Outcome(enum.StrEnum):
     STUCK = 'stuck'
     CONTROLLER_UNRESPONSIVE = 'controller_unresponsive'
     INVALID_ENVIRONMENT = 'invalid_environment'
+    CANCELLED = 'cancelled'
+    """Cut off by the evaluate client or by the simulator's shutdown: no test result."""
 
 
 FAILURE_OUTCOMES = frozenset({Outcome.TIMEOUT, Outcome.STUCK})

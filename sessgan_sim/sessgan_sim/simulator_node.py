@@ -8,178 +8,119 @@ TwistStamped with ``use_stamped_cmd_vel``) and, in free mode, ``environment``
 Stepping modes: ``lockstep`` publishes a tick's data and waits for the controller's answer before
 advancing; ``clocked`` advances ``/clock`` at ``real_time_factor`` and uses the latest command.
 A controller silent for ``controller_timeout`` wall seconds ends the episode as
-``controller_unresponsive``.
+``controller_unresponsive``. Sim time only moves forward: the first episode starts at
+``sim_time_origin``, every later one a control period after the previous one ended (failure
+bags record each episode's origin), so a long-running stack can live through any number of
+episodes. Every parameter is a field of
+:class:`sessgan_sim.simulator_settings.SimulatorSettings`, validated there as a whole.
+
+The node composes the parts in ``sessgan_sim.worker``: it receives work (evaluate goals, free
+mode maps), runs one episode at a time and answers with its metrics.
 """
 
 from __future__ import annotations
 
-import math
+import dataclasses
 import threading
 import time
-from dataclasses import dataclass, field
 
 import rclpy
-from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-from nav_msgs.msg import OccupancyGrid, Odometry
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import OccupancyGrid
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import LaserScan
-from tf2_msgs.msg import TFMessage
 
+from sessgan_gen.config_cli import field_docs
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.node_help import exit_if_help
-from sessgan_gen.ros_conversion import (
-    environment_from_msg,
-    occupancy_from_grid_msg,
-    occupancy_grid_msg,
-)
+from sessgan_gen.ros_conversion import environment_from_msg, occupancy_from_grid_msg
+from sessgan_gen.ros_spin import exit_process, run_node
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
-from sessgan_sim import cdr
-from sessgan_sim import ros_messages as rm
-from sessgan_sim.bag_recording import (
-    BagRecord,
-    BagWriteError,
-    episode_bag_directory,
-    write_episode_bag,
-)
-from sessgan_sim.episode import Episode, EpisodeConfig
-from sessgan_sim.errors import SessganSimError
+from sessgan_sim.episode import Episode
+from sessgan_sim.errors import InvalidConfigError, SessganSimError
 from sessgan_sim.metrics import Outcome, is_controller_failure
-from sessgan_sim.sensors import LidarConfig
-
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-"""cmd_vel: matches reliable and best-effort controllers; see CommandReceiver."""
-
-
-
-class CommandReceiver:
-    """Takes ``cmd_vel`` messages straight from a wait set, without an executor.
-
-    Lockstep waits for one command per tick; an executor's Python overhead per wake-up costs
-    more than the whole round trip, and the subscription's node is spun by nobody else. The
-    reader is best effort: reliability's acknowledgements cost a fifth of a lockstep tick. An
-    episode starts only once this reader has matched the controller's writer (a best-effort
-    reader drops what comes before; wait_for_controller). A command lost on one host (none in
-    bench_lockstep_under_load.py) would end the episode controller_unresponsive after the
-    timeout, never hang it or shift later commands.
-    """
-
-    def __init__(self, node, msg_type, topic: str) -> None:
-        self.subscription = node.create_subscription(msg_type, topic, lambda _: None,
-                                                     COMMAND_QOS)
-        self.context = node.context
-        # A wait on a shut-down context never returns (seen with rclpy 7.1.6): shutdown (a
-        # SIGTERM, say) wakes the waiting episode instead, as rclpy's executors wake theirs.
-        self.shutdown = node.create_guard_condition(lambda: None)
-        self.context.on_shutdown(self.shutdown.trigger)
-        self.wait_set = _rclpy.WaitSet(1, 1, 0, 0, 0, 0, self.context.handle)
-
-    def take(self):
-        """The oldest received command, or None."""
-        taken = self.subscription.handle.take_message(self.subscription.msg_type, False)
-        return None if taken is None else taken[0]
-
-    def take_all(self) -> list:
-        commands = []
-        while (command := self.take()) is not None:
-            commands.append(command)
-        return commands
-
-    def wait(self, timeout: float) -> bool:
-        """Block until a command is ready or ``timeout`` seconds pass; False once ROS is shut
-        down (no command will come)."""
-        if not self.context.ok():
-            return False
-        self.wait_set.clear_entities()
-        self.wait_set.add_subscription(self.subscription.handle)
-        self.wait_set.add_guard_condition(self.shutdown.handle)
-        self.wait_set.wait(max(0, int(timeout * 1e9)))
-        return self.context.ok()
-
-
-@dataclass
-class Recording:
-    """Every message of an episode, in order, kept as messages (or already serialized bytes)
-    until a bag is wanted."""
-
-    entries: list = field(default_factory=list)
-
-    def add(self, topic: str, msgtype: str, stamp_ns: int, message) -> None:
-        self.entries.append((topic, msgtype, stamp_ns, message))
-
-    def records(self):
-        for topic, msgtype, stamp_ns, message in self.entries:
-            data = message if isinstance(message, bytes) else serialize_message(message)
-            yield BagRecord(topic, msgtype, stamp_ns, data)
+from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSettings
+from sessgan_sim.worker.commands import CommandReceiver
+from sessgan_sim.worker.failure_bags import EpisodeFacts, remove_partial_bags, write_failure_bag
+from sessgan_sim.worker.nav2_stack import Nav2Stack
+from sessgan_sim.worker.stepping import EpisodeClock, EpisodeStepper
+from sessgan_sim.worker.topics import LATCHED_QOS, Recording, RobotTopics
 
 
 class SimulatorNode(Node):
+    """Parameters, the evaluate action and free mode around one Episode at a time."""
 
     def __init__(self) -> None:
         super().__init__('sessgan_sim')
-        self.declare_parameter('mode', 'lockstep')            # lockstep | clocked
-        self.declare_parameter('real_time_factor', 1.0)       # clocked mode: sim s per wall s
-        self.declare_parameter('controller_timeout', 2.0)     # wall s without a command
-        self.declare_parameter('controller_startup_timeout', 15.0)  # wall s for the first one
-        self.declare_parameter('use_stamped_cmd_vel', False)
-        self.declare_parameter('scenario', 'factory')         # free mode and defaults
-        self.declare_parameter('robot', '')                   # empty: the scenario's robot
-        self.declare_parameter('time_limit', 0.0)             # sim s; 0: the scenario's
-        self.declare_parameter('control_rate', 20.0)          # Hz of scan/odom/commands
-        self.declare_parameter('lidar_beams', 360)
-        self.declare_parameter('lidar_fov_deg', 360.0)
-        self.declare_parameter('lidar_range_max', 10.0)
-        self.declare_parameter('lidar_noise_std', 0.01)       # m
-        self.declare_parameter('dummy_agents', -1)            # -1: the scenario's
-        self.declare_parameter('free_mode', False)            # run an episode per `environment`
-        self.declare_parameter('seed', 0)                     # free mode episodes
-        self.declare_parameter('record_directory', '')        # free mode failure bags
-        self.declare_parameter('bag_storage', 'mcap')         # mcap | sqlite3
+        self.settings = self.declare_settings()
+        self.add_on_set_parameters_callback(self.check_parameters)
+        self.add_post_set_parameters_callback(self.apply_parameters)
 
         self.busy = threading.Lock()
         self.episode = Episode().open()  # one pybullet world, rebuilt for every episode
         self.callback_group = ReentrantCallbackGroup()
-        self.scan_publisher = self.create_publisher(LaserScan, 'scan', SENSOR_QOS)
-        self.odom_publisher = self.create_publisher(Odometry, 'odom', SENSOR_QOS)
-        self.tf_publisher = self.create_publisher(TFMessage, 'tf', SENSOR_QOS)
-        self.tf_static_publisher = self.create_publisher(TFMessage, 'tf_static', LATCHED_QOS)
-        self.clock_publisher = self.create_publisher(Clock, 'clock', SENSOR_QOS)
-        self.map_publisher = self.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
-        self.goal_publisher = self.create_publisher(PoseStamped, 'goal_pose', LATCHED_QOS)
-        self.topics = {name: self.resolve_topic_name(name) for name in (
-            'scan', 'odom', 'tf', 'tf_static', 'clock', 'map', 'goal_pose', 'cmd_vel')}
-
-        stamped = bool(self.get_parameter('use_stamped_cmd_vel').value)
-        self.command_type = TwistStamped if stamped else Twist
-        self.command_node = rclpy.create_node(
-            self.get_name() + '_cmd_vel', namespace=self.get_namespace(), context=self.context)
-        self.commands = CommandReceiver(self.command_node, self.command_type, 'cmd_vel')
+        self.topics = RobotTopics(self)
+        command_type = TwistStamped if self.settings.use_stamped_cmd_vel else Twist
+        self.commands = CommandReceiver(self, command_type)
+        self.stepper = EpisodeStepper(self.topics, self.commands, command_type.__name__)
+        self.stack = Nav2Stack(self, self.callback_group, lambda: self.commands.running)
+        self.clock_origin_ns = int(round(self.settings.sim_time_origin * 1e9))
+        self.cleaned_directories: set[str] = set()
+        self.clean_record_directory(self.settings.record_directory)
 
         self.action_server = ActionServer(
             self, EvaluateEnvironment, 'evaluate', execute_callback=self.execute,
             goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=self.callback_group)
-        if self.get_parameter('free_mode').value:
-            self.free_seed = int(self.get_parameter('seed').value)
+        if self.settings.free_mode:
+            self.free_seed = self.settings.seed
             self.create_subscription(OccupancyGrid, 'environment', self.on_free_map, LATCHED_QOS,
                                      callback_group=self.callback_group)
         self.get_logger().info(
-            f'simulator ready: {self.get_parameter("mode").value} mode, action '
+            f'simulator ready: {self.settings.mode} mode, action '
             f'{self.resolve_topic_name("evaluate")}')
+
+    # ---- parameters ------------------------------------------------------------------------
+
+    def declare_settings(self) -> SimulatorSettings:
+        """Declare one parameter per setting and validate them together; InvalidConfigError
+        names the parameter at fault (also a misspelt one given on the command line)."""
+        docs = field_docs(SimulatorSettings)
+        defaults = SimulatorSettings().to_dict()
+        values = {}
+        for name, default in defaults.items():
+            descriptor = ParameterDescriptor(
+                description=docs.get(name, ''), dynamic_typing=True,
+                read_only=name in STRUCTURAL_SETTINGS)
+            values[name] = self.declare_parameter(name, default, descriptor).value
+        unknown = sorted(set(self._parameter_overrides) - set(defaults) - {'use_sim_time'})
+        if unknown:
+            raise InvalidConfigError(f'unknown parameter(s) {unknown}; the simulator has '
+                                     f'{sorted(defaults)}')
+        return SimulatorSettings.from_values(values)
+
+    def check_parameters(self, parameters) -> SetParametersResult:
+        try:
+            self.settings_with(parameters)
+        except InvalidConfigError as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def apply_parameters(self, parameters) -> None:
+        self.settings = self.settings_with(parameters)  # the next episode uses them
+
+    def settings_with(self, parameters) -> SimulatorSettings:
+        values = self.settings.to_dict()
+        values.update({p.name: p.value for p in parameters if p.name in values})
+        return SimulatorSettings.from_values(values)
 
     # ---- entry points ----------------------------------------------------------------------
 
@@ -193,7 +134,8 @@ class SimulatorNode(Node):
         request = goal_handle.request
         result = EvaluateEnvironment.Result()
         with self.busy:
-            if not self.context.ok():  # shut down while waiting: the world is closed
+            if not self.commands.running:  # stopping: the world is (about to be) closed
+                goal_handle.abort()
                 return result
             try:
                 environment = environment_from_msg(request.environment)
@@ -206,14 +148,18 @@ class SimulatorNode(Node):
                 environment, robot=request.robot, time_limit=request.time_limit,
                 seed=request.seed, record_directory=request.record_directory,
                 controller=request.controller, goal_handle=goal_handle)
+        if not self.context.ok():
+            return result  # shut down: the goal handle belongs to a closed context
         if goal_handle.is_cancel_requested:
             goal_handle.canceled()
+        elif result.metrics.outcome == EpisodeMetricsMsg.OUTCOME_CANCELLED:
+            goal_handle.abort()
         else:
             goal_handle.succeed()
         return result
 
     def on_free_map(self, grid: OccupancyGrid) -> None:
-        scenario = self.get_parameter('scenario').value
+        scenario = self.settings.scenario
         try:
             occupancy, _, _ = occupancy_from_grid_msg(grid)
             cells = occupancy_to_tokens(occupancy, get_scenario(scenario))
@@ -226,12 +172,12 @@ class SimulatorNode(Node):
             self.get_logger().warning('ignoring a map on environment: an episode is running')
             return
         try:
-            if not self.context.ok():  # shutting down: the world is closed
+            if not self.commands.running:  # stopping: the world is (about to be) closed
                 return
             self.free_seed += 1
             metrics = self.run_episode(
                 environment, robot='', time_limit=0.0, seed=environment.seed,
-                record_directory=self.get_parameter('record_directory').value,
+                record_directory=self.settings.record_directory,
                 controller='external', goal_handle=None)
             self.get_logger().info(
                 f'free-mode episode {environment.id}: {metrics.outcome}, '
@@ -239,58 +185,85 @@ class SimulatorNode(Node):
         finally:
             self.busy.release()
 
-    # ---- the episode loop ------------------------------------------------------------------
-
-    def episode_config(self, robot: str, time_limit: float, seed: int) -> EpisodeConfig:
-        """Parameters and goal fields as a core config; None fields take scenario defaults."""
-        param = self.get_parameter
-        rate = float(param('control_rate').value)
-        agents = int(param('dummy_agents').value)
-        config = EpisodeConfig(
-            robot=robot or param('robot').value or None,
-            control_rate_hz=rate,
-            time_limit=time_limit or float(param('time_limit').value) or None,
-            lidar=LidarConfig(
-                beams=int(param('lidar_beams').value),
-                field_of_view=math.radians(float(param('lidar_fov_deg').value)),
-                range_max=float(param('lidar_range_max').value),
-                noise_std=float(param('lidar_noise_std').value), rate_hz=rate),
-            dummy_agents=None if agents < 0 else agents,
-            seed=int(seed),
-        )
-        config.validate()
-        return config
+    # ---- one episode -----------------------------------------------------------------------
 
     def run_episode(self, environment: Environment, robot: str, time_limit: float, seed: int,
                     record_directory: str, controller: str, goal_handle) -> EpisodeMetricsMsg:
         wall_start = time.monotonic()
+        settings = self.settings  # one snapshot for the whole episode
         recording = Recording() if record_directory else None
         try:
-            config = self.episode_config(robot, time_limit, seed)
+            config = settings.episode_config(robot, time_limit, seed)
+            config.validate()
         except (SessganSimError, ValueError) as err:
             return invalid_metrics(environment.id, str(err))
         episode = self.episode
         observation = episode.reset(environment, config)
         config = episode.config  # resolved: scenario defaults filled in
-        startup_timeout = float(self.get_parameter('controller_startup_timeout').value)
+        clock = EpisodeClock(self.clock_origin_ns)
+        startup_timeout = settings.controller_startup_timeout
         if episode.done:
             metrics = episode.metrics()
-        elif not self.wait_for_controller(startup_timeout):
-            episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                          f'no controller subscribed to scan and published cmd_vel within '
-                          f'{startup_timeout:.1f} s wall time')
+        elif not self.stepper.wait_for_controller(startup_timeout):
+            if self.commands.running:
+                episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                              f'no controller subscribed to scan and published cmd_vel within '
+                              f'{startup_timeout:.1f} s wall time')
+            else:
+                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
             metrics = episode.metrics()
         else:
-            self.publish_episode_start(environment, episode, observation, recording)
+            self.topics.publish_world(environment, episode.robot.ride_height,
+                                      episode.robot.sensor_height, clock.stamp_ns(0.0),
+                                      recording)
+
+            def prepare_stack() -> str | None:
+                """Costmap resets, then the goal: before time advances."""
+                if settings.reset_costmaps:
+                    failure = self.stack.reset_costmaps(settings.stack_timeout)
+                    if failure:
+                        return failure
+                if settings.goal_via.uses_topic:
+                    self.topics.publish_goal(environment.goal, clock.stamp_ns(0.0), recording)
+                if settings.goal_via.uses_action:
+                    return self.stack.send_goal(environment.goal, clock.stamp_ns(0.0),
+                                                settings.stack_timeout)
+                return None
+
+            def stop_after_navigation() -> tuple[float, float, float] | None:
+                """A stack that ended its NavigateToPose goal no longer drives: stand still
+                (as a base with a command timeout does) instead of waiting for cmd_vel."""
+                return (0.0, 0.0, 0.0) if self.stack.navigation_ended else None
+
             loop_start = time.monotonic()
-            metrics = self.step_loop(episode, observation, recording, goal_handle)
+            metrics = self.stepper.run(
+                episode, observation, clock, settings, recording, goal_handle,
+                before_first_step=prepare_stack, command_override=stop_after_navigation)
+            note = self.stack.finish(settings.stack_timeout)
+            if note:
+                metrics = dataclasses.replace(
+                    metrics, detail=f'{metrics.detail}; {note}' if metrics.detail else note)
             self.log_timing(environment.id, metrics, episode.profile,
                             time.monotonic() - loop_start)
+            # The next episode's clock starts one control period after this one's end: a
+            # long-running stack never sees sim time go back (its tf buffer stays valid).
+            self.clock_origin_ns = clock.stamp_ns(episode.time + config.control_period)
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
-        if recording is not None and is_controller_failure(metrics):
-            message.bag_path = self.write_bag(
-                record_directory, environment, config, metrics, recording, seed, controller)
+        if (recording is not None and metrics.outcome is not Outcome.CANCELLED
+                and is_controller_failure(metrics)):
+            self.clean_record_directory(record_directory)
+            facts = EpisodeFacts(seed=seed, controller=controller,
+                                 namespace=self.get_namespace(),
+                                 sim_time_origin_ns=clock.origin_ns, settings=settings)
+            message.bag_path = write_failure_bag(record_directory, environment, config, metrics,
+                                                 recording, facts, self.get_logger())
         return message
+
+    def clean_record_directory(self, record_directory: str) -> None:
+        """Remove partial bags a killed worker left, once per directory and process."""
+        if record_directory and record_directory not in self.cleaned_directories:
+            self.cleaned_directories.add(record_directory)
+            remove_partial_bags(record_directory, self.get_logger())
 
     def log_timing(self, environment_id: str, metrics, profile, loop_seconds: float) -> None:
         """One line per episode: where the wall time of a tick goes (benchmarks parse it)."""
@@ -305,192 +278,20 @@ class SimulatorNode(Node):
             f'(x{factor:.1f} real time); per tick ms: ' +
             ' '.join(f'{name}={value * 1e3:.3f}' for name, value in per_tick.items()))
 
-    def publish_episode_start(self, environment, episode, observation, recording) -> None:
-        stamp = rm.time_msg(observation.time)
-        self.publish(self.map_publisher, 'map', 'nav_msgs/msg/OccupancyGrid',
-                     occupancy_grid_msg(environment, stamp=stamp), observation.time, recording)
-        self.publish(self.tf_static_publisher, 'tf_static', 'tf2_msgs/msg/TFMessage',
-                     rm.static_tf_msg(stamp, episode.robot.ride_height,
-                                      episode.robot.sensor_height),
-                     observation.time, recording)
-        goal = environment.goal
-        self.publish(self.goal_publisher, 'goal_pose', 'geometry_msgs/msg/PoseStamped',
-                     rm.goal_msg(stamp, goal.x, goal.y, goal.yaw), observation.time, recording)
+    def stop(self, grace: float) -> None:
+        """Cut a running episode off (outcome cancelled, its goal aborted) and wait up to
+        ``grace`` seconds for it to end; no new episode starts (at exit, ROS still up)."""
+        self.commands.stop()
+        if self.busy.acquire(timeout=grace):
+            self.busy.release()
 
-    def wait_for_controller(self, timeout: float) -> bool:
-        """Wait until a controller reads our scan and publishes cmd_vel, with every endpoint of
-        the tick's topics that discovery shows matched to ours.
-
-        Only matched endpoints exchange messages: a tick published before the controller's odom
-        reader matched our writer, or an answer sent before our best-effort cmd_vel reader
-        matched its writer, would be lost and stall the episode until the startup timeout. A
-        tick is never published twice (a repeated one would earn a second answer and shift
-        every later command by a tick). An endpoint that never matches (incompatible QoS) holds
-        the start up for at most a second.
-        """
-        deadline = time.monotonic() + timeout
-        settle_deadline = None
-        waited = False
-        while True:
-            commands = self.commands.subscription.get_publisher_count()
-            if self.scan_publisher.get_subscription_count() > 0 and commands > 0:
-                complete = commands >= self.command_node.count_publishers(
-                    self.topics['cmd_vel']) and all(
-                    publisher.get_subscription_count() >= self.count_subscribers(
-                        self.topics[name]) for name, publisher in (
-                        ('clock', self.clock_publisher), ('odom', self.odom_publisher),
-                        ('scan', self.scan_publisher)))
-                now = time.monotonic()
-                settle_deadline = settle_deadline or now + 1.0
-                if complete or now >= settle_deadline:
-                    if waited:  # just matched: let the controller's side catch up too
-                        time.sleep(0.1)
-                    return True
-            if time.monotonic() > deadline:
-                return False
-            waited = True
-            time.sleep(0.01)
-
-    def republish_goal(self, episode, observation) -> None:
-        """Resend the goal to a controller whose volatile goal_pose reader (Nav2's is) joined
-        after the first one; not recorded twice."""
-        goal = episode.environment.goal
-        self.goal_publisher.publish(
-            rm.goal_msg(rm.time_msg(observation.time), goal.x, goal.y, goal.yaw))
-
-    def publish(self, publisher, topic: str, msgtype: str, message, sim_time: float,
-                recording: Recording | None) -> None:
-        publisher.publish(message)
-        if recording is not None:
-            recording.add(self.topics[topic], msgtype, int(round(sim_time * 1e9)), message)
-
-    def publish_tick(self, episode, observation, recording) -> None:
-        """clock, odom, tf (when anyone listens or records) and scan of one tick; the
-        messages of every tick are published serialized (sessgan_sim.cdr)."""
-        t = observation.time
-        stamp = cdr.stamp(t)
-        self.publish(self.clock_publisher, 'clock', 'rosgraph_msgs/msg/Clock', cdr.clock(stamp),
-                     t, recording)
-        pose = observation.pose
-        odom = cdr.odometry(stamp, rm.ODOM_FRAME, rm.BASE_FOOTPRINT, pose.x, pose.y, pose.yaw,
-                            *observation.twist)
-        self.publish(self.odom_publisher, 'odom', 'nav_msgs/msg/Odometry', odom, t, recording)
-        if recording is not None or self.tf_publisher.get_subscription_count() > 0:
-            # Building tf costs more than the check; most controllers under test use odom.
-            self.publish(self.tf_publisher, 'tf', 'tf2_msgs/msg/TFMessage', rm.dynamic_tf_msg(
-                rm.time_msg(t), pose.x, pose.y, pose.yaw), t, recording)
-        lidar = observation.lidar
-        self.publish(self.scan_publisher, 'scan', 'sensor_msgs/msg/LaserScan', cdr.laser_scan(
-            stamp, rm.SCAN_FRAME, observation.scan, lidar.angle_min, lidar.angle_increment,
-            lidar.range_min, lidar.range_max, lidar.scan_time), t, recording)
-
-    def wait_for_command(self, deadline: float, republish) -> object | None:
-        """The next command received before the wall-clock ``deadline``, else None."""
-        next_republish = time.monotonic() + 1.0
-        while True:
-            command = self.commands.take()
-            if command is not None:
-                return command
-            now = time.monotonic()
-            if now >= deadline:
-                return None
-            if republish is not None and now >= next_republish:
-                republish()  # covers a controller that matched our publishers only now
-                next_republish = now + 1.0
-            if not self.commands.wait(min(deadline, next_republish) - now):
-                return None
-
-    def step_loop(self, episode, observation, recording, goal_handle):
-        lockstep = self.get_parameter('mode').value != 'clocked'
-        rtf = max(1e-3, float(self.get_parameter('real_time_factor').value))
-        timeout = float(self.get_parameter('controller_timeout').value)
-        startup_timeout = float(self.get_parameter('controller_startup_timeout').value)
-        dt = 1.0 / episode.config.control_rate_hz
-        feedback_every = max(1, int(round(0.25 / dt)))
-        command = None
-        last_command_wall = time.monotonic()
-        wall_origin = time.monotonic()
-        first = True
-        ticks = 0
-        self.commands.take_all()  # stale answers of an earlier episode
-        while not episode.done:
-            if goal_handle is not None and goal_handle.is_cancel_requested:
-                episode.abort(Outcome.TIMEOUT, 'cancelled by the evaluate client')
-                break
-            if not self.context.ok():  # shutting down (SIGTERM): end at once, no more ticks
-                episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, 'the simulator was shut down')
-                break
-            self.publish_tick(episode, observation, recording)
-            if lockstep:
-                limit = startup_timeout if first else timeout
-                received = self.wait_for_command(
-                    time.monotonic() + limit,
-                    (lambda: self.republish_goal(episode, observation)) if first else None)
-                if received is None:
-                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                                  f'no cmd_vel within {limit:.1f} s wall time')
-                    break
-                command = received
-            else:
-                tick_deadline = wall_origin + (observation.time + dt) / rtf
-                while (remaining := tick_deadline - time.monotonic()) > 0:
-                    if not self.commands.wait(remaining):
-                        break
-                    received = self.commands.take_all()
-                    if received:
-                        command = received[-1]
-                        last_command_wall = time.monotonic()
-                limit = startup_timeout if command is None else timeout
-                if time.monotonic() - last_command_wall > limit:
-                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                                  f'no cmd_vel within {limit:.1f} s wall time')
-                    break
-            first = False
-            values = rm.twist_values(command) if command is not None else (0.0, 0.0, 0.0)
-            if recording is not None and command is not None:
-                recording.add(self.topics['cmd_vel'], 'geometry_msgs/msg/' +
-                              self.command_type.__name__, int(round(observation.time * 1e9)),
-                              command)
-            observation = episode.step(values).observation
-            ticks += 1
-            if goal_handle is not None and ticks % feedback_every == 0:
-                so_far = episode.metrics()
-                feedback = EvaluateEnvironment.Feedback()
-                feedback.sim_time = observation.time
-                feedback.collisions = so_far.collisions
-                feedback.distance_to_goal = so_far.final_distance_to_goal
-                goal_handle.publish_feedback(feedback)
-        if not lockstep:
-            # The final state, so subscribers and bags see where the robot ended. Not in
-            # lockstep: its answer could arrive during the next episode.
-            self.publish_tick(episode, observation, recording)
-        return episode.metrics()
-
-    def write_bag(self, record_directory, environment, config, metrics, recording, seed,
-                  controller) -> str:
-        metadata = {
-            'environment_id': environment.id, 'scenario': environment.scenario,
-            'seed': environment.seed, 'episode_seed': int(seed),
-            'generation': environment.generation, 'member': environment.member,
-            'controller': controller, 'metrics': metrics.to_dict(),
-            'robot': config.robot, 'time_limit': config.time_limit,
-            'start': [environment.start.x, environment.start.y, environment.start.yaw],
-            'goal': [environment.goal.x, environment.goal.y, environment.goal.yaw],
-            'feasible': environment.feasible, 'route_length': environment.route_length,
-            'route_min_clearance': environment.route_min_clearance,
-            'namespace': self.get_namespace(),
-        }
-        try:
-            path = write_episode_bag(
-                episode_bag_directory(record_directory, environment.id), recording.records(),
-                metadata, environment.occupancy, environment.resolution, environment.origin,
-                storage=self.get_parameter('bag_storage').value, overwrite=True)
-        except (BagWriteError, OSError, ValueError) as err:
-            self.get_logger().error(
-                f'cannot write the failure bag of {environment.id!r} in {record_directory}: {err}')
-            return ''
-        self.get_logger().info(f'failure bag written: {path}')
-        return str(path)
+    def close(self) -> None:
+        """Release the world and the command reader once no episode runs (at exit)."""
+        idle = self.busy.acquire(timeout=5.0)
+        self.episode.close()
+        self.commands.destroy()
+        if idle:
+            self.busy.release()
 
 
 def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetricsMsg:
@@ -527,24 +328,13 @@ def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
 
 def main(args=None) -> None:
     exit_if_help('sessgan_sim simulator', __doc__ or '', SimulatorNode, args)
-    rclpy.init(args=args)
-    node = None
-    executor = MultiThreadedExecutor(num_threads=2)
+    # Two threads: one runs an episode inside the evaluate callback, the other keeps the
+    # action server (and Nav2 clients) answering meanwhile.
     try:
-        node = SimulatorNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            # A running episode ends at its next tick once ROS is shut down; closing its world
-            # and nodes under it would crash the process instead of letting it exit. A goal
-            # still waiting for the lock finds ROS shut down and returns at once.
-            idle = node.busy.acquire(timeout=5.0)
-            node.episode.close()
-            node.command_node.destroy_node()
-            node.destroy_node()
-            if idle:
-                node.busy.release()
-        rclpy.try_shutdown()
+        status = run_node(
+            SimulatorNode, lambda context: MultiThreadedExecutor(num_threads=2, context=context),
+            args=args, stop=SimulatorNode.stop, before_destroy=SimulatorNode.close)
+    except InvalidConfigError as err:
+        rclpy.logging.get_logger('sessgan_sim').fatal(f'cannot start the simulator: {err}')
+        status = 2
+    exit_process(status)

@@ -252,6 +252,50 @@ def test_export_environment_and_token_map(tmp_path):
     assert loaded.resolution == 1.0
 
 
+def write_negated_facility(directory, origin=(-3.2, 1.5, 0.0)):
+    """A 160x120-pixel map_server map at 0.05 m/px (8 x 6 m) saved with ``negate: 1`` (white is
+    occupied): a 0.5 m thick border wall, a 1 x 1 m block, a grey (unknown) patch; trinary
+    mode, a non-zero origin. Returns (yaml path, the factory token map it should become at
+    0.5 m per cell: 12 rows x 16 columns, row 0 at the bottom)."""
+    pixels = np.zeros((120, 160), dtype=np.uint8)  # negate: black is free
+    pixels[:10, :] = pixels[-10:, :] = pixels[:, :10] = pixels[:, -10:] = 255  # 0.5 m walls
+    pixels[30:50, 60:80] = 255  # a 1 x 1 m block, image rows 30..49 (top first)
+    pixels[80:90, 120:130] = 128  # a grey 0.5 m square: unknown, so blocked for a robot
+    write_pgm_p5(directory / 'facility.pgm', pixels)
+    yaml_path = write_yaml(directory / 'facility.yaml', image='facility.pgm', resolution=0.05,
+                           origin=list(origin), negate=1, mode='trinary', occupied_thresh=0.65,
+                           free_thresh=0.25)
+    expected = np.zeros((12, 16), dtype=np.int64)
+    expected[0, :] = expected[-1, :] = expected[:, 0] = expected[:, -1] = 1
+    expected[12 - 5:12 - 3, 6:8] = 1  # image rows 30..49 = cell rows 3..4 from the top
+    expected[12 - 9, 12] = 1  # image rows 80..89 = cell row 8 from the top
+    return yaml_path, expected
+
+
+def test_map_server_map_imports_at_the_scenarios_cell_size(tmp_path):
+    from sessgan_gen.map_server_io import cells_at_cell_size, import_map_server_for_scenario
+
+    yaml_path, expected = write_negated_facility(tmp_path)
+    loaded = read_map_server(yaml_path)
+    assert loaded.origin == (-3.2, 1.5, 0.0)
+    assert loaded.occupancy[0, 0] == 100 and loaded.occupancy[60, 40] == 0  # negate applied
+    assert loaded.occupancy[120 - 85, 125] == -1  # trinary: grey between thresholds
+    assert cells_at_cell_size(loaded.occupancy.shape, 0.05, 0.5) == (12, 16)
+    token_map = import_map_server_for_scenario(yaml_path, 'factory')
+    assert token_map.scenario == 'factory'
+    np.testing.assert_array_equal(token_map.cells, expected)
+
+
+def test_a_map_too_large_for_the_cell_size_is_refused(tmp_path):
+    from sessgan_gen.map_server_io import cells_at_cell_size, import_map_server_for_scenario
+
+    write_pgm_p5(tmp_path / 'map.pgm', np.zeros((4, 4), dtype=np.uint8))
+    write_yaml(tmp_path / 'map.yaml', resolution=1000.0)
+    with pytest.raises(MapFormatError, match='more than 4096 per side'):
+        import_map_server_for_scenario(tmp_path / 'map.yaml', 'factory')
+    assert cells_at_cell_size((3, 1), 0.01, 0.5) == (1, 1)  # never zero cells
+
+
 def test_written_images_open_in_pillow_and_a_maxval_100_image_keeps_exact_shades(tmp_path):
     from PIL import Image
 

@@ -11,6 +11,7 @@ from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.grid_search import distance_field
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_sim.agents import AgentConfig
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError, InvalidConfigError
 from sessgan_sim.metrics import ContactKind, Outcome, is_controller_failure
@@ -168,6 +169,26 @@ def test_an_agent_driving_into_a_standing_robot_is_not_its_fault(episode):
         if touched >= 2:
             break
     assert touched >= 2
+
+
+def test_cautious_agents_wait_instead_of_driving_into_a_standing_robot(episode):
+    env = corridor(feasible=False)
+    cautious = AgentConfig(behaviour='cautious')
+    rammed = 0
+    for seed in range(40):
+        blind = config(dummy_agents=1, seed=seed, stuck_timeout=0.0, time_limit=15.0)
+        episode.reset(env, blind)
+        if not run(episode, VelocityCommand()).collisions:
+            continue
+        rammed += 1
+        episode.reset(env, dataclasses.replace(blind, agents=cautious))
+        metrics = run(episode, VelocityCommand())
+        assert metrics.collisions == 0 and metrics.min_clearance > 0.0
+        if rammed >= 2:
+            break
+    assert rammed >= 2
+    with pytest.raises(InvalidConfigError, match='behaviour'):
+        AgentConfig(behaviour='reckless').validate()
 
 
 def test_driving_into_an_agent_is_a_fault(episode):

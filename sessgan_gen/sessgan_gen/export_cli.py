@@ -1,0 +1,108 @@
+"""`ros2 run sessgan_gen export`: write any map of the project as a map_server map (PGM + YAML)
+that Nav2's map_server, RViz or an image viewer loads.
+
+Exactly one source:
+
+* ``--map-file tokens.txt``: a token map (an example map, or the ``<checkpoint>.map.txt`` that
+  ``train --map-yaml`` wrote), at its scenario's cell size, origin (0, 0);
+* ``--generate``: the map a generator checkpoint (``--checkpoint``, default the scenario's
+  shipped one) samples from ``--seed``, as the generator node would publish it;
+* ``--bag bags/<run>/<episode>``: the map of a failure bag (a failing map), with its origin.
+
+The YAML goes to ``--output``, the PGM beside it (same name, .pgm).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from sessgan_gen.config_cli import parse_config
+from sessgan_gen.errors import SessganGenError
+
+
+@dataclass
+class ExportConfig:
+    """What to export, and where; the ``export`` command's options."""
+
+    output: str = ''
+    """map_server YAML to write; the PGM goes beside it."""
+    map_file: str = ''
+    """Token map text file to export."""
+    generate: bool = False
+    """Export the map a generator checkpoint samples from --seed."""
+    checkpoint: str = ''
+    """Generator checkpoint for --generate; empty: the scenario's shipped checkpoint."""
+    scenario: str = ''
+    """Scenario of --generate; empty: the checkpoint's (factory without --checkpoint)."""
+    seed: int = 0
+    """Seed of the map --generate samples."""
+    width: int = 0
+    """Width in cells of the map --generate samples; 0: the scenario's default."""
+    height: int = 0
+    """Height in cells of the map --generate samples; 0: the scenario's default."""
+    bag: str = ''
+    """Failure bag directory whose map to export."""
+
+
+def export(config: ExportConfig) -> Path:
+    """Write the map ``config`` names; returns the YAML path. SessganGenError (or ValueError)
+    says what is wrong with the options or the source."""
+    sources = [name for name, given in (('--map-file', config.map_file),
+                                        ('--generate', config.generate), ('--bag', config.bag))
+               if given]
+    if len(sources) != 1:
+        raise SessganGenError(f'give exactly one of --map-file, --generate, --bag (got '
+                              f'{", ".join(sources) or "none"})')
+    if not config.output:
+        raise SessganGenError('--output (the map_server YAML to write) is required')
+    output = Path(config.output)
+    if output.suffix.lower() not in ('.yaml', '.yml'):
+        raise SessganGenError(f'--output {output} must name a .yaml file (the PGM goes beside '
+                              'it)')
+    from sessgan_gen.map_server_io import (
+        export_environment,
+        export_token_map,
+        read_map_server,
+        write_map_server,
+    )
+
+    output.parent.mkdir(parents=True, exist_ok=True)
+    if config.map_file:
+        from sessgan_gen.token_map import read_token_map
+
+        export_token_map(output, read_token_map(config.map_file))
+    elif config.generate:
+        from sessgan_gen.environment_sampler import EnvironmentSampler
+
+        scenario = config.scenario or (None if config.checkpoint else 'factory')
+        environment = EnvironmentSampler().sample(
+            [config.seed], config.checkpoint or None, scenario,
+            (config.height, config.width))[0]
+        export_environment(output, environment)
+    else:
+        bag = Path(config.bag)
+        if not (bag / 'map.yaml').is_file():
+            raise SessganGenError(f'{bag} is no failure bag: it has no map.yaml')
+        loaded = read_map_server(bag / 'map.yaml')
+        write_map_server(output, loaded.occupancy, loaded.resolution, loaded.origin)
+    return output
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit status (0 written, 1 error)."""
+    config = parse_config(ExportConfig, argv, prog='ros2 run sessgan_gen export',
+                          description=__doc__.split('\n\n')[0])
+    try:
+        output = export(config)
+    except (SessganGenError, ValueError, OSError) as err:
+        print(f'export: error: {err}', file=sys.stderr)
+        return 1
+    print(f'{output} and {output.with_suffix(".pgm")}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,143 @@
+"""Driving a Nav2 stack the way its users do: NavigateToPose goals and costmap resets.
+
+Names are relative, so they follow the worker's namespace: the ``navigate_to_pose`` action
+server (bt_navigator) and the ClearEntireCostmap services of Nav2's two costmaps,
+``global_costmap/clear_entirely_global_costmap`` and
+``local_costmap/clear_entirely_local_costmap``. Every call waits at most ``timeout`` wall
+seconds and reports a failure as a sentence for the episode's detail (the episode then ends
+as controller_unresponsive: the stack under test did not respond). The futures are completed
+by the node's executor in another thread while an episode runs in the evaluate callback.
+
+nav2_msgs is imported when first needed: a worker that never drives Nav2 runs without it.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from action_msgs.msg import GoalStatus
+
+from sessgan_sim import ros_messages as rm
+from sessgan_sim.worker.topics import time_of
+
+NAVIGATE_ACTION = 'navigate_to_pose'
+RESET_SERVICES = ('global_costmap/clear_entirely_global_costmap',
+                  'local_costmap/clear_entirely_local_costmap')
+POLL = 0.005
+"""Seconds between checks of a pending future."""
+
+TERMINAL = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
+            GoalStatus.STATUS_CANCELED: 'canceled'}
+
+
+class Nav2Stack:
+    """The action client and service clients of one worker, created on first use."""
+
+    def __init__(self, node, callback_group, running) -> None:
+        """``running()``: False once the worker stops (every wait ends then)."""
+        self.node = node
+        self.callback_group = callback_group
+        self.running = running
+        self._action_client: Any = None
+        self._reset_clients: dict[str, Any] = {}
+        self._goal_handle: Any = None
+        self._result_future: Any = None
+
+    # ---- resets ----------------------------------------------------------------------------
+
+    def reset_costmaps(self, timeout: float) -> str | None:
+        """Clear both costmaps; None when both answered, else why not."""
+        from nav2_msgs.srv import ClearEntireCostmap
+
+        for name in RESET_SERVICES:
+            client = self._reset_clients.get(name)
+            if client is None:
+                client = self.node.create_client(ClearEntireCostmap, name,
+                                                 callback_group=self.callback_group)
+                self._reset_clients[name] = client
+            service = self.node.resolve_service_name(name)
+            deadline = time.monotonic() + timeout
+            if not self._wait_until(client.service_is_ready, deadline):
+                return (f'costmap reset: no {service} service within {timeout:.1f} s wall time '
+                        '(reset_costmaps is on: is Nav2 running under this namespace?)')
+            future = client.call_async(ClearEntireCostmap.Request())
+            if not self._wait_until(future.done, deadline):
+                client.remove_pending_request(future)
+                return f'costmap reset: {service} did not answer within {timeout:.1f} s wall time'
+        return None
+
+    # ---- the goal --------------------------------------------------------------------------
+
+    def send_goal(self, goal, stamp_ns: int, timeout: float) -> str | None:
+        """Send ``goal`` (map frame) as a NavigateToPose goal; None once the server accepted
+        it, else why not."""
+        from nav2_msgs.action import NavigateToPose
+
+        if self._action_client is None:
+            from rclpy.action import ActionClient
+
+            self._action_client = ActionClient(self.node, NavigateToPose, NAVIGATE_ACTION,
+                                               callback_group=self.callback_group)
+        client = self._action_client
+        name = self.node.resolve_topic_name(NAVIGATE_ACTION)
+        self._goal_handle = self._result_future = None
+        deadline = time.monotonic() + timeout
+        if not self._wait_until(client.server_is_ready, deadline):
+            return (f'no NavigateToPose action server at {name} within {timeout:.1f} s wall '
+                    'time (goal_interface sends the goal there)')
+        request = NavigateToPose.Goal(
+            pose=rm.goal_msg(time_of(stamp_ns), goal.x, goal.y, goal.yaw))
+        sent = client.send_goal_async(request)
+        if not self._wait_until(sent.done, deadline):
+            return f'{name} did not answer the goal within {timeout:.1f} s wall time'
+        handle = sent.result()
+        if handle is None or not handle.accepted:
+            return f'{name} rejected the goal'
+        self._goal_handle = handle
+        self._result_future = handle.get_result_async()
+        return None
+
+    @property
+    def navigation_ended(self) -> bool:
+        """True when the stack ended the current NavigateToPose goal itself (succeeded,
+        aborted or canceled): it no longer drives the robot."""
+        return self._result_future is not None and self._result_future.done()
+
+    def finish(self, timeout: float) -> str:
+        """End the episode's NavigateToPose goal: cancel it if the stack still pursues it.
+        Returns a note on how the navigation ended ('' without an action goal)."""
+        if self._goal_handle is None:
+            return ''
+        name = self.node.resolve_topic_name(NAVIGATE_ACTION)
+        try:
+            if not self.navigation_ended:
+                # Wait for the goal to end, not only for the cancel to be accepted: the stack
+                # has stopped navigating before the next episode resets it.
+                deadline = time.monotonic() + timeout
+                cancel = self._goal_handle.cancel_goal_async()
+                if (self._wait_until(cancel.done, deadline)
+                        and self._wait_until(self._result_future.done, deadline)):
+                    return f'{name} goal still active at the end: canceled'
+                return (f'{name} goal still active at the end; its cancel was not confirmed '
+                        f'within {timeout:.1f} s wall time')
+            response = self._result_future.result()
+            status = TERMINAL.get(response.status, f'status {response.status}')
+            note = f'{name} goal {status} by the stack'
+            code = getattr(response.result, 'error_code', 0)
+            if code:
+                message = getattr(response.result, 'error_msg', '')
+                note += f' (error {code}{": " + message if message else ""})'
+            return note
+        finally:
+            self._goal_handle = self._result_future = None
+
+    # ---- helpers ---------------------------------------------------------------------------
+
+    def _wait_until(self, condition, deadline: float) -> bool:
+        """Poll ``condition`` until it holds, the deadline passes or the worker stops."""
+        while not condition():
+            if time.monotonic() >= deadline or not self.running():
+                return False
+            time.sleep(POLL)
+        return True

@@ -1,0 +1,212 @@
+"""The tick loops of one episode: lockstep and clocked.
+
+Lockstep publishes a tick's clock, odom, tf and scan, waits for the controller's cmd_vel and
+only then advances the simulation by one control period. Clocked advances the simulation at
+``real_time_factor`` times the wall clock and applies the latest command received. Either way
+a silent controller ends the episode as controller_unresponsive after a wall-clock timeout,
+an evaluate client's cancel or a shutdown ends it as cancelled, and nothing waits forever.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from sessgan_sim import ros_messages as rm
+from sessgan_sim.metrics import Outcome
+from sessgan_sim.simulator_settings import SimulatorSettings, StepMode
+from sessgan_sim.worker.commands import CommandReceiver
+from sessgan_sim.worker.topics import Recording, RobotTopics
+
+GOAL_REPUBLISH_PERIOD = 1.0
+"""Wall seconds between checks for late goal_pose readers (and, in lockstep before the first
+command, between unconditional resends of the goal)."""
+FEEDBACK_PERIOD = 0.25
+"""Sim seconds between evaluate feedback messages."""
+
+
+@dataclass
+class EpisodeClock:
+    """Maps an episode's sim time (seconds from its start) to stamps on the worker's clock."""
+
+    origin_ns: int
+
+    def stamp_ns(self, episode_time: float) -> int:
+        return self.origin_ns + int(round(episode_time * 1e9))
+
+
+class EpisodeStepper:
+    """Runs an episode's ticks between the topics and the command reader."""
+
+    def __init__(self, topics: RobotTopics, commands: CommandReceiver,
+                 command_type_name: str) -> None:
+        self.topics = topics
+        self.commands = commands
+        self.command_msgtype = f'geometry_msgs/msg/{command_type_name}'
+
+    # ---- before the first tick -------------------------------------------------------------
+
+    def wait_for_controller(self, timeout: float) -> bool:
+        """Wait until a controller reads our scan and publishes cmd_vel, with every endpoint of
+        the tick's topics that discovery shows matched to ours.
+
+        Only matched endpoints exchange messages: a tick published before the controller's odom
+        reader matched our writer, or an answer sent before our best-effort cmd_vel reader
+        matched its writer, would be lost and stall the episode until the startup timeout. A
+        tick is never published twice (a repeated one would earn a second answer and shift
+        every later command by a tick). An endpoint that never matches (incompatible QoS) holds
+        the start up for at most a second. False after ``timeout`` wall seconds or on shutdown.
+        """
+        topics, commands = self.topics, self.commands
+        deadline = time.monotonic() + timeout
+        settle_deadline = None
+        waited = False
+        while self.commands.running:
+            matched_commands = commands.matched_writers()
+            if topics.readers('scan') > 0 and matched_commands > 0:
+                complete = matched_commands >= commands.writers_in_graph() and all(
+                    topics.readers(name) >= commands.node.count_subscribers(topics.names[name])
+                    for name in ('clock', 'odom', 'scan'))
+                now = time.monotonic()
+                settle_deadline = settle_deadline or now + 1.0
+                if complete or now >= settle_deadline:
+                    if waited:  # just matched: let the controller's side catch up too
+                        time.sleep(0.1)
+                    return True
+            if time.monotonic() > deadline:
+                return False
+            waited = True
+            time.sleep(0.01)
+        return False
+
+    # ---- the loop ---------------------------------------------------------------------------
+
+    def run(self, episode, observation, clock: EpisodeClock, settings: SimulatorSettings,
+            recording: Recording | None, goal_handle=None,
+            before_first_step: Callable[[], str | None] | None = None,
+            command_override: Callable[[], tuple[float, float, float] | None] | None = None):
+        """Step ``episode`` from ``observation`` until it ends; returns its metrics.
+
+        ``before_first_step`` runs once before time advances (costmap resets and the goal);
+        a string it returns ends the episode as controller_unresponsive with that detail.
+        ``command_override`` may replace the received command (a stack that finished its
+        navigation goal is stopped).
+        """
+        lockstep = settings.step_mode is StepMode.LOCKSTEP
+        timeout = settings.controller_timeout
+        startup_timeout = settings.controller_startup_timeout
+        dt = episode.config.control_period
+        feedback_every = max(1, int(round(FEEDBACK_PERIOD / dt)))
+        topics, commands = self.topics, self.commands
+        topics.forget_goal()
+        command = None
+        last_command_wall = time.monotonic()
+        wall_origin = time.monotonic()
+        next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
+        first = True
+        ticks = 0
+        commands.take_all()  # stale answers of an earlier episode
+        while not episode.done:
+            if goal_handle is not None and goal_handle.is_cancel_requested:
+                episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
+                break
+            if not commands.running:  # stopping (SIGINT, SIGTERM): end at once
+                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
+                break
+            stamp_ns = clock.stamp_ns(observation.time)
+            # The stack is prepared (resets, goal) before the first tick in lockstep, so the
+            # controller's first answer already knows the goal; after it in clocked mode, so a
+            # stack like Nav2 sees the new pose in tf before it plans.
+            if first and lockstep and not self.prepare(episode, before_first_step):
+                break
+            topics.publish_tick(observation, stamp_ns, recording)
+            if first and not lockstep:
+                if not self.prepare(episode, before_first_step):
+                    break
+                wall_origin = time.monotonic() - observation.time / settings.real_time_factor
+                last_command_wall = time.monotonic()
+            if time.monotonic() >= next_goal_check:
+                topics.republish_goal()  # to a goal_pose reader that joined late
+                next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
+            if lockstep:
+                limit = startup_timeout if first else timeout
+                received = self.wait_for_command(
+                    time.monotonic() + limit,
+                    (lambda: topics.republish_goal(force=True)) if first else None)
+                if received is None:
+                    if not commands.running:
+                        continue  # the loop's head ends it as cancelled
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                                  f'no cmd_vel within {limit:.1f} s wall time')
+                    break
+                command = received
+            else:
+                tick_deadline = wall_origin + (observation.time + dt) / settings.real_time_factor
+                while (remaining := tick_deadline - time.monotonic()) > 0:
+                    if not commands.wait(remaining):
+                        break
+                    received_all = commands.take_all()
+                    if received_all:
+                        command = received_all[-1]
+                        last_command_wall = time.monotonic()
+                overridden = command_override() if command_override is not None else None
+                limit = startup_timeout if command is None else timeout
+                if overridden is None and time.monotonic() - last_command_wall > limit:
+                    if not commands.running:
+                        continue
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                                  f'no cmd_vel within {limit:.1f} s wall time')
+                    break
+            first = False
+            values = rm.twist_values(command) if command is not None else (0.0, 0.0, 0.0)
+            if not lockstep and overridden is not None:
+                values = overridden
+            if recording is not None and command is not None:
+                recording.add(topics.names['cmd_vel'], self.command_msgtype, stamp_ns, command)
+            observation = episode.step(values).observation
+            ticks += 1
+            if goal_handle is not None and ticks % feedback_every == 0:
+                self.publish_feedback(goal_handle, episode, observation)
+        if not lockstep:
+            # The final state, so subscribers and bags see where the robot ended. Not in
+            # lockstep: its answer could arrive during the next episode.
+            topics.publish_tick(observation, clock.stamp_ns(observation.time), recording)
+        return episode.metrics()
+
+    @staticmethod
+    def prepare(episode, before_first_step) -> bool:
+        """Run ``before_first_step``; False (the episode ended) when it reports a failure."""
+        failure = before_first_step() if before_first_step is not None else None
+        if failure:
+            episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
+            return False
+        return True
+
+    def wait_for_command(self, deadline: float, republish) -> object | None:
+        """The next command received before the wall-clock ``deadline``, else None (also at
+        shutdown)."""
+        next_republish = time.monotonic() + GOAL_REPUBLISH_PERIOD
+        while True:
+            command = self.commands.take()
+            if command is not None:
+                return command
+            now = time.monotonic()
+            if now >= deadline:
+                return None
+            if republish is not None and now >= next_republish:
+                republish()  # covers a controller that matched our publishers only now
+                next_republish = now + GOAL_REPUBLISH_PERIOD
+            if not self.commands.wait(min(deadline, next_republish) - now):
+                return None
+
+    @staticmethod
+    def publish_feedback(goal_handle, episode, observation) -> None:
+        from sessgan_interfaces.action import EvaluateEnvironment
+
+        so_far = episode.metrics()
+        feedback = EvaluateEnvironment.Feedback()
+        feedback.sim_time = observation.time
+        feedback.collisions = so_far.collisions
+        feedback.distance_to_goal = so_far.final_distance_to_goal
+        goal_handle.publish_feedback(feedback)

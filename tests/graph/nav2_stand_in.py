@@ -1,0 +1,252 @@
+"""A stand-in for a Nav2 stack, written with rclpy and standard interfaces only.
+
+It behaves as Nav2 does where the simulator's contract is concerned (Nav2 itself cannot be
+installed on this project's machines):
+
+* a controller on a 20 Hz timer on sim time (like controller_server's control loop), reading
+  the latest scan, odom and tf (the robot's pose is map->odom->base_footprint from ``tf``, as
+  Nav2's costmaps look it up) and publishing Twist, or TwistStamped with ``--stamped``;
+* goals on ``goal_pose`` (volatile, like bt_navigator's subscription) and, with ``--action``,
+  on a ``navigate_to_pose`` action server (nav2_msgs/action/NavigateToPose) that succeeds when
+  the goal is reached and aborts or cancels like bt_navigator;
+* with ``--costmaps``, the ClearEntireCostmap services of Nav2's two costmaps
+  (``global_costmap/clear_entirely_global_costmap`` and ``local_costmap/...``);
+  ``--reset-delay S`` makes them answer after S wall seconds.
+
+It logs what a test checks: every goal with the sim time it arrived at, every costmap reset,
+and a line for each backward jump of sim time (tf2 clears its buffer on one). Policy: turn
+toward the goal, drive when facing it, slow down near obstacles ahead.
+
+Like Nav2's nodes it reads ``/clock`` (through use_sim_time) and ``/tf``, absolute names: under
+a worker's namespace start it as Nav2 is started, with ``-r /clock:=clock -r /tf:=tf``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import rclpy
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import ClockChange, JumpThreshold
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import LaserScan
+from tf2_msgs.msg import TFMessage
+
+CONTROL_PERIOD = 0.05
+"""Sim seconds between commands: controller_server's default controller_frequency, 20 Hz."""
+GOAL_TOLERANCE = 0.25
+"""Metres: Nav2's default xy_goal_tolerance."""
+
+
+def yaw_of(q) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def compose(a: tuple[float, float, float], b: tuple[float, float, float]):
+    """Pose b given in frame a, expressed in a's parent."""
+    ax, ay, ayaw = a
+    bx, by, byaw = b
+    return (ax + math.cos(ayaw) * bx - math.sin(ayaw) * by,
+            ay + math.sin(ayaw) * bx + math.cos(ayaw) * by, ayaw + byaw)
+
+
+class Nav2StandIn(Node):
+
+    def __init__(self, options) -> None:
+        super().__init__('nav2_stand_in')
+        self.options = options
+        self.group = ReentrantCallbackGroup()
+        self.scan: LaserScan | None = None
+        self.odom: Odometry | None = None
+        self.transforms: dict[tuple[str, str], tuple[float, float, float]] = {}
+        self.goal: tuple[float, float] | None = None
+        self.goal_handle = None
+        self.commands_sent = 0
+        command_type = TwistStamped if options.stamped else Twist
+        self.cmd_publisher = self.create_publisher(command_type, 'cmd_vel', 10)
+        self.create_subscription(LaserScan, 'scan', self.on_scan, 10)
+        self.create_subscription(Odometry, 'odom', self.on_odom, 10)
+        # Absolute like tf2_ros' listener; a namespaced stack remaps it (-r /tf:=tf).
+        self.create_subscription(TFMessage, '/tf', self.on_tf, 10)
+        self.create_subscription(PoseStamped, 'goal_pose', self.on_goal_pose, 10)
+        self.create_timer(CONTROL_PERIOD, self.control, callback_group=self.group)
+        self.jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
+                          on_clock_change=True), post_callback=self.on_jump)
+        if options.action:
+            from nav2_msgs.action import NavigateToPose
+
+            self.action_server = ActionServer(
+                self, NavigateToPose, 'navigate_to_pose', execute_callback=self.navigate,
+                goal_callback=self.on_navigate_goal,
+                cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=self.group)
+        if options.costmaps:
+            from nav2_msgs.srv import ClearEntireCostmap
+
+            for costmap in ('global', 'local'):
+                self.create_service(
+                    ClearEntireCostmap, f'{costmap}_costmap/clear_entirely_{costmap}_costmap',
+                    lambda request, response, costmap=costmap: self.clear(costmap, response),
+                    callback_group=self.group)
+        self.get_logger().info('stand-in ready')
+
+    # ---- inputs ------------------------------------------------------------------------------
+
+    def on_scan(self, msg: LaserScan) -> None:
+        self.scan = msg
+
+    def on_odom(self, msg: Odometry) -> None:
+        self.odom = msg
+
+    def on_tf(self, msg: TFMessage) -> None:
+        for transform in msg.transforms:
+            t = transform.transform
+            self.transforms[(transform.header.frame_id, transform.child_frame_id)] = (
+                t.translation.x, t.translation.y, yaw_of(t.rotation))
+
+    def on_goal_pose(self, msg: PoseStamped) -> None:
+        self.set_goal(msg, 'goal_pose')
+
+    def set_goal(self, msg: PoseStamped, source: str) -> None:
+        self.goal = (msg.pose.position.x, msg.pose.position.y)
+        now = self.get_clock().now().nanoseconds / 1e9
+        self.get_logger().info(
+            f'goal from {source}: ({self.goal[0]:.2f}, {self.goal[1]:.2f}) frame '
+            f'{msg.header.frame_id!r} stamp {msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}'
+            f' at sim time {now:.3f}')
+
+    def on_jump(self, jump) -> None:
+        if jump.clock_change == ClockChange.ROS_TIME_ACTIVATED:
+            return
+        if jump.delta.nanoseconds < 0:
+            self.get_logger().warning(
+                f'sim time jumped back by {-jump.delta.nanoseconds / 1e9:.3f} s '
+                '(tf2 would clear its buffer)')
+
+    def pose(self):
+        """map -> base_footprint from tf, as Nav2 looks the robot up."""
+        map_odom = self.transforms.get(('map', 'odom'))
+        odom_base = self.transforms.get(('odom', 'base_footprint'))
+        if map_odom is None or odom_base is None:
+            return None
+        return compose(map_odom, odom_base)
+
+    # ---- the 20 Hz control loop --------------------------------------------------------------
+
+    def control(self) -> None:
+        if self.options.silent:
+            return
+        linear = angular = 0.0
+        pose = self.pose()
+        if self.goal is not None and pose is not None and self.scan is not None:
+            x, y, yaw = pose
+            distance = math.hypot(self.goal[0] - x, self.goal[1] - y)
+            if distance > GOAL_TOLERANCE:
+                heading = math.atan2(self.goal[1] - y, self.goal[0] - x)
+                error = math.atan2(math.sin(heading - yaw), math.cos(heading - yaw))
+                scan = self.scan
+                ahead = [r for i, r in enumerate(scan.ranges)
+                         if abs(scan.angle_min + i * scan.angle_increment) < 0.3
+                         and math.isfinite(r)]
+                clearance = min(ahead, default=scan.range_max)
+                angular = max(-1.5, min(1.5, 2.0 * error))
+                if abs(error) < 0.5:
+                    linear = max(0.0, min(0.5, 0.6 * (clearance - 0.3)))
+        if self.options.stamped:
+            command = TwistStamped()
+            command.header.stamp = self.get_clock().now().to_msg()
+            command.header.frame_id = 'base_footprint'
+            twist = command.twist
+        else:
+            command = twist = Twist()
+        twist.linear.x = linear
+        twist.angular.z = angular
+        self.cmd_publisher.publish(command)
+        self.commands_sent += 1
+
+    # ---- Nav2's servers ----------------------------------------------------------------------
+
+    def clear(self, costmap: str, response):
+        if self.options.reset_delay > 0:
+            time.sleep(self.options.reset_delay)
+        self.get_logger().info(f'cleared the {costmap} costmap')
+        return response
+
+    def on_navigate_goal(self, goal_request) -> GoalResponse:
+        if self.options.reject_goals:
+            self.get_logger().info('rejecting a navigate_to_pose goal')
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def navigate(self, goal_handle):
+        from nav2_msgs.action import NavigateToPose
+
+        previous = self.goal_handle
+        self.goal_handle = goal_handle
+        if previous is not None and previous.is_active and not previous.is_cancel_requested:
+            previous.abort()  # preempted, as bt_navigator does
+        self.set_goal(goal_handle.request.pose, 'navigate_to_pose')
+        result = NavigateToPose.Result()
+        while rclpy.ok(context=self.context):
+            if goal_handle.is_cancel_requested:
+                if self.goal_handle is goal_handle:  # not replaced by a newer goal
+                    self.goal = None
+                goal_handle.canceled()
+                self.get_logger().info('navigate_to_pose goal canceled')
+                return result
+            if not goal_handle.is_active:
+                return result  # preempted by a newer goal
+            pose = self.pose()
+            if pose is not None and self.goal is not None and math.hypot(
+                    self.goal[0] - pose[0], self.goal[1] - pose[1]) <= GOAL_TOLERANCE:
+                goal_handle.succeed()
+                self.get_logger().info('navigate_to_pose goal succeeded')
+                return result
+            feedback = NavigateToPose.Feedback()
+            if pose is not None:
+                feedback.current_pose.header.frame_id = 'map'
+                feedback.current_pose.pose.position.x, feedback.current_pose.pose.position.y = (
+                    pose[0], pose[1])
+                feedback.distance_remaining = float(math.hypot(self.goal[0] - pose[0],
+                                                               self.goal[1] - pose[1]))
+            goal_handle.publish_feedback(feedback)
+            time.sleep(0.05)
+        return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument('--stamped', action='store_true', help='publish TwistStamped')
+    parser.add_argument('--action', action='store_true', help='serve navigate_to_pose')
+    parser.add_argument('--costmaps', action='store_true', help='serve the costmap resets')
+    parser.add_argument('--reset-delay', type=float, default=0.0,
+                        help='wall seconds before a reset is answered')
+    parser.add_argument('--reject-goals', action='store_true',
+                        help='reject navigate_to_pose goals')
+    parser.add_argument('--silent', action='store_true', help='never publish a command')
+    args = rclpy.utilities.remove_ros_args(sys.argv)[1:]
+    options = parser.parse_args(args)
+    rclpy.init(args=sys.argv)
+    node = Nav2StandIn(options)
+    executor = MultiThreadedExecutor(num_threads=3)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,142 @@
+"""Clocked mode with a timer-driven controller (a Nav2 stand-in), goals for late subscribers,
+free mode and the validation of the stepping mode, each with the simulator as a process."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.graph.test_simulator_graph import (
+    EXTERNAL_CONTROLLER,
+    environment_msg,
+    evaluate,
+    room,
+    start_simulator,
+)
+from tests.ros_processes import spin_until
+
+pytestmark = pytest.mark.graph
+
+NAV2_STAND_IN = Path(__file__).with_name('nav2_stand_in.py')
+STACK_REMAPS = ('-r', '/clock:=clock', '-r', '/tf:=tf', '-r', '/tf_static:=tf_static')
+"""What a namespaced stack with sim-time timers and tf needs (Nav2's launch file does the same)."""
+
+
+def start_stand_in(node_processes, namespace: str, *options: str):
+    process = node_processes.start(
+        [sys.executable, str(NAV2_STAND_IN), *options, '--ros-args', '-r', f'__ns:={namespace}',
+         *STACK_REMAPS, '-p', 'use_sim_time:=true'],
+        name=f'nav2_stand_in{namespace.replace("/", "_")}')
+    process.wait_for_output('stand-in ready', timeout=30)
+    return process
+
+
+def count_messages(ros_node, topic: str, msg_type) -> list:
+    """Every message received on ``topic`` from now on (while the node is spun)."""
+    received = []
+    ros_node.create_subscription(msg_type, topic, received.append, 100)
+    return received
+
+
+@pytest.mark.parametrize('stamped, real_time_factor', [(False, 4.0), (True, 2.0)],
+                         ids=['twist', 'twist_stamped'])
+def test_timer_driven_controller_reaches_goal_in_clocked_mode(node_processes, ros_node, stamped,
+                                                              real_time_factor):
+    from geometry_msgs.msg import Twist, TwistStamped
+
+    namespace = '/clk_stamped' if stamped else '/clk_twist'
+    parameters = ['dummy_agents:=0', 'mode:=clocked', f'real_time_factor:={real_time_factor}']
+    if stamped:
+        parameters.append('use_stamped_cmd_vel:=true')
+    start_simulator(node_processes, namespace, *parameters)
+    stand_in = start_stand_in(node_processes, namespace, *(['--stamped'] if stamped else []))
+    commands = count_messages(ros_node, f'{namespace}/cmd_vel',
+                              TwistStamped if stamped else Twist)
+    metrics, feedback = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'room'),
+                                 time_limit=60.0)
+    assert metrics.outcome == 'goal_reached', metrics.detail
+    assert metrics.collisions == 0 and metrics.simulation_time > 2.0
+    assert feedback
+    # The controller's timer runs on sim time: about 20 commands per sim second whatever the
+    # real-time factor (a wall-clock timer would give 20 / real_time_factor).
+    per_sim_second = len(commands) / metrics.simulation_time
+    assert 12.0 < per_sim_second < 30.0, (len(commands), metrics.simulation_time)
+    assert 'jumped back' not in stand_in.output()
+    if stamped:
+        assert all(c.header.frame_id == 'base_footprint' for c in commands)
+
+
+@pytest.mark.parametrize('mode', ['lockstep', 'clocked'])
+def test_goal_reaches_subscribers_that_join_during_the_episode(node_processes, ros_node, mode):
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.action import ActionClient
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from sessgan_interfaces.action import EvaluateEnvironment
+
+    namespace = f'/late_{mode}'
+    # A controller that never answers holds a lockstep episode at its first tick for the
+    # start-up timeout; in clocked mode the episode runs at real time meanwhile.
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', f'mode:={mode}',
+                    'controller_startup_timeout:=8.0')
+    start_stand_in(node_processes, namespace, '--silent')
+    environment = environment_msg(room(), 'factory', 'late')
+    client = ActionClient(ros_node, EvaluateEnvironment, f'{namespace}/evaluate')
+    assert client.wait_for_server(timeout_sec=30)
+    sent = client.send_goal_async(EvaluateEnvironment.Goal(environment=environment, seed=1))
+    assert spin_until(ros_node, sent.done, timeout=30) and sent.result().accepted
+    assert spin_until(ros_node, lambda: False, timeout=2.0) is False  # the episode is running
+
+    latched, volatile = [], []
+    reliable = ReliabilityPolicy.RELIABLE
+    ros_node.create_subscription(PoseStamped, f'{namespace}/goal_pose', latched.append,
+                                 QoSProfile(depth=1, reliability=reliable,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    ros_node.create_subscription(PoseStamped, f'{namespace}/goal_pose', volatile.append,
+                                 QoSProfile(depth=1, reliability=reliable,
+                                            durability=DurabilityPolicy.VOLATILE))
+    assert spin_until(ros_node, lambda: latched and volatile, timeout=5.0), (latched, volatile)
+    for goal in (latched[0], volatile[0]):
+        assert goal.header.frame_id == 'map'
+        assert (goal.pose.position.x, goal.pose.position.y) == pytest.approx(
+            (environment.goal.position.x, environment.goal.position.y))
+    result = sent.result().get_result_async()
+    assert spin_until(ros_node, result.done, timeout=30)
+    assert result.result().result.metrics.outcome == 'controller_unresponsive'
+
+
+def test_free_mode_runs_an_episode_for_every_map(node_processes, ros_node, tmp_path):
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    simulator = start_simulator(node_processes, '/free', 'free_mode:=true', 'seed:=40',
+                                'dummy_agents:=0', f'record_directory:={tmp_path / "bags"}')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
+                          '__ns:=/free', '-p', 'use_sim_time:=true'], name='external')
+    publisher = ros_node.create_publisher(
+        OccupancyGrid, '/free/environment',
+        QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                   durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    publisher.publish(environment_msg(room(), 'factory', 'free').map)
+    simulator.wait_for_output(r'free-mode episode free-40: goal_reached', timeout=90)
+    # A wall across most of the room: the go-to-goal controller gets stuck behind it, a
+    # failure in a feasible map, so free mode records its bag.
+    walled = room(20)
+    walled[10, 1:15] = 1
+    publisher.publish(environment_msg(walled, 'factory', 'free').map)
+    simulator.wait_for_output(r'free-mode episode free-41: (stuck|timeout)', timeout=90)
+    bags = sorted(path.name for path in (tmp_path / 'bags').iterdir())
+    assert bags == ['free-41'], bags
+    episode = json.loads((tmp_path / 'bags' / 'free-41' / 'episode.json').read_text())
+    assert episode['controller'] == 'external' and episode['namespace'] == '/free'
+    assert episode['episode_seed'] == 41
+
+
+def test_misspelt_mode_stops_the_simulator_with_a_clear_error(node_processes):
+    process = node_processes.start(['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args',
+                                    '-p', 'mode:=clockd'], name='bad_mode')
+    assert process.wait(timeout=60) == 2
+    assert "parameter 'mode' must be one of lockstep, clocked; got 'clockd'" in process.output()

@@ -3,7 +3,8 @@ from setuptools import find_packages, setup
 package_name = 'sessgan_controllers'
 # One executable per registered controller (sessgan_controllers.registry), all running the same
 # node: the executable's name selects the controller.
-controllers = ('nearness_diagram', 'velocity_projection', 'race_controller')
+controllers = ('nearness_diagram', 'velocity_projection', 'race_controller',
+               'reference_navigator')
 
 setup(
     name=package_name,
@@ -17,8 +18,8 @@ setup(
     zip_safe=True,
     maintainer='SESS-GAN developers',
     maintainer_email='sessgan@example.org',
-    description='Robot-under-test controllers for SESS-GAN, each its own node speaking only '
-                'cmd_vel/odom/scan/goal_pose.',
+    description=('Robot-under-test controllers for SESS-GAN, each its own node speaking only the '
+                 'robot-under-test topics (scan, odom, goal_pose, map; cmd_vel).'),
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

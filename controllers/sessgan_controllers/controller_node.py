@@ -18,10 +18,26 @@ the same position: a new episode may reuse a goal.
 The goal is read in its own frame; the simulator's map->odom transform is
 the identity (perfect localisation), so map and odom coordinates agree.
 
+Controllers that plan on a map (a ``set_map`` method, see
+:class:`~sessgan_controllers.types.MapAwareController`) also subscribe ``map``
+(nav_msgs/OccupancyGrid, reliable and transient local, depth 1, as the simulator
+publishes it) and get every map that arrives; the others never subscribe it.
+
+``control_mode`` chooses when commands are published:
+
+* ``scan`` (default): one command per scan, as above; for a lockstep simulator.
+* ``timer``: a command every ``1 / control_rate_hz`` seconds of the node's clock (sim
+  time with ``use_sim_time``), computed from the latest scan, the odometry of that scan's
+  tick (the scan is read from where the robot was when it was taken: pairing it with a
+  newer pose would shift every return by the distance driven since) and the goal, the
+  way Nav2's controller_server runs (20 Hz by default); for a clocked simulator. Scans
+  are not answered one by one.
+
 Every built-in controller runs through :func:`main`, one entry point for all of them: the
 executable's name (``ros2 run sessgan_controllers nearness_diagram``) is the registry name of
 the controller it runs (:mod:`sessgan_controllers.registry`). Parameters: the fields of the
-controller's config plus ``use_stamped_cmd_vel`` and ``base_frame_id``.
+controller's config plus ``use_stamped_cmd_vel``, ``base_frame_id``, ``control_mode`` and
+``control_rate_hz``.
 """
 
 from __future__ import annotations
@@ -29,13 +45,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import OccupancyGrid, Odometry
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
@@ -51,13 +68,22 @@ from sensor_msgs.msg import LaserScan
 
 from sessgan_controllers.messages import (
     goal_from_pose,
+    map_from_msg,
     odom_from_cdr,
     scan_from_msg,
     twist_from_command,
     twist_stamped_from_command,
 )
 from sessgan_controllers.registry import ControllerSpec, get_controller
-from sessgan_controllers.types import STOP, Goal, RobotState, VelocityCommand, config_help
+from sessgan_controllers.types import (
+    STOP,
+    Goal,
+    MapData,
+    RobotState,
+    VelocityCommand,
+    accepts_map,
+    config_help,
+)
 from sessgan_gen.node_help import exit_if_help
 
 GOAL_QOS = QoSProfile(
@@ -65,6 +91,16 @@ GOAL_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 """Matches reliable publishers, volatile or transient-local (a latched goal from a
 transient-local publisher that started earlier is not replayed to a volatile reader)."""
+
+MAP_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1,
+    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""As the simulator publishes ``map``: a controller started later still gets the last map."""
+
+CONTROL_MODES = ('scan', 'timer')
+
+ODOM_HISTORY = 20
+"""Timer mode: odometry messages kept to find the one of the latest scan's tick."""
 
 CMD_VEL_QOS_DEPTH = 10
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
@@ -100,6 +136,25 @@ class ControllerNode(Node):
         self._base_frame = str(self.declare_parameter(
             'base_frame_id', 'base_footprint', ParameterDescriptor(
                 description='frame_id of TwistStamped commands.', read_only=True)).value)
+        self._control_mode = str(self.declare_parameter(
+            'control_mode', 'scan', ParameterDescriptor(
+                description="'scan': one command per scan (lockstep); 'timer': a command every "
+                            '1 / control_rate_hz s of the node clock from the latest scan '
+                            '(clocked simulation, like Nav2).', read_only=True)).value)
+        control_rate = self.declare_parameter(
+            'control_rate_hz', 20.0, ParameterDescriptor(
+                description="Commands per second of the node clock in 'timer' mode.",
+                read_only=True)).value
+        if self._control_mode not in CONTROL_MODES:
+            raise ValueError(f'control_mode must be one of {", ".join(CONTROL_MODES)}, got '
+                             f'{self._control_mode!r}')
+        if not (isinstance(control_rate, (int, float)) and math.isfinite(control_rate)
+                and control_rate > 0.0):
+            raise ValueError(f'control_rate_hz must be a positive number, got {control_rate!r}')
+        self._timer_mode = self._control_mode == 'timer'
+        self._latest_scan: LaserScan | None = None
+        self._odom_history: deque[tuple[int, RobotState]] = deque(maxlen=ODOM_HISTORY)
+        self._map: MapData | None = None
         self._state: RobotState | None = None
         self._odom_stamp: int | None = None
         self._waiting_scan: tuple[int, LaserScan] | None = None
@@ -116,6 +171,10 @@ class ControllerNode(Node):
         self.create_subscription(LaserScan, 'scan', self._on_scan, SENSOR_QOS)
         self.create_subscription(Odometry, 'odom', self._on_odom, SENSOR_QOS, raw=True)
         self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, GOAL_QOS)
+        if accepts_map(self._controller):
+            self.create_subscription(OccupancyGrid, 'map', self._on_map, MAP_QOS)
+        if self._timer_mode:
+            self.create_timer(1.0 / float(control_rate), self._on_timer)
 
     # ----------------------------------------------------------------------------------------
     # Parameters: one per config field, validated as a whole before they are applied.
@@ -153,6 +212,8 @@ class ControllerNode(Node):
         if config is not None:
             self._config = config
             self._controller = self._spec.make(config)
+            if self._map is not None and accepts_map(self._controller):
+                self._controller.set_map(self._map)
             self.get_logger().info(f'Parameters updated: {config}')
 
     # ----------------------------------------------------------------------------------------
@@ -160,7 +221,33 @@ class ControllerNode(Node):
 
     def _on_odom(self, data: bytes) -> None:
         self._odom_stamp, self._state = odom_from_cdr(data)
-        self._answer_if_ready()
+        if self._timer_mode:
+            self._odom_history.append((self._odom_stamp, self._state))
+        else:
+            self._answer_if_ready()
+
+    def _on_map(self, msg: OccupancyGrid) -> None:
+        try:
+            grid = map_from_msg(msg)
+            self._controller.set_map(grid)
+        except ValueError as err:
+            self.get_logger().error(f'Ignoring an unusable map: {err}')
+            return
+        self._map = grid
+        self.get_logger().info(
+            f'New map: {grid.occupancy.shape[1]}x{grid.occupancy.shape[0]} cells of '
+            f'{grid.resolution:g} m')
+
+    def _on_timer(self) -> None:
+        """Timer mode: a command from the latest scan, odometry and goal."""
+        if self._latest_scan is None:
+            return
+        command = self._command_for(self._latest_scan, self._state_at(self._latest_scan))
+        if self._stamped:
+            stamp = self.get_clock().now().to_msg()
+            self._cmd_vel.publish(twist_stamped_from_command(command, stamp, self._base_frame))
+        else:
+            self._cmd_vel.publish(twist_from_command(command))
 
     def _on_scan(self, msg: LaserScan) -> None:
         stamp = _nanoseconds(msg.header.stamp)
@@ -169,10 +256,18 @@ class ControllerNode(Node):
             # that came before the previous episode's last scan, belong to the old episode.
             if self._odom_stamp is not None and self._odom_stamp > stamp:
                 self._state, self._odom_stamp = None, None
+            # Only odometry that came after the jump back belongs to the new episode.
+            history = list(self._odom_history)
+            newest_old = max((index for index, (odom_stamp, _) in enumerate(history)
+                              if odom_stamp > stamp), default=-1)
+            self._odom_history = deque(history[newest_old + 1:], maxlen=ODOM_HISTORY)
             if not self._goal_since_last_scan:
                 self._goal = None
         self._last_scan_stamp = stamp
         self._goal_since_last_scan = False
+        if self._timer_mode:
+            self._latest_scan = msg
+            return
         # A newer scan replaces one still waiting: answer only the latest tick.
         self._waiting_scan = (stamp, msg)
         self._answer_if_ready()
@@ -206,7 +301,8 @@ class ControllerNode(Node):
         self._controller.reset()
         self.get_logger().info(
             f'New goal ({goal.x:.2f}, {goal.y:.2f}) in frame {msg.header.frame_id!r}')
-        self._answer_if_ready()
+        if not self._timer_mode:
+            self._answer_if_ready()
 
     def _answer(self, msg: LaserScan) -> None:
         self._waiting_scan = None
@@ -217,20 +313,30 @@ class ControllerNode(Node):
         else:
             self._cmd_vel.publish(twist_from_command(command))
 
-    def _command_for(self, msg: LaserScan) -> VelocityCommand:
+    def _state_at(self, msg: LaserScan) -> RobotState | None:
+        """The odometry of the scan's tick: the newest not newer than the scan (the latest
+        state when all are newer)."""
+        stamp = _nanoseconds(msg.header.stamp)
+        for odom_stamp, state in reversed(self._odom_history):
+            if odom_stamp <= stamp:
+                return state
+        return self._state
+
+    def _command_for(self, msg: LaserScan, state: RobotState | None = None) -> VelocityCommand:
+        """The command for scan ``msg`` seen from ``state`` (default: the latest odometry)."""
+        state = state if state is not None else self._state
         if self._goal is None or self._goal_reached:
             return STOP
-        if self._state is None:
+        if state is None:
             if not self._warned_no_odom:
                 self.get_logger().warning('Scan received before any odometry: standing still')
                 self._warned_no_odom = True
             return STOP
-        if self._controller.goal_reached(self._state, self._goal):
+        if self._controller.goal_reached(state, self._goal):
             self._goal_reached = True
-            self.get_logger().info(
-                f'Goal reached at ({self._state.x:.2f}, {self._state.y:.2f})')
+            self.get_logger().info(f'Goal reached at ({state.x:.2f}, {state.y:.2f})')
             return STOP
-        command = self._controller.compute_command(scan_from_msg(msg), self._state, self._goal)
+        command = self._controller.compute_command(scan_from_msg(msg), state, self._goal)
         if not command.is_finite():
             self.get_logger().error(
                 f'Controller produced a non-finite command {command}; stopping')
@@ -295,10 +401,14 @@ def main(args: Sequence[str] | None = None) -> None:
     except KeyError as err:
         print(f'{name}: {err}', file=sys.stderr)
         sys.exit(2)
-    exit_if_help(f'sessgan_controllers {name}', f'{spec.description} For the {spec.robot} '
-                 'robot.\n\nSubscribes scan, odom and goal_pose; publishes one cmd_vel '
-                 '(Twist, or TwistStamped with use_stamped_cmd_vel) per scan. Run it with '
-                 'use_sim_time:=true beside a simulator worker in the same namespace.',
+    robots = (f'the robots {", ".join(spec.robots)} (its robot parameter)' if spec.robots
+              else f'the {spec.robot} robot')
+    exit_if_help(f'sessgan_controllers {name}', f'{spec.description} For {robots}.\n\n'
+                 'Subscribes scan, odom and goal_pose (and map, if it plans on one); publishes '
+                 'cmd_vel (Twist, or TwistStamped with use_stamped_cmd_vel): one per scan, or '
+                 'with control_mode:=timer every 1 / control_rate_hz s of its clock. Run it '
+                 'with use_sim_time:=true beside a simulator worker in the same namespace (in '
+                 'timer mode also -r /clock:=clock).',
                  lambda: ControllerNode(name), args)
     run(name, args)
 

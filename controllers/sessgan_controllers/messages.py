@@ -7,11 +7,11 @@ import struct
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
-from sessgan_controllers.types import Goal, RobotState, ScanData, VelocityCommand
+from sessgan_controllers.types import Goal, MapData, RobotState, ScanData, VelocityCommand
 from sessgan_gen.quaternion import yaw_from_quaternion
 
 
@@ -66,6 +66,23 @@ def odom_from_cdr(data: bytes) -> tuple[int, RobotState]:
     vx, vy, _, _, _, wz = struct.unpack_from(order + '6d', body, offset)
     state = RobotState(x=x, y=y, yaw=yaw_from_quaternion(qx, qy, qz, qw), vx=vx, vy=vy, wz=wz)
     return sec * 1_000_000_000 + nanosec, state
+
+
+def map_from_msg(msg: OccupancyGrid) -> MapData:
+    """The grid of a nav_msgs/OccupancyGrid; ValueError (naming the problem) for a grid that is
+    empty, inconsistent or rotated."""
+    info = msg.info
+    width, height = int(info.width), int(info.height)
+    if len(msg.data) != width * height:
+        raise ValueError(f'map data has {len(msg.data)} cells but info says {width}x{height}')
+    orientation = info.origin.orientation
+    if abs(orientation.x) > 1e-6 or abs(orientation.y) > 1e-6 or abs(orientation.z) > 1e-6:
+        raise ValueError('rotated map origins are not supported')
+    occupancy = np.frombuffer(bytes(msg.data), dtype=np.int8).reshape(height, width).copy()
+    grid = MapData(occupancy, float(info.resolution),
+                   (float(info.origin.position.x), float(info.origin.position.y)))
+    grid.validate()
+    return grid
 
 
 def goal_from_pose(msg: PoseStamped) -> Goal:

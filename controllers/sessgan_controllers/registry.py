@@ -16,6 +16,10 @@ from sessgan_controllers.nearness_diagram import (
     NearnessDiagramController,
 )
 from sessgan_controllers.race_controller import RaceController, RaceControllerConfig
+from sessgan_controllers.reference_navigator import (
+    ReferenceNavigator,
+    ReferenceNavigatorConfig,
+)
 from sessgan_controllers.types import Controller
 from sessgan_controllers.velocity_projection import (
     VelocityProjectionConfig,
@@ -34,8 +38,20 @@ class ControllerSpec:
     factory: Callable[[Any], Controller]
     """Builds the controller from a config instance."""
     robot: str
-    """Robot model of sessgan_sim it is written for."""
+    """Robot model of sessgan_sim it is written for (its default one)."""
     description: str
+    robots: tuple[str, ...] = ()
+    """Every robot model it can drive, chosen with its ``robot`` parameter; empty: ``robot``
+    only."""
+
+    def drives(self, robot: str) -> bool:
+        """Whether it can drive sessgan_sim's robot model ``robot``."""
+        return robot in (self.robots or (self.robot,))
+
+    def node_arguments(self, robot: str) -> list[str]:
+        """ROS arguments that make its node drive ``robot`` (``-p robot:=...`` for a
+        controller of several robots; none otherwise)."""
+        return ['-p', f'robot:={robot}'] if self.robots and robot else []
 
     def make(self, config: Any = None, **overrides: Any) -> Controller:
         """A new controller from ``config`` (default config if None) with ``overrides``."""
@@ -82,4 +98,14 @@ register_controller(ControllerSpec(
     factory=RaceController,
     robot='car',
     description='Follow-the-gap track following with a reactive speed policy for the car.',
+))
+register_controller(ControllerSpec(
+    name='reference_navigator',
+    config_type=ReferenceNavigatorConfig,
+    factory=ReferenceNavigator,
+    robot='diff_drive',
+    description='A default Nav2 set-up: A* on the map with inflation and scan marks, replanning, '
+                'and a rotation shim + regulated pure pursuit (diff_drive), bicycle pure pursuit '
+                'with a curvature speed profile (car) or holonomic pursuit (flyer).',
+    robots=('diff_drive', 'car', 'flyer'),
 ))

@@ -10,6 +10,11 @@ Every controller core maps one tick's inputs to one velocity command::
 * ``goal``: the goal position in the same frame as the pose.
 * ``command``: a body-frame velocity (vx, vy, wz), like geometry_msgs/Twist.
 
+Controllers that plan on the episode's map (the ``map`` topic) also offer
+``set_map(grid)`` (:class:`MapAwareController`); the node and in-process runners
+hand them a :class:`MapData` whenever a new map arrives, before the episode's goal.
+Controllers without it never see the map.
+
 Angles are radians, counter-clockwise positive; lengths are metres.
 """
 
@@ -17,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -136,6 +141,44 @@ STOP = VelocityCommand()
 """The zero command."""
 
 
+@dataclass(frozen=True)
+class MapData:
+    """An occupancy grid as nav_msgs/OccupancyGrid carries it, without the message.
+
+    Values: 0 free, 50 low obstacle (below a flyer's altitude), 100 wall or out of bounds,
+    -1 unknown. Row 0 is the row nearest the origin (lowest y), column 0 the lowest x; cell
+    (row, col) covers x in [origin_x + col * resolution, origin_x + (col + 1) * resolution),
+    likewise for y. The grid is not rotated.
+    """
+
+    occupancy: np.ndarray
+    """int8 array of shape (height, width)."""
+    resolution: float
+    """Metres per cell."""
+    origin: tuple[float, float] = (0.0, 0.0)
+    """Map-frame position in metres of the corner of cell (0, 0)."""
+
+    def validate(self) -> None:
+        """Raise ValueError naming what is wrong with the grid."""
+        grid = np.asarray(self.occupancy)
+        if grid.ndim != 2 or grid.shape[0] < 1 or grid.shape[1] < 1:
+            raise ValueError(f'map occupancy must be a non-empty 2-D array, got shape '
+                             f'{grid.shape}')
+        if not (math.isfinite(self.resolution) and self.resolution > 0.0):
+            raise ValueError(f'map resolution must be a positive number of metres, got '
+                             f'{self.resolution}')
+        if len(self.origin) != 2 or not all(math.isfinite(v) for v in self.origin):
+            raise ValueError(f'map origin must be two finite numbers, got {self.origin}')
+
+    @classmethod
+    def of(cls, environment: Any) -> MapData:
+        """The map of anything with ``occupancy``, ``resolution`` and ``origin`` (a
+        sessgan_gen Environment, say), as a controller gets it from the ``map`` topic."""
+        return cls(np.asarray(environment.occupancy, dtype=np.int8),
+                   float(environment.resolution),
+                   (float(environment.origin[0]), float(environment.origin[1])))
+
+
 def observed(observation: Any) -> tuple[ScanData, RobotState]:
     """The controller's view of a sessgan_sim Observation (``scan``, ``lidar``, ``pose``,
     ``twist``), as the controller node gets it from scan and odom: for running a controller
@@ -162,6 +205,21 @@ class Controller(Protocol):
     def reset(self) -> None:
         """Forget any state kept between steps (call on a new goal or episode)."""
         ...
+
+
+@runtime_checkable
+class MapAwareController(Controller, Protocol):
+    """A controller that plans on the episode's map: it gets every new map (a new map means a
+    new episode, so it also forgets what it planned on the previous one)."""
+
+    def set_map(self, grid: MapData) -> None:
+        """Use ``grid`` from now on; raise ValueError for a grid it cannot use."""
+        ...
+
+
+def accepts_map(controller: Any) -> bool:
+    """Whether ``controller`` wants the map (has a callable ``set_map``)."""
+    return callable(getattr(controller, 'set_map', None))
 
 
 class StatelessController:

@@ -417,6 +417,10 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
             '-p', 'rate:=0.0'])
     if config.external:
         return generator
+    from sessgan_controllers.registry import CONTROLLERS
+
+    spec = CONTROLLERS.get(controller)
+    robot_args = spec.node_arguments(get_scenario(config.scenario).robot) if spec else []
     for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'
         ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
@@ -427,7 +431,7 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
                 '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}']),
             (f'{controller}_w{worker}', [
                 'ros2', 'run', 'sessgan_controllers', controller, *ros_args,
-                '-p', 'use_sim_time:=true']),
+                '-p', 'use_sim_time:=true', *robot_args]),
             core=core, batch=True)
     return generator
 

@@ -190,7 +190,8 @@ def resimulate(args, episode: dict) -> int:
                           f'--worker {namespace} to use it as it is', file=sys.stderr)
                     return EXIT_ERROR
                 start_resimulation_graph(supervisor, settings, namespace, log_directory,
-                                         None if args.external else controller, worker_cores)
+                                         None if args.external else controller, worker_cores,
+                                         str(episode.get('robot', '')))
             client = ActionClient(node, EvaluateEnvironment, action_name)
             if not client.wait_for_server(timeout_sec=60.0):
                 logs = ''.join(child.log_tail(800) for child in supervisor.children)
@@ -251,7 +252,7 @@ def action_present(node, name: str, wait: float) -> bool:
 
 
 def start_resimulation_graph(supervisor, settings, namespace: str, log_directory: Path,
-                             controller: str | None, worker_cores) -> None:
+                             controller: str | None, worker_cores, robot_model: str) -> None:
     """A simulator with ``settings`` under ``namespace`` and, unless None, the built-in
     ``controller`` beside it (one core, batch scheduling, like a campaign's workers)."""
     import yaml
@@ -263,10 +264,14 @@ def start_resimulation_graph(supervisor, settings, namespace: str, log_directory
     supervisor.start('simulator', ['ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
                                    '--params-file', str(params_file)], core=core, batch=True)
     if controller is not None:
+        from sessgan_controllers.registry import CONTROLLERS
+
         stamped = ['-p', 'use_stamped_cmd_vel:=true'] if settings.use_stamped_cmd_vel else []
+        spec = CONTROLLERS.get(controller)
+        robot = spec.node_arguments(robot_model) if spec else []
         supervisor.start('controller', ['ros2', 'run', 'sessgan_controllers', controller,
-                                        *ros_args, '-p', 'use_sim_time:=true', *stamped],
-                         core=core, batch=True)
+                                        *ros_args, '-p', 'use_sim_time:=true', *stamped,
+                                        *robot], core=core, batch=True)
 
 
 def main(argv=None) -> int:

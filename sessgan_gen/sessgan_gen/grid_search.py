@@ -112,32 +112,58 @@ def label_regions(grid: FlatGrid) -> tuple[list[int], list[list[int]], list[int]
     return labels, orders, dist
 
 
-def distance_field(free: np.ndarray, source: Cell) -> np.ndarray:
-    """4-connected step count from ``source`` over ``free`` cells as a float array (inf where
-    unreachable, everywhere when the source is outside or not free)."""
-    grid = flat_grid(free)
-    distance = np.full((grid.height, grid.width), np.inf)
+def distance_field(free: np.ndarray, source: Cell, diagonal: bool = False) -> np.ndarray:
+    """Step count from ``source`` over ``free`` cells as a float array (inf where unreachable,
+    everywhere when the source is outside or not free). 4-connected, or 8-connected with
+    ``diagonal`` (a diagonal step between two free cells counts one, even past two blocked
+    corners: for measuring progress, not for certifying a route)."""
+    mask = np.asarray(free, dtype=bool)
+    distance = np.full(mask.shape, np.inf)
     row, col = source
-    if not (0 <= row < grid.height and 0 <= col < grid.width) or not free[row, col]:
+    if not (0 <= row < mask.shape[0] and 0 <= col < mask.shape[1]) or not mask[row, col]:
         return distance
-    dist = [-1] * len(grid.open_cells)
-    bfs(grid, to_flat(grid, source), dist)
-    flat = np.asarray(dist, dtype=np.float64).reshape(-1, grid.stride)[1:-1, 1:-1]
-    distance[flat >= 0] = flat[flat >= 0]
+    if not diagonal:
+        grid = flat_grid(mask)
+        dist = [-1] * len(grid.open_cells)
+        bfs(grid, to_flat(grid, source), dist)
+        flat = np.asarray(dist, dtype=np.float64).reshape(-1, grid.stride)[1:-1, 1:-1]
+        distance[flat >= 0] = flat[flat >= 0]
+        return distance
+    # Frontier growth in numpy: few steps (the map's diameter), each over the whole grid.
+    reached = np.zeros_like(mask)
+    reached[row, col] = True
+    frontier = reached.copy()
+    distance[row, col] = 0.0
+    step = 0
+    while frontier.any():
+        step += 1
+        padded = np.pad(frontier, 1)
+        grown = np.zeros_like(mask)
+        for d_row in (-1, 0, 1):
+            for d_col in (-1, 0, 1):
+                grown |= padded[1 + d_row:1 + d_row + mask.shape[0],
+                                1 + d_col:1 + d_col + mask.shape[1]]
+        grown &= mask & ~reached
+        distance[grown] = step
+        reached |= grown
+        frontier = grown
     return distance
 
 
 def descend(distance: np.ndarray, source: Cell) -> list[Cell]:
     """Cells from ``source`` to the origin of a :func:`distance_field`, each step one less
-    (4-connected); [] when the source is outside the grid or unreachable."""
+    (4-connected moves first, then diagonal ones); [] when the source is outside the grid
+    or unreachable."""
     height, width = distance.shape
     row, col = source
     if not (0 <= row < height and 0 <= col < width) or not np.isfinite(distance[row, col]):
         return []
+    moves = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1))
     path = [(row, col)]
     while distance[row, col] > 0:
         want = distance[row, col] - 1
-        for n_row, n_col in ((row - 1, col), (row + 1, col), (row, col - 1), (row, col + 1)):
+        for d_row, d_col in moves:
+            n_row, n_col = row + d_row, col + d_col
             if 0 <= n_row < height and 0 <= n_col < width and distance[n_row, n_col] == want:
                 row, col = n_row, n_col
                 break

@@ -44,6 +44,7 @@ from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_sim.agents import AgentConfig, DummyAgents
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import (
+    CONTACT_DEBOUNCE,
     STANDING_SPEED,
     ContactKind,
     EpisodeMetrics,
@@ -61,6 +62,9 @@ from sessgan_sim.sensors import (
     read_odometry,
 )
 from sessgan_sim.world import World, WorldLayout, WorldStyle
+
+AGENT_WAIT_DISTANCE = 1.0
+"""m between bodies within which a robot waiting for an agent is not counted stuck."""
 
 ROUTE_TIME_FACTOR = 4.0
 """Default time limits allow driving the certified route at a quarter of the top speed."""
@@ -279,6 +283,9 @@ class Episode:
         self._clock = clock
         self._world = World()
         self._agents = DummyAgents()
+        self._pushed_by: int | None = None
+        """The agent that last drove into the robot, until ``_pushed_until`` (sim s)."""
+        self._pushed_until = -math.inf
         self._record: _Record | None = None
         self._live: _Live | None = None
         self.profile = TickProfile()
@@ -357,6 +364,7 @@ class Episode:
         self._world.open()
         self._live = None
         self._agents = DummyAgents(config.agents)
+        self._pushed_by, self._pushed_until = None, -math.inf
         self.profile = TickProfile()
         scan = np.full(config.lidar.beams, np.inf, dtype=np.float32)
         scan.flags.writeable = False
@@ -544,6 +552,10 @@ class Episode:
             if progress < live.best_progress:
                 live.best_progress = progress
                 live.last_progress_time = now
+            elif self._agent_nearby(live):
+                # Waiting for an agent that blocks the way is not stuck (the time limit
+                # still bounds the wait).
+                live.last_progress_time = now
             elif now - live.last_progress_time >= config.stuck_timeout - 1e-9:
                 self._end(Outcome.STUCK,
                           f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
@@ -553,24 +565,35 @@ class Episode:
     def _record_contacts(self, recorder: MetricsRecorder, partners: set[int], time: float,
                          x: float, y: float,
                          velocities: tuple[tuple[float, float], ...]) -> None:
-        """Record one physics step's contacts, attributing each (see sessgan_sim.metrics)."""
+        """Record one physics step's contacts, attributing each (see sessgan_sim.metrics).
+
+        While an agent drives into the robot (and CONTACT_DEBOUNCE after), whatever else the
+        robot touches is that agent's doing too: it was shoved."""
         agents = self._agents
-        static_recorded = False
+        touches_static = False
         for body in partners:
             agent = agents.index_of(body)
             if agent is None:
-                if not static_recorded:
-                    recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
-                    static_recorded = True
+                touches_static = True
                 continue
             dx, dy = agents.positions[agent, 0] - x, agents.positions[agent, 1] - y
             distance = math.hypot(dx, dy) or 1e-9
             # The robot drove into the agent if, just before or during the contact step, it
             # moved toward it faster than a standing robot would.
             approach = max((vx * dx + vy * dy) / distance for vx, vy in velocities)
-            kind = (ContactKind.ROBOT_INTO_AGENT if approach > STANDING_SPEED
-                    else ContactKind.AGENT_INTO_ROBOT)
+            pushed = self._pushed_by is not None and time <= self._pushed_until
+            if approach > STANDING_SPEED and not pushed:
+                kind = ContactKind.ROBOT_INTO_AGENT
+            else:
+                kind = ContactKind.AGENT_INTO_ROBOT
+                self._pushed_by, self._pushed_until = agent, time + CONTACT_DEBOUNCE
             recorder.record_contact(time, agent, kind, x, y)
+        if touches_static:
+            # Shoved into a wall by an agent: the agent's doing (its index names it).
+            if self._pushed_by is not None and time <= self._pushed_until:
+                recorder.record_contact(time, -1, ContactKind.AGENT_INTO_ROBOT, x, y)
+            else:
+                recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
 
     @staticmethod
     def _progress_field(grid: CertificateGrid, environment: Environment, robot: Robot,
@@ -578,11 +601,12 @@ class Episode:
         goal = grid.cell_of(environment.goal.x, environment.goal.y)
         start = grid.cell_of(environment.start.x, environment.start.y)
         clearance = grid.clearance
-        steps = distance_field(clearance >= route_need - 1e-9, goal)
+        # Diagonal steps: a diagonal gap the robot passes must not look like a detour.
+        steps = distance_field(clearance >= route_need - 1e-9, goal, diagonal=True)
         route = descend(steps, start) if environment.feasible else []
         if not route:
             return ProgressField(grid, distance_field(
-                clearance >= robot.footprint_radius * 0.75, goal), [])
+                clearance >= robot.footprint_radius * 0.75, goal, diagonal=True), [])
         band = (clearance > 0.0) & ~np.isfinite(steps)
         for _ in range(int(math.ceil(route_need / grid.cell_size)) + 1):
             padded = np.pad(steps, 1, constant_values=np.inf)
@@ -611,6 +635,16 @@ class Episode:
                 x, y = grid.centre((row, col))
                 discs.append((x, y, reach))
         return discs
+
+    def _agent_nearby(self, live: _Live) -> bool:
+        """Whether an agent's body is within AGENT_WAIT_DISTANCE of the robot's body."""
+        agents = self._agents
+        if not agents.body_ids:
+            return False
+        x, y = live.robot.position
+        gaps = (np.hypot(agents.positions[:, 0] - x, agents.positions[:, 1] - y)
+                - agents.config.radius - live.robot.footprint_radius)
+        return bool((gaps < AGENT_WAIT_DISTANCE).any())
 
     def _progress_distance(self, record: _Record, live: _Live) -> float:
         """Distance (m) from the robot to the goal along its ProgressField; inf (never

@@ -7,8 +7,9 @@
   with it, so sliding along a wall, or a contact flickering on and off, is one event.
 * Each event is attributed (:class:`ContactKind`): the robot against a static obstacle, the
   robot moving into an agent (its velocity toward the agent above ``STANDING_SPEED`` at the
-  event's start), or an agent driving into a robot that stood still or moved away, which is
-  not the controller's fault. ``fault_collisions`` counts the first two.
+  event's start), or an agent driving into a robot that stood still or moved away (or shoving
+  it into a wall or another agent), which is not the controller's fault.
+  ``fault_collisions`` counts the first two.
 * proximity_time: sim seconds with clearance (robot body to the nearest obstacle or
   agent) below the proximity distance while not in contact, sampled every control
   tick (each tick counts its whole period).
@@ -58,7 +59,8 @@ class ContactKind(enum.StrEnum):
     ROBOT_INTO_AGENT = 'robot_into_agent'
     """The robot moved into an agent: its fault."""
     AGENT_INTO_ROBOT = 'agent_into_robot'
-    """An agent drove into the robot standing still or moving away: not its fault."""
+    """An agent drove into the robot standing still or moving away, or shoved it into
+    something else (within CONTACT_DEBOUNCE of driving into it): not its fault."""
 
 
 class ContactEvent(NamedTuple):

@@ -22,7 +22,7 @@ from typing import Any, get_type_hints
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.json_data import to_json_data
 from sessgan_gen.scenarios import get_scenario
-from sessgan_sim.agents import AgentConfig
+from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
 from sessgan_sim.bag_recording import BagStorage
 from sessgan_sim.episode import EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError, SessganSimError
@@ -67,7 +67,7 @@ starting point cannot change while the node runs."""
 EPISODE_SETTINGS = frozenset({
     'robot', 'robot_params', 'time_limit', 'control_rate', 'physics_rate', 'lidar_beams',
     'lidar_fov_deg', 'lidar_range_min', 'lidar_range_max', 'lidar_rate', 'lidar_noise_std',
-    'dummy_agents', 'agent_speed', 'stuck_timeout', 'collision_limit'})
+    'dummy_agents', 'agent_speed', 'agent_behaviour', 'stuck_timeout', 'collision_limit'})
 """Settings that shape an episode's simulation (its EpisodeConfig); the others say how the
 node steps, talks to the stack under test and records."""
 
@@ -129,6 +129,9 @@ class SimulatorSettings:
     """Moving dummy agents; -1: the scenario's."""
     agent_speed: float = 0.5
     """Speed of the dummy agents, m/s."""
+    agent_behaviour: str = 'blind'
+    """'blind' agents drive on whatever is ahead; 'cautious' ones wait while the robot or
+    another agent is within 0.5 m ahead (an AGV with a safety scanner)."""
     stuck_timeout: float = 10.0
     """Sim seconds without progress toward the goal that end an episode as stuck; 0 disables."""
     collision_limit: int = 10
@@ -186,6 +189,10 @@ class SimulatorSettings:
             if getattr(self, name) < 0:
                 raise InvalidConfigError(f'parameter {name!r} must be >= 0, got '
                                          f'{getattr(self, name)}')
+        if self.agent_behaviour not in AGENT_BEHAVIOURS:
+            raise InvalidConfigError(f"parameter 'agent_behaviour' must be one of "
+                                     f"{', '.join(AGENT_BEHAVIOURS)}; got "
+                                     f'{self.agent_behaviour!r}')
         if self.dummy_agents < -1:
             raise InvalidConfigError(f"parameter 'dummy_agents' must be >= 0, or -1 for the "
                                      f"scenario's, got {self.dummy_agents}")
@@ -264,7 +271,7 @@ class SimulatorSettings:
                 rate_hz=float(self.lidar_rate or self.control_rate),
                 noise_std=float(self.lidar_noise_std)),
             dummy_agents=None if self.dummy_agents < 0 else int(self.dummy_agents),
-            agents=AgentConfig(speed=float(self.agent_speed)),
+            agents=AgentConfig(speed=float(self.agent_speed), behaviour=self.agent_behaviour),
             stuck_timeout=float(self.stuck_timeout),
             collision_limit=int(self.collision_limit),
             seed=int(seed),

@@ -15,12 +15,17 @@ from sessgan_controllers.types import config_help
 pytestmark = pytest.mark.unit
 
 
-def test_the_three_built_in_controllers_are_registered():
+def test_the_built_in_controllers_are_registered():
     assert {name: spec.robot for name, spec in CONTROLLERS.items()} == {
         'nearness_diagram': 'diff_drive',
         'velocity_projection': 'flyer',
         'race_controller': 'car',
+        'reference_navigator': 'diff_drive',
     }
+    assert get_controller('nearness_diagram').drives('diff_drive')
+    assert not get_controller('nearness_diagram').drives('car')
+    assert all(get_controller('reference_navigator').drives(robot)
+               for robot in ('diff_drive', 'car', 'flyer'))
 
 
 def test_unknown_controller_lists_the_known_ones():

@@ -69,7 +69,7 @@ def test_non_default_settings_reach_the_episode_config():
         'control_rate': 10.0, 'physics_rate': 50.0, 'lidar_beams': 90, 'lidar_fov_deg': 180.0,
         'lidar_range_min': 0.2, 'lidar_range_max': 4.0, 'lidar_rate': 5.0,
         'lidar_noise_std': 0.0, 'dummy_agents': 1, 'agent_speed': 0.3, 'stuck_timeout': 4.0,
-        'collision_limit': 3, 'time_limit': 30.0})
+        'collision_limit': 3, 'time_limit': 30.0, 'agent_behaviour': 'cautious'})
     config = settings.episode_config(seed=7)
     assert config.robot == 'diff_drive'
     assert config.robot_params == {'max_linear_speed': 0.5, 'max_angular_speed': 1.5}
@@ -79,6 +79,9 @@ def test_non_default_settings_reach_the_episode_config():
         90, 0.2, 4.0, 5.0, 0.0)
     assert lidar.field_of_view == pytest.approx(math.pi)
     assert config.dummy_agents == 1 and config.agents.speed == 0.3
+    assert config.agents.behaviour == 'cautious'
+    with pytest.raises(InvalidConfigError, match='agent_behaviour'):
+        SimulatorSettings.from_values({'agent_behaviour': 'reckless'})
     assert (config.stuck_timeout, config.collision_limit, config.time_limit, config.seed) == (
         4.0, 3, 30.0, 7)
     # An evaluate goal's robot and time limit win over the parameters.

@@ -21,6 +21,8 @@ setup(
         'console_scripts': [
             'campaign = sessgan_evolver.campaign_cli:main',
             'replay = sessgan_evolver.replay_cli:main',
+            'evaluate = sessgan_evolver.evaluate_cli:main',
+            'compare = sessgan_evolver.compare_cli:main',
         ],
     },
 )

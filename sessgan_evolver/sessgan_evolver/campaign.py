@@ -43,6 +43,8 @@ from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 from sessgan_sim.bag_recording import BagStorage
 
+SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
+
 EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
 """Wall seconds per map cell added to the default episode timeout for building the world: a
 simulator built a 4096 x 4096 map (16.8 M cells) in 262 s, 16 us a cell (a 1024 x 1024 map
@@ -83,7 +85,11 @@ class CampaignConfig:
     """[fixed] Map and simulator seeds: 'fixed' uses the same K seeds in every generation (so a
     member's fitness is comparable across generations and an elite keeps its score);
     'per-generation' draws new shared seeds each generation (fitness then also varies with
-    the maps drawn)."""
+    the maps drawn); 'rotating' takes K consecutive seeds of a pool of --seed-pool in turn,
+    and a member evaluated in earlier generations (an unchanged elite) is selected on the
+    mean fitness of all its evaluations, so one lucky draw does not keep it."""
+    seed_pool: int = 0
+    """[0: 4 x maps per member] Rotating schedule: the number of seeds in the pool."""
     record_failures: bool = True
     """[True] Write every failure episode as a bag under bags/<run>/."""
     mode: str = 'lockstep'
@@ -91,6 +97,9 @@ class CampaignConfig:
     external: bool = False
     """[False] Start no simulators or controllers: use every evaluate action server already
     running (e.g. your own stack under /w0, /w1)."""
+    in_process: bool = False
+    """[False] No ROS graph: sample and run every episode in this process with the built-in
+    controller (lockstep, one episode at a time; workers and mode are ignored)."""
     elite_count: int = 1
     """[1] Members kept unchanged each generation."""
     tournament_size: int = 3
@@ -108,14 +117,20 @@ class CampaignConfig:
         for name in ('generations', 'population', 'maps_per_member', 'workers'):
             if getattr(self, name) < 1:
                 raise CampaignError(f'{name} must be >= 1, got {getattr(self, name)}')
-        if self.seed_schedule not in ('fixed', 'per-generation'):
-            raise CampaignError(f'seed schedule must be fixed or per-generation, got '
-                                f'{self.seed_schedule!r}')
+        if self.seed_schedule not in SEED_SCHEDULES:
+            raise CampaignError(f'seed schedule must be one of {", ".join(SEED_SCHEDULES)}, '
+                                f'got {self.seed_schedule!r}')
+        if self.seed_pool < 0 or (self.seed_pool and self.seed_pool < self.maps_per_member):
+            raise CampaignError(f'seed pool must be 0 (default) or at least maps_per_member '
+                                f'({self.maps_per_member}), got {self.seed_pool}')
         if self.bag_storage not in set(BagStorage):
             raise CampaignError(f'bag storage must be one of {[s.value for s in BagStorage]}, '
                                 f'got {self.bag_storage!r}')
         if self.mode not in ('lockstep', 'clocked'):
             raise CampaignError(f'mode must be lockstep or clocked, got {self.mode!r}')
+        if self.in_process and self.external:
+            raise CampaignError('in_process runs a built-in controller itself; it cannot use '
+                                'external workers')
         self.algorithm_config().validate()
         self.fitness.validate()
 
@@ -128,6 +143,22 @@ class CampaignConfig:
             tournament_size=min(self.tournament_size, self.population),
             crossover_probability=self.crossover_probability, seed=self.seed,
             operators=operators)
+
+    def resolved_seed_pool(self) -> int:
+        return self.seed_pool or 4 * self.maps_per_member
+
+    def generation_seeds(self, generation: int) -> tuple[list[int], list[int]]:
+        """(map seeds, simulator seeds) every member of ``generation`` is evaluated on."""
+        count = self.maps_per_member
+        if self.seed_schedule == 'rotating':
+            pool = self.resolved_seed_pool()
+            maps = shared_seeds(self.seed, 0, pool)
+            sims = shared_seeds(self.seed, 0, pool, SeedStream.SIMULATION)
+            picks = [(generation * count + k) % pool for k in range(count)]
+            return [maps[i] for i in picks], [sims[i] for i in picks]
+        seed_generation = 0 if self.seed_schedule == 'fixed' else generation
+        return (shared_seeds(self.seed, seed_generation, count),
+                shared_seeds(self.seed, seed_generation, count, SeedStream.SIMULATION))
 
     def resolved_time_limit(self) -> float:
         return self.time_limit or get_scenario(self.scenario).time_limit
@@ -214,8 +245,10 @@ class Campaign:
         self.pyramid.load_state_dict(genome.to_state_dict(self.template))
         return checkpoint_bytes(self.pyramid, self.metadata)
 
-    def start(self, resume: bool) -> tuple[GeneticAlgorithm, float | None]:
-        """The algorithm to continue with and the TPKL reference (None before generation 0)."""
+    def start(self, resume: bool) -> tuple[GeneticAlgorithm, float | None,
+                                          dict[str, list[float]]]:
+        """The algorithm to continue with, the TPKL reference (None before generation 0) and
+        the fitness history of the current population's genomes (digest -> fitnesses)."""
         self.store.write_config(self.config.to_dict(), self.config.seed, __version__,
                                 invocation=self.invocation)
         point = self.store.resume() if resume else None
@@ -226,18 +259,21 @@ class Campaign:
                 self.log(f'{line}: going back to an earlier generation')
             self.log(f'resuming {self.store.run_dir} at generation {point.generation}')
             algorithm = GeneticAlgorithm.from_state_dict(point.checkpoint['algorithm'])
-            return algorithm, point.checkpoint['extra'].get('tpkl_reference')
+            extra = point.checkpoint['extra']
+            history = {str(k): [float(f) for f in v]
+                       for k, v in (extra.get('fitness_history') or {}).items()}
+            return algorithm, extra.get('tpkl_reference'), history
         if self.store.latest_checkpoint() is not None:
             raise CampaignError(
                 f'run {self.store.run_name!r} exists already: pass --resume to continue it, '
                 f'or choose another --run name')
         initial = Genome.from_state_dict(self.template)
-        return GeneticAlgorithm(self.config.algorithm_config(), initial), None
+        return GeneticAlgorithm(self.config.algorithm_config(), initial), None, {}
 
     def run(self, evaluator: Evaluator, resume: bool = False) -> CampaignResult:
         config = self.config
         wall_start = time.monotonic()
-        algorithm, tpkl_reference = self.start(resume)
+        algorithm, tpkl_reference, history = self.start(resume)
         sample_generations = set(report_generations(config.generations - 1))
         progress = ProgressPrinter()
         last_tokens: list[list[np.ndarray]] = []
@@ -245,12 +281,10 @@ class Campaign:
         while algorithm.generation < config.generations:
             generation = algorithm.generation
             self.store.save_checkpoint(generation, algorithm.state_dict(),
-                                       {'tpkl_reference': tpkl_reference})
+                                       {'tpkl_reference': tpkl_reference,
+                                        'fitness_history': history})
             genomes = algorithm.ask()
-            seed_generation = 0 if config.seed_schedule == 'fixed' else generation
-            map_seeds = shared_seeds(config.seed, seed_generation, config.maps_per_member)
-            sim_seeds = shared_seeds(config.seed, seed_generation, config.maps_per_member,
-                                     SeedStream.SIMULATION)
+            map_seeds, sim_seeds = config.generation_seeds(generation)
             jobs, token_maps = [], []
             for member, genome in enumerate(genomes):
                 environments = evaluator.sample(self.weights_of(genome), map_seeds,
@@ -278,7 +312,7 @@ class Campaign:
             if missing:
                 raise CampaignError(f'generation {generation}: no result for episodes {missing}')
 
-            fitnesses = []
+            fitnesses, selection = [], []
             for member in range(len(genomes)):
                 episodes = [results[(member, k)] for k in range(config.maps_per_member)]
                 for job in jobs[member * config.maps_per_member:(member + 1) *
@@ -290,10 +324,21 @@ class Campaign:
                 breakdown = member_fitness(
                     episodes, tpkls[member], tpkl_reference,
                     map_diversity(token_maps[member]), config.fitness)
+                evaluations = history.setdefault(genomes[member].digest(), [])
+                evaluations.append(breakdown.fitness)
+                # Rotating seeds: an unchanged genome is selected on all its evaluations.
+                selection.append(float(np.mean(evaluations))
+                                 if config.seed_schedule == 'rotating' else breakdown.fitness)
                 self.store.append_member({'generation': generation, 'member': member,
-                                          **breakdown.as_row()})
+                                          **breakdown.as_row(),
+                                          'selection_fitness': selection[-1],
+                                          'evaluations': len(evaluations)})
                 fitnesses.append(breakdown)
-            algorithm.tell([b.fitness for b in fitnesses])
+            algorithm.tell(selection)
+            # Only genomes that can come back (elites, unchanged) keep their history.
+            survivors = {genome.digest() for genome in algorithm.ask()}
+            history = {digest: values for digest, values in history.items()
+                       if digest in survivors}
             summary = generation_summary(generation, fitnesses)
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
@@ -309,7 +354,8 @@ class Campaign:
                 f'{format_duration(per_generation * (config.generations - done))}')
             if done < config.generations:
                 self.store.save_checkpoint(done, algorithm.state_dict(),
-                                           {'tpkl_reference': tpkl_reference})
+                                           {'tpkl_reference': tpkl_reference,
+                                            'fitness_history': history})
             last_tokens = token_maps
         report_path = self.write_report(last_tokens)
         return CampaignResult(self.store.run_dir, self.bags_dir, report_path,

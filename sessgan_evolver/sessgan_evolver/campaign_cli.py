@@ -468,6 +468,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     # SIGTERM ends the campaign like Ctrl-C, so the children are stopped too.
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    if config.in_process:
+        return run_in_process(campaign, config, controller, run_name, args.resume, log)
 
     import rclpy
     rclpy.init(args=['--ros-args'])
@@ -498,13 +500,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         supervisor.stop_all()
         node.destroy_node()
         rclpy.try_shutdown()
+    report_result(result, log)
+    return 0
+
+
+def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, run_name: str,
+                   resume: bool, log: Callable[[str], None]) -> int:
+    """The campaign with sessgan_evolver.in_process's evaluator: no ROS at all."""
+    from sessgan_evolver.in_process import InProcessEvaluator
+
+    log(f'run {run_name}: {config.generations} generations x {config.population} members x '
+        f'{config.maps_per_member} maps, scenario {config.scenario}, controller {controller}, '
+        'in process')
+    try:
+        with InProcessEvaluator(
+                config.scenario, controller, config.time_limit,
+                record_directory=campaign.bags_dir if config.record_failures else None,
+                bag_storage=config.bag_storage) as evaluator:
+            result = campaign.run(evaluator, resume=resume)
+    except KeyboardInterrupt:
+        log(f'interrupted (continue later with --resume --run {run_name} --in-process)')
+        return 130
+    except (SessganEvolverError, SessganGenError) as err:
+        log(f'error: {err}')
+        return 1
+    report_result(result, log)
+    return 0
+
+
+def report_result(result: Any, log: Callable[[str], None]) -> None:
     first, last = result.generations[0], result.generations[-1]
     log(f'done in {result.wall_time / 60:.1f} min: mean risk '
         f'{first["mean_risk_score"] or 0:.3f} (generation 0) -> '
         f'{last["mean_risk_score"] or 0:.3f} (generation {last["generation"]})')
     print(f'report: {result.report_path}')
     print(f'failure bags: {result.bags_dir}')
-    return 0
 
 
 if __name__ == '__main__':

@@ -20,6 +20,10 @@ class SeedStream(IntEnum):
     """Seeds the generator samples maps from (one per map index)."""
     SIMULATION = 2
     """Seeds of the simulator (sensor noise, dummy agents), one per map index."""
+    FRESH_MAPS = 3
+    """Map seeds of a fresh-seed evaluation (sessgan_evolver.fresh_seed)."""
+    FRESH_SIMULATION = 4
+    """Simulator seeds of a fresh-seed evaluation."""
 
 
 def shared_seeds(campaign_seed: int, generation: int, count: int,

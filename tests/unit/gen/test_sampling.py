@@ -68,3 +68,35 @@ def test_cuda_sampling_matches_cpu(pyramid):
     gpu = on_gpu.sample(seeds=range(20))
     assert gpu.device.type == 'cpu'
     assert (cpu == gpu).float().mean() > 0.99  # float differences may flip near-ties
+
+
+def test_explicit_noise_maps_reproduce_seeded_sampling(pyramid):
+    from sessgan_gen.sampling import noise_shapes, sample_token_maps_from_noise, seed_noise_maps
+
+    seeds = [4, 77, 1234]
+    noises = [seed_noise_maps(pyramid, seed) for seed in seeds]
+    assert [n.shape for n in noises[0]] == noise_shapes(pyramid) == [(3, 8, 8), (3, 16, 16),
+                                                                     (3, 32, 32)]
+    assert np.array_equal(sample_token_maps_from_noise(pyramid, noises),
+                          sample_token_maps(pyramid, seeds))
+    # Other sizes scale every noise map like seeded sampling does.
+    small = [seed_noise_maps(pyramid, seed, size=(24, 40)) for seed in seeds]
+    assert np.array_equal(sample_token_maps_from_noise(pyramid, small),
+                          sample_token_maps(pyramid, seeds, size=(24, 40)))
+    # Changing the noise changes the map; an empty request gives no maps.
+    shifted = [[noise + 3.0 for noise in noises[0]]]
+    assert not np.array_equal(sample_token_maps_from_noise(pyramid, shifted)[0],
+                              sample_token_maps(pyramid, seeds[:1])[0])
+    assert sample_token_maps_from_noise(pyramid, []).shape == (0, 32, 32)
+
+
+def test_explicit_noise_maps_of_the_wrong_shape_are_named(pyramid):
+    from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps
+
+    good = seed_noise_maps(pyramid, 1)
+    with pytest.raises(ValueError, match='scales'):
+        sample_token_maps_from_noise(pyramid, [good[:2]])
+    with pytest.raises(ValueError, match='map 1'):
+        sample_token_maps_from_noise(pyramid, [good, [good[0], good[1], good[2][:, :4]]])
+    with pytest.raises(ValueError, match='scale 0'):
+        sample_token_maps_from_noise(pyramid, [[g[:2] for g in good]])

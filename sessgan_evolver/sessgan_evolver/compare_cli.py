@@ -1,0 +1,83 @@
+"""`ros2 run sessgan_evolver compare`: every search method side by side at equal budget.
+
+Runs SESS-GAN and the baselines (random, grid_ga, cellular_automaton, latent) on one scenario
+and controller, in process, once per search seed; confirms and counts distinct faults,
+evaluates the final generators on fresh seeds and writes <output>/report.md, compare.png,
+failing_maps.png and CSV files (sessgan_evolver.comparison says how everything is counted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shlex
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import torch
+
+from sessgan_evolver.comparison import CompareConfig, run_comparison
+from sessgan_evolver.errors import SessganEvolverError
+from sessgan_gen.config_cli import field_docs
+from sessgan_gen.errors import SessganGenError
+
+
+def _int_tuple(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.split(',') if part.strip())
+
+
+def _str_tuple(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(',') if part.strip())
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog='ros2 run sessgan_evolver compare',
+                                     description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    docs = field_docs(CompareConfig)
+    defaults = CompareConfig()
+    for field in dataclasses.fields(CompareConfig):
+        flag = '--' + field.name.replace('_', '-')
+        default = getattr(defaults, field.name)
+        if field.name == 'methods':
+            parser.add_argument(flag, type=_str_tuple, default=default,
+                                help=docs.get(field.name, '') + ' Comma-separated.')
+        elif field.name == 'search_seeds':
+            parser.add_argument(flag, type=_int_tuple, default=default,
+                                help=docs.get(field.name, '') + ' Comma-separated.')
+        else:
+            parser.add_argument(flag, type=type(default), default=default,
+                                help=docs.get(field.name, ''))
+    parser.add_argument('--output', type=Path, default=None,
+                        help='report folder (default: runs/compare-<scenario>-<controller>)')
+    return parser.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    arguments = sys.argv[1:] if argv is None else list(argv)
+    args = parse_args(arguments)
+    torch.set_num_threads(1)
+    config = CompareConfig(**{field.name: getattr(args, field.name)
+                              for field in dataclasses.fields(CompareConfig)})
+    output = args.output or Path('runs') / f'compare-{config.scenario}-' \
+        f'{config.controller or "default"}'
+
+    def log(message: str) -> None:
+        print(f'[compare] {message}', file=sys.stderr, flush=True)
+
+    command = 'ros2 run sessgan_evolver compare ' + shlex.join(arguments)
+    try:
+        result = run_comparison(config, output, command, log)
+    except (SessganEvolverError, SessganGenError, ValueError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        log('interrupted')
+        return 130
+    print(f'report: {result.report_path}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

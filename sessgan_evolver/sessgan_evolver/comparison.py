@@ -1,0 +1,523 @@
+"""Every search method side by side at equal episode budget: the ``compare`` report.
+
+For one scenario and controller, each method (sessgan_evolver.search_methods.METHODS) runs
+once per search seed with the same episode budget, through the same in-process runner and
+validity certificate (maps without a certified route are not simulated and still cost one
+episode, for every method). Per run:
+
+* **distinct faults** (sessgan_evolver.faults) among its valid failures, each re-run
+  ``repeats`` times; *confirmed* when every re-run shows the same fault (``confirm_limit``
+  > 0 checks only the first that many faults of a run and says so);
+* **confirmed distinct faults per 1,000 episodes**;
+* **episodes and wall time to the first confirmed failure**: the episode index of the first
+  valid failure whose fault was confirmed, and the search's wall seconds at that episode
+  plus that fault's confirmation re-runs (CPU seconds beside it);
+* **fresh-seed failure rate of the final generator** (sessgan_evolver.fresh_seed): SESS-GAN's
+  fittest member of its last generation; ``random`` and ``latent`` (weights frozen) leave
+  the generator they sampled; ``cellular_automaton`` is its own generator; ``grid_ga``
+  leaves none. Every generator is evaluated on the same fresh seed pairs, disjoint from all
+  seeds of all runs, once per distinct generator;
+* **TPKL and uniqueness of the failing maps**: of the maps of its distinct faults (first
+  occurrence each), to the example map.
+
+Figures are reported per method as mean ± sample standard deviation over the search seeds,
+with every seed's value in runs.csv.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig
+from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
+from sessgan_evolver.fault_records import confirm_faults
+from sessgan_evolver.faults import FaultEntry, FaultRule, group_faults
+from sessgan_evolver.fitness import FitnessConfig
+from sessgan_evolver.fresh_seed import (
+    AutomatonSource,
+    FreshSeedSummary,
+    MapSource,
+    PyramidSource,
+    campaign_sources,
+    evaluate_source,
+    fresh_seed_plan,
+    summary_rows,
+    summary_table,
+    write_csv,
+)
+from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
+from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
+from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+
+
+class CompareError(SessganEvolverError):
+    """Settings a comparison cannot run with."""
+
+
+@dataclass(frozen=True)
+class CompareConfig:
+    """What ``compare`` runs; the CLI fills it from its arguments (defaults in brackets)."""
+
+    scenario: str = 'factory'
+    """[factory] Scenario."""
+    controller: str = ''
+    """[scenario's] Built-in controller under test."""
+    methods: tuple[str, ...] = METHODS
+    """[all] Methods to compare."""
+    search_seeds: tuple[int, ...] = (0, 1, 2)
+    """[0,1,2] One run of each method per seed (at least 3 for a spread)."""
+    budget: int = 360
+    """[360] Episodes per run (SESS-GAN: whole generations of population x K)."""
+    fresh_episodes: int = 30
+    """[30] Fresh seed pairs per final generator."""
+    repeats: int = 3
+    """[3] Re-runs per distinct fault to confirm it."""
+    confirm_limit: int = 0
+    """[0: all] Confirm only the first this many distinct faults of each run."""
+    max_fault_records: int = 3
+    """[3] Confirmed faults per run kept as a bag and a picture (-1: every one; a bag of a
+    60 s factory episode is about 2 MB)."""
+    time_limit: float = 0.0
+    """[scenario's] Episode time limit, sim seconds."""
+    evaluation_seed: int = 1000
+    """[1000] Seed of the fresh seed pairs."""
+    checkpoint: str = ''
+    """[scenario's shipped] Pre-trained generator (SESS-GAN's start, random's and latent's)."""
+    seed_schedule: str = 'fixed'
+    """[fixed] SESS-GAN's seed schedule."""
+    population: int = 12
+    """[12] SESS-GAN's members and the GAs' individuals per generation."""
+    maps_per_member: int = 3
+    """[3] SESS-GAN's K."""
+    coarse_cells: int = 4
+    """[4] Fault rule: coarse cell side, map cells."""
+    context_cells: int = 2
+    """[2] Fault rule: context around the coarse cell, map cells."""
+
+    def validate(self) -> None:
+        get_scenario(self.scenario)
+        unknown = [m for m in self.methods if m not in METHODS]
+        if unknown or not self.methods:
+            raise CompareError(f'unknown or no methods {unknown}; known: {", ".join(METHODS)}')
+        if not self.search_seeds or len(set(self.search_seeds)) != len(self.search_seeds):
+            raise CompareError(f'search seeds must be distinct and not empty, got '
+                               f'{self.search_seeds}')
+        for name in ('budget', 'fresh_episodes', 'population', 'maps_per_member'):
+            if getattr(self, name) < 1:
+                raise CompareError(f'{name} must be >= 1, got {getattr(self, name)}')
+        for name in ('repeats', 'confirm_limit'):
+            if getattr(self, name) < 0:
+                raise CompareError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if self.seed_schedule not in SEED_SCHEDULES:
+            raise CompareError(f'seed schedule must be one of {SEED_SCHEDULES}')
+        if 'sessgan' in self.methods and self.budget < self.population * self.maps_per_member:
+            raise CompareError(f'a budget of {self.budget} pays for no SESS-GAN generation of '
+                               f'{self.population} x {self.maps_per_member} episodes')
+        self.rule().validate()
+
+    def rule(self) -> FaultRule:
+        return FaultRule(self.coarse_cells, self.context_cells)
+
+    def campaign_config(self, seed: int) -> CampaignConfig:
+        return CampaignConfig(
+            scenario=self.scenario, population=self.population,
+            maps_per_member=self.maps_per_member, seed=seed, checkpoint=self.checkpoint,
+            controller=self.controller, time_limit=self.time_limit,
+            seed_schedule=self.seed_schedule, record_failures=False,
+            fitness=FitnessConfig())
+
+    def ga_config(self) -> GAConfig:
+        return GAConfig(population=self.population)
+
+
+@dataclass
+class RunFigures:
+    """One method's run with one search seed."""
+
+    method: str
+    search_seed: int
+    episodes: int
+    valid_maps: int
+    valid_failures: int
+    distinct_faults: int
+    checked_faults: int
+    """Distinct faults re-run (all unless confirm_limit)."""
+    confirmed_faults: int
+    exact_faults: int
+    """Checked faults whose every re-run reproduced the metrics exactly."""
+    confirmed_per_1000: float
+    """Confirmed distinct faults per 1,000 episodes (of the checked ones)."""
+    distinct_per_1000: float
+    first_confirmed_episode: int | None
+    """1-based episode of the first valid failure with a confirmed fault."""
+    first_confirmed_wall: float | None
+    first_confirmed_cpu: float | None
+    search_wall: float
+    search_cpu: float
+    generator: str
+    """The final generator's label ('' for none)."""
+    fresh_failure_rate: float | None = None
+    fresh_valid_fraction: float | None = None
+    failing_tpkl: float | None = None
+    failing_uniqueness: float | None = None
+    fault_records: list[str] = field(default_factory=list)
+
+    def row(self) -> dict[str, Any]:
+        data = dataclasses.asdict(self)
+        data['fault_records'] = ';'.join(self.fault_records)
+        return data
+
+
+@dataclass
+class MethodRun:
+    """What a run leaves for the report."""
+
+    figures: RunFigures
+    records: list[EpisodeRecord]
+    faults: list[FaultEntry]
+    source: MapSource | None
+    source_key: str
+
+
+@dataclass
+class Comparison:
+    config: CompareConfig
+    runs: list[MethodRun]
+    fresh: dict[str, FreshSeedSummary]
+    """Fresh-seed summaries by generator key."""
+    report_path: Path
+    wall_time: float
+
+
+def _example_tokens(records: Sequence[EpisodeRecord], faults: Sequence[FaultEntry],
+                    scenario: str) -> list[np.ndarray]:
+    spec = get_scenario(scenario)
+    return [occupancy_to_tokens(records[entry.first].environment.occupancy, spec)
+            for entry in faults]
+
+
+def run_method(config: CompareConfig, method: str, seed: int, output: Path,
+               log: Callable[[str], None]) -> MethodRun:
+    """One search run, its faults confirmed and recorded."""
+    rule = config.rule()
+    episode_log = EpisodeLog(rule)
+    label = f'{method}-seed{seed}'
+    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
+                            simulate_invalid=False, observer=episode_log) as evaluator:
+        episode_log.restart_clock()
+        source: MapSource | None
+        if method == 'sessgan':
+            search = run_sessgan_search(config.campaign_config(seed), evaluator, config.budget,
+                                        output / 'runs', label, log)
+            source = campaign_sources(search.run_dir, 'best')[0]
+            source_key = f'sessgan:{source.label}'
+        else:
+            searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
+                                     config.ga_config())
+            run_search(searcher, evaluator, config.budget, label)
+            source, source_key = _final_source(config, method)
+        search_wall = time.perf_counter() - episode_log.started
+        search_cpu = time.process_time() - episode_log.cpu_started
+        records = episode_log.records
+        faults = group_faults([record.fault for record in records])
+        checked = faults[:config.confirm_limit] if config.confirm_limit else faults
+        written = confirm_faults(checked, records, evaluator, rule, config.repeats,
+                                 output / 'faults' / label, config.max_fault_records,
+                                 {'method': method, 'search_seed': seed})
+    confirmed = [entry for entry in checked
+                 if entry.confirmation is not None and entry.confirmation.confirmed]
+    exact = [entry for entry in checked if entry.confirmation is not None
+             and entry.confirmation.exact == entry.confirmation.repeats]
+    first = min(confirmed, key=lambda entry: entry.first, default=None)
+    episodes = len(records)
+    tokens = _example_tokens(records, faults, config.scenario)
+    example = load_example_map(config.scenario).cells
+    figures = RunFigures(
+        method=method, search_seed=seed, episodes=episodes,
+        valid_maps=sum(bool(r.metrics.get('feasible')) for r in records),
+        valid_failures=sum(r.valid_failure for r in records), distinct_faults=len(faults),
+        checked_faults=len(checked), confirmed_faults=len(confirmed),
+        exact_faults=len(exact),
+        confirmed_per_1000=1000.0 * len(confirmed) / episodes if episodes else 0.0,
+        distinct_per_1000=1000.0 * len(faults) / episodes if episodes else 0.0,
+        first_confirmed_episode=None if first is None else first.first + 1,
+        first_confirmed_wall=None if first is None else
+        records[first.first].elapsed + first.confirmation.wall_time,  # type: ignore[union-attr]
+        first_confirmed_cpu=None if first is None else records[first.first].cpu,
+        search_wall=search_wall, search_cpu=search_cpu,
+        generator=source.label if source is not None else '',
+        failing_tpkl=tile_pattern_kl(example, tokens) if tokens else None,
+        failing_uniqueness=uniqueness_report(tokens).mean if tokens else None,
+        fault_records=[str(path) for path in written])
+    log(f'{label}: {episodes} episodes, {figures.valid_failures} valid failures, '
+        f'{len(faults)} distinct faults, {len(confirmed)}/{len(checked)} confirmed, '
+        f'{search_wall:.0f} s')
+    return MethodRun(figures, records, faults, source, source_key)
+
+
+def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None, str]:
+    if method in ('random', 'latent'):
+        label = 'shipped generator' if not config.checkpoint else config.checkpoint
+        return PyramidSource(label, config.scenario, config.checkpoint or None), 'pyramid:base'
+    if method == 'cellular_automaton':
+        return AutomatonSource(config.scenario), 'cellular_automaton'
+    return None, ''
+
+
+def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Path,
+                       log: Callable[[str], None]) -> dict[str, FreshSeedSummary]:
+    """Evaluate every distinct final generator on one plan of fresh seeds."""
+    used_maps = {int(r.environment.seed) for run in runs for r in run.records}
+    used_sims = {int(r.sim_seed) for run in runs for r in run.records}
+    plan = fresh_seed_plan(config.evaluation_seed, config.fresh_episodes, used_maps, used_sims)
+    summaries: dict[str, FreshSeedSummary] = {}
+    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
+                            simulate_invalid=False) as evaluator:
+        for run in runs:
+            if run.source is None or run.source_key in summaries:
+                continue
+            result = evaluate_source(run.source, plan, evaluator, config.rule())
+            summaries[run.source_key] = result.summary
+            log(f'fresh seeds, {run.source.label}: failure rate '
+                f'{result.summary.failure_rate}, {result.summary.valid_maps} valid maps')
+    for run in runs:
+        summary = summaries.get(run.source_key)
+        if summary is not None:
+            run.figures.fresh_failure_rate = summary.failure_rate
+            run.figures.fresh_valid_fraction = summary.valid_fraction
+    write_csv(output / 'fresh_seed.csv', summary_rows(list(summaries.values())))
+    (output / 'fresh_seed_plan.txt').write_text(
+        f'{len(plan.pairs)} fresh (map seed, simulator seed) pairs from evaluation seed '
+        f'{config.evaluation_seed}; {plan.skipped} drawn seeds skipped because a run used '
+        f'them; excluded {plan.excluded_map_seeds} map and {plan.excluded_sim_seeds} '
+        f'simulator seeds of the runs\n' + '\n'.join(f'{m} {s}' for m, s in plan.pairs) + '\n')
+    return summaries
+
+
+# ---- aggregation and report ---------------------------------------------------------------
+
+REPORTED = (
+    ('confirmed_per_1000', 'confirmed distinct faults / 1,000 episodes', '{:.1f}'),
+    ('distinct_per_1000', 'distinct faults / 1,000 episodes', '{:.1f}'),
+    ('first_confirmed_episode', 'episodes to first confirmed failure', '{:.0f}'),
+    ('first_confirmed_wall', 'wall s to first confirmed failure', '{:.1f}'),
+    ('fresh_failure_rate', 'fresh-seed failure rate of the final generator', '{:.3f}'),
+    ('failing_tpkl', 'TPKL of failing maps', '{:.3f}'),
+    ('failing_uniqueness', 'uniqueness of failing maps (%)', '{:.1f}'),
+)
+"""(RunFigures field, label, format) of the report's table and figure."""
+
+
+def spread(values: Sequence[float | None]) -> tuple[float | None, float | None, int]:
+    """(mean, sample std or None for fewer than 2 values, count) of the non-None values."""
+    present = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+    if not present:
+        return None, None, 0
+    std = float(np.std(present, ddof=1)) if len(present) > 1 else None
+    return float(np.mean(present)), std, len(present)
+
+
+def format_spread(values: Sequence[float | None], number_format: str) -> str:
+    mean, std, count = spread(values)
+    if mean is None:
+        return 'none'
+    text = number_format.format(mean)
+    if std is not None:
+        text += ' ± ' + number_format.format(std)
+    if count < len(values):
+        text += f' ({count}/{len(values)} runs)'
+    return text
+
+
+def method_table(config: CompareConfig, runs: Sequence[MethodRun]) -> str:
+    methods = [m for m in config.methods if any(r.figures.method == m for r in runs)]
+    lines = ['| | ' + ' | '.join(methods) + ' |', '|---|' + '---:|' * len(methods)]
+    by_method = {m: [r.figures for r in runs if r.figures.method == m] for m in methods}
+    rows = list(REPORTED) + [('episodes', 'episodes per run', '{:.0f}'),
+                             ('valid_failures', 'valid failures (episodes)', '{:.1f}'),
+                             ('distinct_faults', 'distinct faults', '{:.1f}'),
+                             ('confirmed_faults', 'confirmed distinct faults', '{:.1f}'),
+                             ('search_wall', 'search wall s', '{:.0f}'),
+                             ('search_cpu', 'search CPU s', '{:.0f}')]
+    for key, label, number_format in rows:
+        cells = [format_spread([getattr(f, key) for f in by_method[m]], number_format)
+                 for m in methods]
+        lines.append(f'| {label} | ' + ' | '.join(cells) + ' |')
+    return '\n'.join(lines)
+
+
+def plot_comparison(config: CompareConfig, runs: Sequence[MethodRun], path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    methods = [m for m in config.methods if any(r.figures.method == m for r in runs)]
+    figure, axes = plt.subplots(2, 4, figsize=(16, 7.5))
+    colours = plt.rcParams['axes.prop_cycle'].by_key()['color']
+    for axis, (key, label, _) in zip(axes.flat, REPORTED):
+        for index, method in enumerate(methods):
+            values = [getattr(r.figures, key) for r in runs if r.figures.method == method]
+            mean, std, count = spread(values)
+            colour = colours[index % len(colours)]
+            if mean is not None:
+                axis.bar(index, mean, yerr=std or 0.0, color=colour, alpha=0.6, capsize=4)
+            present = [float(v) for v in values if v is not None]
+            axis.plot([index] * len(present), present, 'o', color='black', markersize=3)
+            if count < len(values):
+                axis.text(index, 0, f'{count}/{len(values)}', ha='center', va='bottom',
+                          fontsize='x-small')
+        axis.set_xticks(range(len(methods)), methods, rotation=30, fontsize='small')
+        axis.set_title(label, fontsize='small')
+        axis.grid(axis='y', alpha=0.3)
+    axes.flat[-1].set_axis_off()
+    axes.flat[-1].text(0.0, 0.5, _settings_text(config), fontsize='small', va='center',
+                       transform=axes.flat[-1].transAxes)
+    figure.suptitle(f'Fault finding on {config.scenario} against '
+                    f'{config.controller or get_scenario(config.scenario).controller}: mean ± '
+                    f'std over search seeds {list(config.search_seeds)} (dots: runs)')
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
+def _settings_text(config: CompareConfig) -> str:
+    return (f'budget {config.budget} episodes per run\n'
+            f'{len(config.search_seeds)} search seeds\n'
+            f'{config.repeats} re-runs per distinct fault'
+            + (f' (first {config.confirm_limit} per run)' if config.confirm_limit else '')
+            + f'\n{config.fresh_episodes} fresh seed pairs per generator\n'
+            f'SESS-GAN: {config.population} x {config.maps_per_member}, '
+            f'{config.seed_schedule} seeds\n'
+            f'fault cells {config.coarse_cells} (+{config.context_cells} context)')
+
+
+def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method: int = 4
+                   ) -> list[tuple[str, list[FaultScene]]]:
+    """Up to ``per_method`` confirmed distinct faults per method (seeds in turn), re-run
+    with a trace for the picture."""
+    rows = []
+    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
+                            simulate_invalid=False) as evaluator:
+        for method in config.methods:
+            method_runs = [r for r in runs if r.figures.method == method]
+            if not method_runs:
+                continue
+            queues = [[e for e in r.faults if e.confirmation and e.confirmation.confirmed]
+                      for r in method_runs]
+            picked: list[tuple[MethodRun, FaultEntry]] = []
+            while len(picked) < per_method and any(queues):
+                for run, queue in zip(method_runs, queues):
+                    if queue and len(picked) < per_method:
+                        picked.append((run, queue.pop(0)))
+            scenes = []
+            for run, entry in picked:
+                record = run.records[entry.first]
+                episode = evaluator.runner.run(record.environment, record.sim_seed, trace=True)
+                assert episode.trace is not None
+                scene = scene_from_run(record.environment, episode.trace, episode.metrics,
+                                       entry.key, config.rule())
+                scene.caption = (f'seed {run.figures.search_seed}: '
+                                 f'{entry.key.kind.replace("_", " ")}')
+                scenes.append(scene)
+            rows.append((method, scenes))
+    return rows
+
+
+def write_report(config: CompareConfig, runs: Sequence[MethodRun],
+                 fresh: dict[str, FreshSeedSummary], output: Path, command: str,
+                 wall_time: float) -> Path:
+    plot_comparison(config, runs, output / 'compare.png')
+    write_scene_grid(example_scenes(config, runs), output / 'failing_maps.png')
+    write_csv(output / 'runs.csv', [run.figures.row() for run in runs])
+    write_csv(output / 'faults.csv', [
+        {'method': run.figures.method, 'search_seed': run.figures.search_seed,
+         'fault': entry.key.label, 'kind': entry.key.kind, 'first_episode': entry.first + 1,
+         'occurrences': len(entry.occurrences),
+         'environment_id': run.records[entry.first].environment.id,
+         'sim_seed': run.records[entry.first].sim_seed,
+         'outcome': run.records[entry.first].metrics.get('outcome'),
+         'fault_collisions': run.records[entry.first].metrics.get('fault_collisions'),
+         'repeats': entry.confirmation.repeats if entry.confirmation else '',
+         'reproduced': entry.confirmation.reproduced if entry.confirmation else '',
+         'exact': entry.confirmation.exact if entry.confirmation else ''}
+        for run in runs for entry in run.faults])
+    write_csv(output / 'episodes.csv', [
+        {'method': run.figures.method, 'search_seed': run.figures.search_seed,
+         'episode': record.index + 1, 'environment_id': record.environment.id,
+         'map_seed': record.environment.seed, 'sim_seed': record.sim_seed,
+         'feasible': record.metrics.get('feasible'), 'outcome': record.metrics.get('outcome'),
+         'fault_collisions': record.metrics.get('fault_collisions'),
+         'collisions': record.metrics.get('collisions'),
+         'risk_score': record.metrics.get('risk_score'),
+         'fault_risk_score': record.metrics.get('fault_risk_score'),
+         'valid_failure': record.valid_failure,
+         'fault': record.fault.label if record.fault else '', 'elapsed': record.elapsed,
+         'cpu': record.cpu, 'origin': record.origin}
+        for run in runs for record in run.records])
+    controller = config.controller or get_scenario(config.scenario).controller
+    lines = [
+        f'# Fault finding: {config.scenario}, {controller}', '',
+        f'Command: `{command}`', '',
+        f'{len(config.search_seeds)} search seeds {list(config.search_seeds)}, '
+        f'{config.budget} episodes per run, in process (lockstep, one core), '
+        f'{wall_time / 60:.1f} min in all. Mean ± sample std over the seeds; '
+        '`(k/n runs)`: only k of n runs had a value.', '',
+        method_table(config, runs), '',
+        '![comparison](compare.png)', '',
+        '## Example failing maps (confirmed distinct faults)', '',
+        '![failing maps](failing_maps.png)', '',
+        '## Fresh-seed evaluation of the final generators', '',
+        summary_table(list(fresh.values())) if fresh else 'No method left a generator.', '',
+        '## How it is counted', '',
+        f'* Distinct faults: same kind, same {config.coarse_cells}x{config.coarse_cells}-cell '
+        f'coarse cell of the first fault event, same map within {config.context_cells} cells '
+        'around it (sessgan_evolver.faults). Confirmed: all '
+        f'{config.repeats} re-runs show the same fault'
+        + (f'; only the first {config.confirm_limit} faults of each run were re-run'
+           if config.confirm_limit else '') + '.',
+        '* Every map goes through the same validity certificate; maps without a certified '
+        'route are not simulated and still cost one episode.',
+        '* SESS-GAN runs whole generations of population x K episodes; its final generator '
+        "is its last generation's fittest member. random and latent leave the generator they "
+        'sampled (weights frozen); grid_ga leaves none.',
+        '* Files: runs.csv (every run), faults.csv (every distinct fault), episodes.csv '
+        '(every episode), fresh_seed.csv, faults/<method>-seed<s>/ (bags and pictures of '
+        'confirmed faults), runs/ (SESS-GAN campaigns).',
+    ]
+    path = output / 'report.md'
+    path.write_text('\n'.join(lines) + '\n', encoding='utf-8')
+    return path
+
+
+def run_comparison(config: CompareConfig, output: str | Path, command: str = '',
+                   log: Callable[[str], None] = print) -> Comparison:
+    """Run every method on every seed, evaluate the final generators, write the report."""
+    config.validate()
+    output = Path(output)
+    if (output / 'report.md').exists():
+        raise CompareError(f'{output} holds a comparison already: choose another --output')
+    output.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    runs = []
+    for seed in config.search_seeds:
+        for method in config.methods:
+            runs.append(run_method(config, method, seed, output, log))
+    fresh = fresh_seed_figures(config, runs, output, log)
+    wall = time.perf_counter() - started
+    report = write_report(config, runs, fresh, output, command, wall)
+    return Comparison(config, runs, fresh, report, wall)

@@ -1,0 +1,288 @@
+"""Episodes of a built-in controller on the simulator core, in this process, without ROS.
+
+The episode the ROS graph runs in lockstep mode, minus the messages: every control tick the
+controller core (from sessgan_controllers' registry) turns the observation into the command
+applied during the next tick, as a controller node answering every scan does. The simulator
+settings are a simulator worker's (sessgan_sim.simulator_settings.SimulatorSettings; by
+default the node's defaults: the scenario's robot, agents and time limit), and the
+controller sees its inputs exactly as the node decodes them from the messages
+(:func:`node_inputs`: the scan's geometry in float32 as LaserScan carries it, the yaw read
+back from the odometry quaternion, STOP once the controller says the goal is reached), so an
+in-process episode is, bit for bit, the lockstep episode of a worker running the same
+controller node: its failure bags re-simulate to the same result
+(``ros2 run sessgan_evolver replay <bag> --resimulate``).
+
+Deterministic: the same environment, seed and settings give the same metrics and trace
+(every random choice of the episode derives from the seed; the controllers keep no state
+between episodes).
+
+A trace (optional) keeps what a picture or a bag of the episode needs: per tick the robot's
+pose and velocity, the command, the agents' positions (and the scans for a bag), and the
+episode's contact events as sessgan_sim attributes them (static, robot into agent, agent
+into robot).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from sessgan_controllers.errors import UnknownControllerError
+from sessgan_controllers.registry import get_controller
+from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
+from sessgan_evolver.errors import SessganEvolverError
+from sessgan_gen.environment import Environment
+from sessgan_gen.scenarios import get_scenario
+from sessgan_sim.episode import Episode, EpisodeConfig, Observation
+from sessgan_sim.errors import EpisodeError
+from sessgan_sim.metrics import ContactEvent
+from sessgan_sim.simulator_settings import SimulatorSettings
+
+
+class EpisodeRunnerError(SessganEvolverError):
+    """An episode that cannot be run in process (unknown controller, bad settings)."""
+
+
+def _float32(value: float) -> float:
+    return float(np.float32(value))
+
+
+def node_inputs(observation: Observation) -> tuple[ScanData, RobotState]:
+    """The controller's inputs as its node decodes them from the simulator's messages.
+
+    LaserScan carries angle_min, angle_increment, range_min and range_max as float32 and
+    Odometry the heading as a quaternion; the controllers' own ``observed()`` passes the
+    float64 values through, which is a different (if tiny) input, and a controller's path
+    through a cluttered map amplifies any difference within seconds.
+    """
+    lidar, pose, twist = observation.lidar, observation.pose, observation.twist
+    scan = ScanData(np.asarray(observation.scan, dtype=float), _float32(lidar.angle_min),
+                    _float32(lidar.angle_increment), _float32(lidar.range_min),
+                    _float32(lidar.range_max))
+    # sessgan_sim.cdr.odometry writes (0, 0, sin(yaw/2), cos(yaw/2)); the node reads the yaw
+    # back with sessgan_controllers.messages.yaw_from_quaternion (same expression here).
+    x = y = 0.0
+    z, w = math.sin(pose.yaw / 2.0), math.cos(pose.yaw / 2.0)
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return scan, RobotState(float(pose.x), float(pose.y), yaw, float(twist.vx),
+                            float(twist.vy), float(twist.wz))
+
+
+@dataclass
+class EpisodeTrace:
+    """What happened during an episode, tick by tick (row 0: the state at reset)."""
+
+    times: np.ndarray
+    """(n,) sim seconds."""
+    poses: np.ndarray
+    """(n, 3) robot x, y (m) and yaw (rad) in the map frame."""
+    twists: np.ndarray
+    """(n, 3) body-frame vx, vy (m/s) and wz (rad/s)."""
+    commands: np.ndarray
+    """(n - 1, 3) the command applied after row i's observation: vx, vy, wz."""
+    agents: np.ndarray
+    """(n, agents, 2) agent centres, metres."""
+    contacts: list[ContactEvent] = field(default_factory=list)
+    """The episode's contact events (sessgan_sim.metrics), in order."""
+    scans: np.ndarray | None = None
+    """(n, beams) float32 ranges in metres when kept (bags), else None."""
+    lidar: dict[str, float] = field(default_factory=dict)
+    """angle_min, angle_increment, range_min, range_max, scan_time of the scans."""
+    robot_radius: float = 0.0
+    """m, the robot's footprint circle."""
+    agent_radius: float = 0.0
+    """m"""
+    base_height: float = 0.0
+    """m, the robot body's centre above the ground (base_link)."""
+    sensor_height: float = 0.0
+    """m, the scan plane above the ground (base_scan)."""
+
+    def summary(self, max_points: int = 400) -> dict[str, Any]:
+        """Plain data for episode.json: the trajectory and agent paths thinned to at most
+        ``max_points`` rows, the contact events and the geometry."""
+        step = max(1, math.ceil(len(self.times) / max_points))
+        rows = list(range(0, len(self.times), step))
+        if rows and rows[-1] != len(self.times) - 1:
+            rows.append(len(self.times) - 1)
+        return {
+            'times': [round(float(t), 4) for t in self.times[rows]],
+            'robot': np.round(self.poses[rows], 4).tolist(),
+            'agents': np.round(self.agents[rows], 4).tolist(),
+            'contacts': [contact.to_dict() for contact in self.contacts],
+            'robot_radius': self.robot_radius,
+            'agent_radius': self.agent_radius,
+        }
+
+
+@dataclass
+class EpisodeRun:
+    """One episode's result."""
+
+    metrics: dict[str, Any]
+    """EpisodeMetrics as a dict (outcome as a string), plus ``wall_time`` (s) and
+    ``bag_path`` ('' unless a bag was written), the fields the campaign stores."""
+    trace: EpisodeTrace | None
+    wall_time: float
+    """Wall seconds of reset and ticks."""
+
+
+class EpisodeRunner:
+    """Owns one simulator (a pybullet client) and runs episodes one at a time.
+
+    ``controller``: a name of sessgan_controllers' registry ('' = the scenario's);
+    ``time_limit``: sim seconds (0 = the settings', else the scenario's); ``settings``: the
+    simulator worker's settings each episode's config is built from (default: the node's
+    defaults; only lockstep makes sense in process).
+    """
+
+    def __init__(self, scenario: str, controller: str = '', time_limit: float = 0.0,
+                 settings: SimulatorSettings | None = None,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        spec = get_scenario(scenario)
+        self.scenario = spec.name
+        self.controller_name = controller or spec.controller
+        try:
+            self.controller_spec = get_controller(self.controller_name)
+        except UnknownControllerError as err:
+            raise EpisodeRunnerError(str(err)) from err
+        if not (math.isfinite(time_limit) and time_limit >= 0):
+            raise EpisodeRunnerError(f'time limit must be >= 0 s (0: the scenario default), got '
+                                     f'{time_limit}')
+        self.settings = settings or SimulatorSettings()
+        if self.settings.mode != 'lockstep':
+            raise EpisodeRunnerError('in-process episodes are lockstep episodes; the settings '
+                                     f'ask for {self.settings.mode!r}')
+        self.time_limit = float(time_limit) or float(self.settings.time_limit) \
+            or spec.time_limit
+        self.episode_config(0).validate()
+        self._clock = clock
+        self._episode: Episode | None = None
+
+    # --- resources --------------------------------------------------------------------------
+
+    def open(self) -> EpisodeRunner:
+        if self._episode is None:
+            self._episode = Episode().open()
+        return self
+
+    def close(self) -> None:
+        if self._episode is not None:
+            self._episode.close()
+            self._episode = None
+
+    def __enter__(self) -> EpisodeRunner:
+        return self.open()
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()
+
+    # --- episodes ---------------------------------------------------------------------------
+
+    def episode_config(self, seed: int) -> EpisodeConfig:
+        """The config of an episode with simulator seed ``seed`` (as a worker builds it for an
+        evaluate goal with this runner's time limit), scenario defaults filled in."""
+        return self.settings.episode_config(time_limit=self.time_limit, seed=int(seed)) \
+            .resolved(get_scenario(self.scenario))
+
+    def run(self, environment: Environment, seed: int, trace: bool = False,
+            keep_scans: bool = False) -> EpisodeRun:
+        """Run one episode of ``environment`` with simulator seed ``seed``.
+
+        ``trace``: also return an :class:`EpisodeTrace`; ``keep_scans``: with the scans
+        (needed for a bag; about 1.4 KB a tick).
+        """
+        if environment.scenario != self.scenario:
+            raise EpisodeRunnerError(f'environment {environment.id!r} is a '
+                                     f'{environment.scenario} map; this runner tests the '
+                                     f'{self.scenario} scenario')
+        self.open()
+        episode = self._episode
+        assert episode is not None
+        controller = self.controller_spec.make()
+        controller.reset()
+        goal = Goal(environment.goal.x, environment.goal.y)
+        started = self._clock()
+        observation = episode.reset(environment, self.episode_config(seed))
+        recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
+        goal_reached = False
+        while not episode.done:
+            scan, state = node_inputs(observation)
+            # As the controller node: STOP from the first tick the controller says the goal
+            # is reached, and for a non-finite command.
+            goal_reached = goal_reached or controller.goal_reached(state, goal)
+            command = STOP if goal_reached else controller.compute_command(scan, state, goal)
+            if not command.is_finite():
+                command = STOP
+            values = (float(command.vx), float(command.vy), float(command.wz))
+            observation = episode.step(values).observation
+            if recorder is not None:
+                recorder.add(observation, values)
+        wall_time = self._clock() - started
+        result = episode.metrics()
+        metrics = result.to_dict()
+        metrics['wall_time'] = wall_time
+        metrics['bag_path'] = ''
+        return EpisodeRun(metrics, recorder.finish(list(result.contacts)) if recorder else None,
+                          wall_time)
+
+
+class _TraceRecorder:
+    """Collects an EpisodeTrace while an episode runs."""
+
+    def __init__(self, episode: Episode, observation: Observation, keep_scans: bool) -> None:
+        self.episode = episode
+        self.keep_scans = keep_scans
+        self.times: list[float] = []
+        self.poses: list[tuple[float, float, float]] = []
+        self.twists: list[tuple[float, float, float]] = []
+        self.commands: list[tuple[float, float, float]] = []
+        self.agents: list[np.ndarray] = []
+        self.scans: list[np.ndarray] = []
+        try:
+            robot = episode.robot
+            self.robot_radius = float(robot.footprint_radius)
+            self.base_height = float(robot.ride_height)
+            self.sensor_height = float(robot.sensor_height)
+        except EpisodeError:  # an episode that could not start has no robot
+            self.robot_radius = self.base_height = self.sensor_height = 0.0
+        self.agent_radius = float(episode.agents.config.radius)
+        self._observe(observation)
+
+    def _observe(self, observation: Observation) -> None:
+        pose, twist = observation.pose, observation.twist
+        self.times.append(float(observation.time))
+        self.poses.append((float(pose.x), float(pose.y), float(pose.yaw)))
+        self.twists.append((float(twist.vx), float(twist.vy), float(twist.wz)))
+        self.agents.append(np.array(self.episode.agents.positions, dtype=float).reshape(-1, 2))
+        if self.keep_scans:
+            self.scans.append(np.array(observation.scan, dtype=np.float32))
+
+    def add(self, observation: Observation, command: tuple[float, float, float]) -> None:
+        self.commands.append(command)
+        self._observe(observation)
+
+    def finish(self, contacts: list[ContactEvent]) -> EpisodeTrace:
+        lidar = self.episode.lidar_info
+        agent_count = max((len(a) for a in self.agents), default=0)
+        agents = np.zeros((len(self.agents), agent_count, 2))
+        for row, positions in enumerate(self.agents):
+            agents[row, :len(positions)] = positions
+        return EpisodeTrace(
+            times=np.array(self.times), poses=np.array(self.poses).reshape(-1, 3),
+            twists=np.array(self.twists).reshape(-1, 3),
+            commands=np.array(self.commands).reshape(-1, 3), agents=agents,
+            contacts=contacts,
+            scans=np.stack(self.scans) if self.keep_scans and self.scans else None,
+            lidar={'angle_min': float(lidar.angle_min),
+                   'angle_increment': float(lidar.angle_increment),
+                   'range_min': float(lidar.range_min), 'range_max': float(lidar.range_max),
+                   'scan_time': float(lidar.scan_time)},
+            robot_radius=self.robot_radius, agent_radius=self.agent_radius,
+            base_height=self.base_height, sensor_height=self.sensor_height)

@@ -1,0 +1,174 @@
+"""`ros2 run sessgan_evolver evaluate`: a generator's failure rate on fresh seeds.
+
+Samples --episodes maps from each generator given (the shipped checkpoint, a campaign's best
+member or final population, your own checkpoints, the cellular-automaton baseline) with seeds
+no campaign used (--run and --exclude-run name the campaigns; their seeds are read from
+their metrics and skipped), runs each map once with the built-in controller in this process
+(lockstep) and writes <output>/summary.md, summary.csv (one row per generator) and
+episodes.csv (one row per map): valid maps, failure rate, collisions, risk, TPKL to the
+example map, uniqueness, distinct faults. --fault-records N keeps the first N confirmed
+distinct faults of each generator as a bag with a picture.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import torch
+
+from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.fault_records import confirm_faults
+from sessgan_evolver.faults import FaultRule
+from sessgan_evolver.fresh_seed import (
+    EPISODE_COLUMNS,
+    AutomatonSource,
+    MapSource,
+    PyramidSource,
+    campaign_sources,
+    check_disjoint,
+    episode_rows,
+    evaluate_source,
+    fresh_seed_plan,
+    open_run,
+    summary_rows,
+    summary_table,
+    used_seeds,
+    write_csv,
+)
+from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_gen.errors import SessganGenError
+from sessgan_gen.progress import ProgressPrinter
+from sessgan_gen.scenarios import get_scenario
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog='ros2 run sessgan_evolver evaluate',
+                                     description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--scenario', default='',
+                        help="scenario (default: the --run's, else factory)")
+    parser.add_argument('--run', type=Path, action='append', default=[],
+                        help='a campaign run directory (runs/<run>) to evaluate; repeatable')
+    parser.add_argument('--member', default='best',
+                        help="which of a run's last population: best, final (every member) or "
+                             'a member index')
+    parser.add_argument('--checkpoint', type=Path, action='append', default=[],
+                        help='a generator checkpoint (.pt) to evaluate; repeatable')
+    parser.add_argument('--shipped', action='store_true',
+                        help="also evaluate the scenario's shipped generator (the default "
+                             'when no generator is given)')
+    parser.add_argument('--cellular-automaton', action='store_true',
+                        help='also evaluate the non-learned cellular-automaton generator')
+    parser.add_argument('--exclude-run', type=Path, action='append', default=[],
+                        help='a further run whose seeds must not be used; repeatable')
+    parser.add_argument('--episodes', type=int, default=30, help='fresh maps per generator')
+    parser.add_argument('--seed', type=int, default=1000, help='seed of the fresh seeds')
+    parser.add_argument('--controller', default='',
+                        help="built-in controller (default: the scenario's)")
+    parser.add_argument('--time-limit', type=float, default=0.0,
+                        help="episode time limit, sim s (default: the scenario's)")
+    parser.add_argument('--simulate-invalid', action='store_true',
+                        help='also simulate maps without a certified route')
+    parser.add_argument('--fault-records', type=int, default=0,
+                        help='confirmed distinct faults per generator kept as bag + PNG '
+                             '(-1: every one)')
+    parser.add_argument('--repeats', type=int, default=3,
+                        help='re-runs that confirm a fault before it is recorded')
+    parser.add_argument('--coarse-cells', type=int, default=FaultRule.coarse_cells,
+                        help='fault rule: coarse cell side in map cells')
+    parser.add_argument('--context-cells', type=int, default=FaultRule.context_cells,
+                        help='fault rule: map cells of context around the coarse cell')
+    parser.add_argument('--output', type=Path, default=None,
+                        help='output folder (default: runs/evaluate-<scenario>-seed<seed>)')
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error('--episodes must be >= 1')
+    return args
+
+
+def build_sources(args: argparse.Namespace, scenario: str) -> list[MapSource]:
+    sources: list[MapSource] = []
+    for run_dir in args.run:
+        sources += campaign_sources(run_dir, args.member)
+    for checkpoint in args.checkpoint:
+        sources.append(PyramidSource(str(checkpoint), scenario, checkpoint))
+    if args.shipped or not sources:
+        sources.insert(0, PyramidSource('shipped generator', scenario, None))
+    if args.cellular_automaton:
+        sources.append(AutomatonSource(scenario))
+    return sources
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    arguments = sys.argv[1:] if argv is None else list(argv)
+    args = parse_args(arguments)
+    torch.set_num_threads(1)
+    try:
+        scenario = args.scenario
+        for run_dir in args.run:
+            run_scenario = str(open_run(run_dir).read_config()['config']['scenario'])
+            if scenario and scenario != run_scenario:
+                raise SessganEvolverError(f'run {run_dir} is a {run_scenario} campaign, not '
+                                          f'{scenario}')
+            scenario = run_scenario
+        scenario = scenario or 'factory'
+        get_scenario(scenario)
+        runs = list(args.run) + list(args.exclude_run)
+        map_seeds, sim_seeds = used_seeds(runs)
+        plan = fresh_seed_plan(args.seed, args.episodes, map_seeds, sim_seeds)
+        check_disjoint(plan, runs)
+        sources = build_sources(args, scenario)
+    except (SessganEvolverError, SessganGenError, OSError, ValueError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
+    output = args.output or Path('runs') / f'evaluate-{scenario}-seed{args.seed}'
+    output.mkdir(parents=True, exist_ok=True)
+    rule = FaultRule(args.coarse_cells, args.context_cells)
+    print(f'{len(plan.pairs)} fresh seed pairs (evaluation seed {args.seed}); '
+          f'{len(map_seeds)} map and {len(sim_seeds)} simulator seeds of {len(runs)} runs '
+          f'excluded, {plan.skipped} drawn seeds skipped', file=sys.stderr)
+    summaries, rows = [], []
+    progress = ProgressPrinter()
+    try:
+        with InProcessEvaluator(scenario, args.controller, args.time_limit,
+                                simulate_invalid=args.simulate_invalid) as evaluator:
+            for source in sources:
+                progress.start(source.label, len(plan.pairs))
+                result = evaluate_source(source, plan, evaluator, rule,
+                                         lambda done, _: progress.update(done))
+                summaries.append(result.summary)
+                rows += episode_rows(result)
+                if args.fault_records:
+                    safe = ''.join(c if c.isalnum() or c in '-_.' else '_'
+                                   for c in source.label)
+                    confirm_faults(result.faults, result.records, evaluator, rule,
+                                   args.repeats, output / 'faults' / safe, args.fault_records,
+                                   {'generator': source.label})
+    except KeyboardInterrupt:
+        print('interrupted', file=sys.stderr)
+        return 130
+    except (SessganEvolverError, SessganGenError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 1
+    table = summary_table(summaries)
+    write_csv(output / 'summary.csv', summary_rows(summaries))
+    write_csv(output / 'episodes.csv', rows, EPISODE_COLUMNS)
+    controller = args.controller or get_scenario(scenario).controller
+    (output / 'summary.md').write_text(
+        f'# Fresh-seed evaluation: {scenario}, {controller}\n\n'
+        f'Command: `ros2 run sessgan_evolver evaluate {shlex.join(arguments)}`\n\n'
+        f'{len(plan.pairs)} fresh (map, simulator) seed pairs from evaluation seed '
+        f'{args.seed}, disjoint from the {len(runs)} runs given; failure rate = valid '
+        'failures / valid maps; collisions and risk: means over valid maps.\n\n'
+        f'{table}\n', encoding='utf-8')
+    print(table)
+    print(f'summary: {output / "summary.md"}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

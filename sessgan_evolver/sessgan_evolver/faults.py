@@ -1,0 +1,237 @@
+"""Failures, distinct faults and their confirmation: how fault-finding is counted.
+
+**Valid failure**: a controller failure as sessgan_sim defines it
+(``sessgan_sim.metrics.is_controller_failure``, the rule the simulator node keeps failure bags
+by): in a valid test (a map whose route certificate holds, ``Environment.feasible``), a
+contact the robot under test caused, or the goal not reached (timeout, stuck). An agent
+driving into a robot that stood still is recorded but is no failure.
+
+**Distinct faults.** A valid failure's *fault* is its first fault event: the first contact
+the robot caused (kind ``collision_static`` against a wall, barrier or low obstacle,
+``collision_agent`` when it moved into an agent; at the robot's position when the contact
+began), or, without one, where the robot ended (kind ``stuck`` or ``timeout``). Two valid
+failures are the same fault when
+
+1. their kinds are equal,
+2. their fault places fall into the same coarse cell (squares of ``FaultRule.coarse_cells``
+   map cells, counted from the map's origin), and
+3. the map around that coarse cell (the coarse cell widened by ``FaultRule.context_cells``
+   map cells on each side, beyond the grid counting as outside) is identical.
+
+So the same local situation met the same way counts once, in one map or in many (a mutation
+far from the place makes no new fault), while a change of the layout where it happened, or
+another kind of failure, is a new one. The coarse grid can split one physical spot between
+two neighbouring cells; the rule accepts that rather than merging distinct spots.
+
+**Confirmation.** A distinct fault is re-run R times from its first occurrence (same map,
+same simulator seed); it is *confirmed* when every re-run is a valid failure with the same
+fault key. In-process lockstep episodes are deterministic, so they also reproduce *exactly*
+(same outcome, collisions, ticks and risk), which is counted separately.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from sessgan_evolver.episode_runner import EpisodeTrace
+from sessgan_evolver.errors import SessganEvolverError
+from sessgan_gen.environment import Environment
+from sessgan_sim.metrics import ContactKind, is_controller_failure
+
+EXACT_FIELDS = ('outcome', 'collisions', 'fault_collisions', 'ticks', 'risk_score',
+                'proximity_time')
+"""Metrics two runs must share to reproduce exactly."""
+
+OUTSIDE = -1
+"""Context value of cells beyond the grid."""
+
+
+class FaultError(SessganEvolverError, ValueError):
+    """A fault rule or a failure that cannot be keyed (bad cell sizes, no trace)."""
+
+
+def is_valid_failure(metrics: Mapping[str, Any]) -> bool:
+    """sessgan_sim's controller-failure rule applied to a metrics dict."""
+    return is_controller_failure(SimpleNamespace(
+        feasible=bool(metrics.get('feasible')),
+        fault_collisions=int(metrics.get('fault_collisions') or 0),
+        outcome=metrics.get('outcome')))
+
+
+@dataclass(frozen=True)
+class FaultRule:
+    """The grouping of the module docstring, in map cells."""
+
+    coarse_cells: int = 4
+    """Side of a coarse cell in map cells (2 m in the factory and drone area, 4 m on the
+    race track)."""
+    context_cells: int = 2
+    """Map cells around the coarse cell whose layout is part of the fault."""
+
+    def validate(self) -> None:
+        if self.coarse_cells < 1:
+            raise FaultError(f'coarse_cells must be >= 1, got {self.coarse_cells}')
+        if self.context_cells < 0:
+            raise FaultError(f'context_cells must be >= 0, got {self.context_cells}')
+
+
+@dataclass(frozen=True, order=True)
+class FaultKey:
+    """What makes a fault distinct (module docstring)."""
+
+    kind: str
+    row: int
+    """Coarse cell row (y) of the fault place."""
+    col: int
+    """Coarse cell column (x)."""
+    context: str
+    """Hex digest of the map around the coarse cell."""
+
+    @property
+    def label(self) -> str:
+        """A short, file-name-safe name, e.g. 'collision_static-r3c5-1a2b3c4d'."""
+        return f'{self.kind}-r{self.row}c{self.col}-{self.context[:8]}'
+
+    def to_dict(self) -> dict[str, Any]:
+        return {'kind': self.kind, 'row': self.row, 'col': self.col, 'context': self.context}
+
+
+@dataclass(frozen=True)
+class FaultEvent:
+    """The first fault event of a valid failure."""
+
+    kind: str
+    x: float
+    """m, map frame."""
+    y: float
+    time: float
+    """Sim seconds (the end of the episode for stuck and timeout)."""
+
+
+FAULT_KIND_OF_CONTACT = {ContactKind.STATIC.value: 'collision_static',
+                         ContactKind.ROBOT_INTO_AGENT.value: 'collision_agent'}
+"""Fault kinds of the contact kinds that are the robot's fault."""
+
+
+def first_fault_event(metrics: Mapping[str, Any], trace: EpisodeTrace) -> FaultEvent:
+    """The first contact the robot caused (from the metrics' contact events), else where the
+    robot ended (kind = the outcome)."""
+    for contact in metrics.get('contacts') or ():
+        kind = FAULT_KIND_OF_CONTACT.get(str(contact.get('kind')))
+        if kind is not None:
+            return FaultEvent(kind, float(contact['x']), float(contact['y']),
+                              float(contact['time']))
+    if int(metrics.get('fault_collisions') or 0) > 0:
+        raise FaultError('the metrics count a fault collision but list no contact event the '
+                         'robot caused')
+    if not len(trace.poses):
+        raise FaultError('the trace has no robot pose')
+    x, y, _ = (float(v) for v in trace.poses[-1])
+    return FaultEvent(str(metrics.get('outcome')), x, y, float(trace.times[-1]))
+
+
+def fault_key(environment: Environment, event: FaultEvent, rule: FaultRule) -> FaultKey:
+    """The key of a fault event in ``environment`` (module docstring)."""
+    rule.validate()
+    map_row, map_col = environment.cell_of(event.x, event.y)
+    row = math.floor(map_row / rule.coarse_cells)
+    col = math.floor(map_col / rule.coarse_cells)
+    top, left = row * rule.coarse_cells - rule.context_cells, col * rule.coarse_cells \
+        - rule.context_cells
+    side = rule.coarse_cells + 2 * rule.context_cells
+    occupancy = np.asarray(environment.occupancy)
+    patch = np.full((side, side), OUTSIDE, dtype=np.int16)
+    rows = slice(max(top, 0), min(top + side, occupancy.shape[0]))
+    cols = slice(max(left, 0), min(left + side, occupancy.shape[1]))
+    if rows.start < rows.stop and cols.start < cols.stop:
+        patch[rows.start - top:rows.stop - top, cols.start - left:cols.stop - left] = \
+            occupancy[rows, cols]
+    digest = hashlib.sha256(patch.tobytes() + f'{side}'.encode()).hexdigest()
+    return FaultKey(event.kind, int(row), int(col), digest)
+
+
+def key_of_failure(environment: Environment, metrics: Mapping[str, Any],
+                   trace: EpisodeTrace | None, rule: FaultRule) -> FaultKey | None:
+    """The fault key of a valid failure (None for anything else)."""
+    if not is_valid_failure(metrics):
+        return None
+    if trace is None:
+        raise FaultError(f'episode {environment.id}: a fault key needs the episode trace')
+    return fault_key(environment, first_fault_event(metrics, trace), rule)
+
+
+def exactly_equal(first: Mapping[str, Any], second: Mapping[str, Any]) -> bool:
+    """Whether two runs' metrics agree on EXACT_FIELDS."""
+    return all(first.get(name) == second.get(name) for name in EXACT_FIELDS)
+
+
+@dataclass(frozen=True)
+class Confirmation:
+    """The re-runs of one distinct fault."""
+
+    repeats: int
+    reproduced: int
+    """Re-runs that were valid failures with the same fault key."""
+    exact: int
+    """Re-runs whose metrics equal the original's on EXACT_FIELDS."""
+    wall_time: float
+    """Wall seconds of the re-runs."""
+
+    @property
+    def confirmed(self) -> bool:
+        return self.repeats > 0 and self.reproduced == self.repeats
+
+
+@dataclass
+class FaultEntry:
+    """One distinct fault and the episodes that showed it."""
+
+    key: FaultKey
+    occurrences: list[int] = field(default_factory=list)
+    """Indices (into the episode list) of the episodes with this fault, in order."""
+    confirmation: Confirmation | None = None
+
+    @property
+    def first(self) -> int:
+        return self.occurrences[0]
+
+
+def group_faults(keys: Sequence[FaultKey | None]) -> list[FaultEntry]:
+    """Distinct faults of a sequence of episodes' keys (None: no valid failure), in the
+    order of their first occurrence."""
+    entries: dict[FaultKey, FaultEntry] = {}
+    for index, key in enumerate(keys):
+        if key is None:
+            continue
+        entry = entries.get(key)
+        if entry is None:
+            entry = entries[key] = FaultEntry(key)
+        entry.occurrences.append(index)
+    return list(entries.values())
+
+
+Rerun = Callable[[], tuple[Mapping[str, Any], FaultKey | None, float]]
+"""Runs a fault's episode again: (metrics, fault key or None, wall seconds)."""
+
+
+def confirm(entry: FaultEntry, original_metrics: Mapping[str, Any], rerun: Rerun,
+            repeats: int) -> Confirmation:
+    """Re-run ``entry``'s first episode ``repeats`` times and store the Confirmation."""
+    if repeats < 0:
+        raise FaultError(f'repeats must be >= 0, got {repeats}')
+    reproduced = exact = 0
+    wall = 0.0
+    for _ in range(repeats):
+        metrics, key, seconds = rerun()
+        wall += seconds
+        reproduced += int(key == entry.key)
+        exact += int(exactly_equal(metrics, original_metrics))
+    entry.confirmation = Confirmation(repeats, reproduced, exact, wall)
+    return entry.confirmation

@@ -1,0 +1,370 @@
+"""Fresh-seed evaluation: does a generator make failing maps for noise it never saw?
+
+A campaign optimises its members on the seeds of its schedule, so their risk on those seeds
+says little about new maps. Here a generator (the shipped checkpoint, a campaign's best
+member or whole last population, a user's checkpoint, or the non-learned cellular automaton)
+samples N maps from seeds that no given campaign used, and each map is run once with a
+simulator seed that no campaign used either:
+
+* map seeds come from stream FRESH_MAPS and simulator seeds from FRESH_SIMULATION of the
+  evaluation seed (sessgan_evolver.seeding); any seed that appears among the map or simulator
+  seeds of an excluded run's episodes (metrics.jsonl) is skipped, and how many were skipped
+  is reported;
+* every source sees the same seed pairs, so generators are compared on common random numbers.
+
+Per source: valid maps (certified route), valid failures (controller failures,
+sessgan_evolver.faults), failure rate = valid failures / valid maps, mean fault collisions,
+risk (the paper's) and fault risk over valid maps, TPKL of all its maps to the example map,
+their uniqueness, and the distinct faults among them.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from sessgan_evolver.cellular_automaton import CellularAutomatonGenerator
+from sessgan_evolver.errors import RunStoreError, SessganEvolverError
+from sessgan_evolver.faults import FaultEntry, FaultRule, group_faults
+from sessgan_evolver.genome import Genome
+from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.run_store import RunStore
+from sessgan_evolver.search import EpisodeLog, EpisodeRecord
+from sessgan_evolver.seeding import SeedStream, shared_seeds
+from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
+from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.sampling import sample_token_maps
+from sessgan_gen.token_map import load_example_map
+
+
+class FreshSeedError(SessganEvolverError):
+    """A generator or run that cannot be evaluated, or seeds that are not fresh."""
+
+
+class MapSource(Protocol):
+    """Something that turns seeds into token maps."""
+
+    label: str
+
+    def maps(self, seeds: Sequence[int]) -> np.ndarray:
+        """Token maps (len(seeds), height, width), map i from seeds[i] alone."""
+        ...
+
+
+class PyramidSource:
+    """A generator checkpoint (a path, checkpoint bytes, or None for the shipped one)."""
+
+    def __init__(self, label: str, scenario: str, checkpoint: str | Path | bytes | None = None
+                 ) -> None:
+        self.label = label
+        source = checkpoint or default_checkpoint_path(scenario)
+        self.pyramid, self.metadata = load_checkpoint(source, scenario=scenario)
+
+    def maps(self, seeds: Sequence[int]) -> np.ndarray:
+        return sample_token_maps(self.pyramid, [int(s) for s in seeds])
+
+
+class PopulationSource:
+    """A population as one generator: map i comes from member i mod n (a member drawn in
+    turn), so N fresh maps cost N episodes whatever the population's size."""
+
+    def __init__(self, label: str, members: Sequence[PyramidSource]) -> None:
+        if not members:
+            raise FreshSeedError('a population needs at least one member')
+        self.label = label
+        self.members = list(members)
+
+    def maps(self, seeds: Sequence[int]) -> np.ndarray:
+        count = len(self.members)
+        if not seeds:
+            return self.members[0].maps([])
+        rows = [self.members[index % count].maps([seed])[0] for index, seed in enumerate(seeds)]
+        return np.stack(rows)
+
+
+class AutomatonSource:
+    """The BARN-style cellular automaton (sessgan_evolver.cellular_automaton)."""
+
+    def __init__(self, scenario: str, label: str = 'cellular automaton') -> None:
+        self.label = label
+        self.generator = CellularAutomatonGenerator(scenario)
+
+    def maps(self, seeds: Sequence[int]) -> np.ndarray:
+        return self.generator.maps([int(s) for s in seeds])
+
+
+# ---- campaigns -------------------------------------------------------------------------------
+
+
+def open_run(run_dir: str | Path) -> RunStore:
+    run_dir = Path(run_dir)
+    if not (run_dir / 'config.json').is_file():
+        raise FreshSeedError(f'{run_dir} is not a campaign run (it has no config.json)')
+    return RunStore(run_dir.parent, run_dir.name)
+
+
+def used_seeds(run_dirs: Iterable[str | Path]) -> tuple[set[int], set[int]]:
+    """(map seeds, simulator seeds) of every episode the runs recorded."""
+    map_seeds: set[int] = set()
+    sim_seeds: set[int] = set()
+    for run_dir in run_dirs:
+        store = open_run(run_dir)
+        try:
+            rows = store.read_rows('episode')
+        except RunStoreError as err:
+            raise FreshSeedError(f'cannot read the episodes of {run_dir}: {err}') from err
+        for row in rows:
+            if row.get('map_seed') is not None:
+                map_seeds.add(int(row['map_seed']))
+            if row.get('sim_seed') is not None:
+                sim_seeds.add(int(row['sim_seed']))
+    return map_seeds, sim_seeds
+
+
+@dataclass(frozen=True)
+class SeedPlan:
+    """The fresh (map seed, simulator seed) pairs of an evaluation."""
+
+    pairs: list[tuple[int, int]]
+    skipped: int
+    """Seeds drawn but skipped because an excluded run used them."""
+    excluded_map_seeds: int
+    excluded_sim_seeds: int
+
+
+def fresh_seed_plan(evaluation_seed: int, count: int, exclude_maps: Collection[int] = (),
+                    exclude_sims: Collection[int] = ()) -> SeedPlan:
+    """``count`` seed pairs from the evaluation seed, disjoint from the excluded seeds."""
+    if count < 1:
+        raise FreshSeedError(f'the number of fresh maps must be >= 1, got {count}')
+    exclude_maps, exclude_sims = set(exclude_maps), set(exclude_sims)
+    pairs: list[tuple[int, int]] = []
+    skipped = 0
+    batch = 0
+    while len(pairs) < count:
+        # Further draws (another 'generation' of the stream) in the unlikely case of clashes.
+        map_seeds = shared_seeds(evaluation_seed, batch, count, SeedStream.FRESH_MAPS)
+        sim_seeds = shared_seeds(evaluation_seed, batch, count, SeedStream.FRESH_SIMULATION)
+        for map_seed, sim_seed in zip(map_seeds, sim_seeds):
+            if map_seed in exclude_maps or sim_seed in exclude_sims:
+                skipped += 1
+            elif len(pairs) < count:
+                pairs.append((map_seed, sim_seed))
+        batch += 1
+    return SeedPlan(pairs, skipped, len(exclude_maps), len(exclude_sims))
+
+
+def check_disjoint(plan: SeedPlan, run_dirs: Iterable[str | Path]) -> None:
+    """FreshSeedError if any seed of ``plan`` was used by one of the runs."""
+    map_seeds, sim_seeds = used_seeds(run_dirs)
+    clashes = [pair for pair in plan.pairs if pair[0] in map_seeds or pair[1] in sim_seeds]
+    if clashes:
+        raise FreshSeedError(f'{len(clashes)} seed pairs were used by the runs, e.g. '
+                             f'{clashes[0]}')
+
+
+def last_evaluated_generation(store: RunStore) -> int:
+    """The last generation with member rows (its population is the run's final one)."""
+    generations = [int(row['generation']) for row in store.read_rows('member')]
+    if not generations:
+        raise FreshSeedError(f'run {store.run_dir} has no evaluated generation yet')
+    return max(generations)
+
+
+def campaign_sources(run_dir: str | Path, member: str = 'best') -> list[PyramidSource]:
+    """Generators of a campaign's last evaluated population: ``member`` is 'best' (the
+    fittest member of that generation), 'final' (every member) or a member index."""
+    store = open_run(run_dir)
+    config = store.read_config()['config']
+    scenario = str(config['scenario'])
+    generation = last_evaluated_generation(store)
+    rows = [row for row in store.read_rows('member') if int(row['generation']) == generation]
+    state = store.load_checkpoint(generation)['algorithm']
+    genomes = [Genome.from_plain(plain) for plain in state['population']]
+    if member == 'best':
+        fitness_key = 'selection_fitness' if 'selection_fitness' in rows[0] else 'fitness'
+        best = max(rows, key=lambda row: (row[fitness_key] if row[fitness_key] is not None
+                                          else -math.inf, -int(row['member'])))
+        chosen = [int(best['member'])]
+    elif member == 'final':
+        chosen = list(range(len(genomes)))
+    else:
+        try:
+            chosen = [int(member)]
+        except ValueError as err:
+            raise FreshSeedError(f"member must be 'best', 'final' or an index, got "
+                                 f'{member!r}') from err
+        if not 0 <= chosen[0] < len(genomes):
+            raise FreshSeedError(f'run {store.run_dir} has members 0..{len(genomes) - 1}, not '
+                                 f'{chosen[0]}')
+    base = config.get('checkpoint') or default_checkpoint_path(scenario)
+    pyramid, metadata = load_checkpoint(base, scenario=scenario)
+    template = {key: value.clone() for key, value in pyramid.state_dict().items()}
+    sources = []
+    for index in chosen:
+        pyramid.load_state_dict(genomes[index].to_state_dict(template))
+        weights = checkpoint_bytes(pyramid, metadata)
+        sources.append(PyramidSource(f'{store.run_name} g{generation} m{index}', scenario,
+                                     weights))
+    return sources
+
+
+# ---- evaluation ------------------------------------------------------------------------------
+
+
+@dataclass
+class FreshSeedSummary:
+    """One generator's figures (module docstring)."""
+
+    generator: str
+    maps: int
+    valid_maps: int
+    valid_fraction: float
+    valid_failures: int
+    failure_rate: float | None
+    """Valid failures / valid maps (None without a valid map)."""
+    mean_fault_collisions: float | None
+    """Contacts the robot caused, mean over valid maps."""
+    mean_collisions: float | None
+    """Every contact event, mean over valid maps."""
+    mean_risk: float | None
+    """The paper's risk score, mean over valid maps."""
+    mean_fault_risk: float | None
+    """Fault risk score, mean over valid maps."""
+    tpkl: float
+    """Of all its maps to the example map, nats."""
+    uniqueness: float
+    """Mean of the 8x8 and 16x16 uniqueness of all its maps, percent."""
+    distinct_faults: int
+    wall_time: float
+    """Wall seconds of its episodes."""
+
+
+@dataclass
+class FreshSeedResult:
+    summary: FreshSeedSummary
+    records: list[EpisodeRecord]
+    faults: list[FaultEntry] = field(default_factory=list)
+
+
+def _mean(values: list[float]) -> float | None:
+    return float(np.mean(values)) if values else None
+
+
+def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvaluator,
+                    rule: FaultRule | None = None,
+                    progress: Callable[[int, int], None] | None = None) -> FreshSeedResult:
+    """Run every fresh seed pair of ``plan`` on ``source``'s maps."""
+    log = EpisodeLog(rule)
+    observer, evaluator.observer = evaluator.observer, log
+    started = time.perf_counter()
+    try:
+        maps = source.maps([map_seed for map_seed, _ in plan.pairs])
+        for index, ((map_seed, sim_seed), cells) in enumerate(zip(plan.pairs, maps)):
+            environment = make_environment(cells, evaluator.scenario,
+                                           f'fresh-{index:04d}-s{map_seed}', seed=map_seed)
+            evaluator.run_environment(environment, sim_seed, source.label)
+            if progress is not None:
+                progress(index + 1, len(plan.pairs))
+    finally:
+        evaluator.observer = observer
+    wall = time.perf_counter() - started
+    records = log.records
+    valid = [record for record in records if record.metrics.get('feasible')]
+    failures = [record for record in valid if record.valid_failure]
+    example = load_example_map(evaluator.scenario).cells
+    token_maps = [np.asarray(m) for m in maps]
+    faults = group_faults([record.fault for record in records])
+    summary = FreshSeedSummary(
+        generator=source.label, maps=len(records), valid_maps=len(valid),
+        valid_fraction=len(valid) / len(records) if records else 0.0,
+        valid_failures=len(failures),
+        failure_rate=len(failures) / len(valid) if valid else None,
+        mean_fault_collisions=_mean([float(r.metrics['fault_collisions']) for r in valid]),
+        mean_collisions=_mean([float(r.metrics['collisions']) for r in valid]),
+        mean_risk=_mean([float(r.metrics['risk_score']) for r in valid]),
+        mean_fault_risk=_mean([float(r.metrics['fault_risk_score']) for r in valid]),
+        tpkl=tile_pattern_kl(example, token_maps),
+        uniqueness=uniqueness_report(token_maps).mean, distinct_faults=len(faults),
+        wall_time=wall)
+    return FreshSeedResult(summary, records, faults)
+
+
+EPISODE_COLUMNS = ('generator', 'index', 'environment_id', 'map_seed', 'sim_seed', 'feasible',
+                   'route_length', 'route_min_clearance', 'outcome', 'fault_collisions',
+                   'collisions', 'proximity_time', 'simulation_time', 'risk_score',
+                   'fault_risk_score', 'valid_failure', 'fault', 'wall_time')
+
+
+def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
+    """Per-map rows of one generator (EPISODE_COLUMNS)."""
+    rows = []
+    for record in result.records:
+        metrics = record.metrics
+        rows.append({
+            'generator': result.summary.generator, 'index': record.index,
+            'environment_id': record.environment.id, 'map_seed': record.environment.seed,
+            'sim_seed': record.sim_seed, 'feasible': bool(metrics.get('feasible')),
+            'route_length': record.environment.route_length,
+            'route_min_clearance': record.environment.route_min_clearance,
+            'outcome': metrics.get('outcome'),
+            'fault_collisions': metrics.get('fault_collisions'),
+            'collisions': metrics.get('collisions'),
+            'proximity_time': metrics.get('proximity_time'),
+            'simulation_time': metrics.get('simulation_time'),
+            'risk_score': metrics.get('risk_score'),
+            'fault_risk_score': metrics.get('fault_risk_score'),
+            'valid_failure': record.valid_failure,
+            'fault': record.fault.label if record.fault else '',
+            'wall_time': metrics.get('wall_time')})
+    return rows
+
+
+def write_csv(path: str | Path, rows: Sequence[Mapping[str, Any]],
+              columns: Sequence[str] | None = None) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    columns = list(columns or (rows[0].keys() if rows else []))
+    with path.open('w', newline='', encoding='utf-8') as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns, extrasaction='ignore',
+                                lineterminator='\n')
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({key: '' if row.get(key) is None else row.get(key)
+                             for key in columns})
+    return path
+
+
+def _format(value: Any, digits: int = 3) -> str:
+    if value is None:
+        return '–'
+    if isinstance(value, float):
+        return f'{value:.{digits}f}'
+    return str(value)
+
+
+def summary_table(summaries: Sequence[FreshSeedSummary]) -> str:
+    """The summaries as a GitHub markdown table."""
+    lines = ['| generator | maps | valid | valid failures | failure rate | fault collisions | '
+             'risk | fault risk | TPKL | uniqueness (%) | distinct faults |',
+             '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|']
+    for s in summaries:
+        lines.append(
+            f'| {s.generator} | {s.maps} | {s.valid_maps} ({s.valid_fraction:.0%}) | '
+            f'{s.valid_failures} | {_format(s.failure_rate)} | '
+            f'{_format(s.mean_fault_collisions, 2)} | {_format(s.mean_risk)} | '
+            f'{_format(s.mean_fault_risk)} | {s.tpkl:.3f} | {s.uniqueness:.2f} | '
+            f'{s.distinct_faults} |')
+    return '\n'.join(lines)
+
+
+def summary_rows(summaries: Sequence[FreshSeedSummary]) -> list[dict[str, Any]]:
+    return [asdict(summary) for summary in summaries]

@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+"""Fault-finding power of every method at equal budget, per controller: the issue's goals.
+
+Runs ``compare`` (sessgan_evolver.comparison: every method, several search seeds, the same
+in-process runner, certificate and fault rule) once per controller and prints, besides the
+report's own table, the figures the goals are stated in:
+
+* SESS-GAN's confirmed distinct faults per 1,000 episodes against random sampling's and the
+  grid GA's (ratio of the means over seeds, and the seed-by-seed ratios);
+* the fresh-seed valid-failure rate of SESS-GAN's final generator against the shipped
+  generator's, and its fresh maps' TPKL against the shipped generator's.
+
+Usage (CPU-heavy; run with nice)::
+
+    nice -n 10 python tests/benchmarks/bench_fault_finding.py --scenario factory \\
+        --controllers nearness_diagram --seeds 0,1,2 --budget 360 --fresh 40
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[2]
+for package in ('sessgan_gen', 'sessgan_sim', 'sessgan_evolver', 'controllers'):
+    sys.path.insert(0, str(ROOT / package))
+
+from sessgan_evolver.comparison import (  # noqa: E402
+    CompareConfig,
+    method_table,
+    run_comparison,
+)
+from sessgan_evolver.search_methods import METHODS  # noqa: E402
+
+
+def mean_of(runs, method: str, key: str) -> float | None:
+    values = [getattr(r.figures, key) for r in runs if r.figures.method == method
+              and getattr(r.figures, key) is not None]
+    return float(np.mean(values)) if values else None
+
+
+def describe_ratio(runs, method: str, other: str, key: str) -> str:
+    mine, theirs = mean_of(runs, method, key), mean_of(runs, other, key)
+    if mine is None or theirs is None:
+        return f'{method} vs {other}: no value'
+    per_seed = []
+    for run in runs:
+        if run.figures.method != method:
+            continue
+        partner = next((r for r in runs if r.figures.method == other
+                        and r.figures.search_seed == run.figures.search_seed), None)
+        a, b = getattr(run.figures, key), getattr(partner.figures, key) if partner else None
+        per_seed.append('n/a' if a is None or not b else f'{a / b:.2f}x')
+    total = f'{mine / theirs:.2f}x' if theirs else 'inf'
+    return (f'{method} vs {other}: {mine:.2f} vs {theirs:.2f} ({total}; per seed '
+            f'{", ".join(per_seed)})')
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--scenario', default='factory')
+    parser.add_argument('--controllers', default='', help="comma-separated ('': scenario's)")
+    parser.add_argument('--methods', default=','.join(METHODS))
+    parser.add_argument('--seeds', default='0,1,2')
+    parser.add_argument('--budget', type=int, default=360)
+    parser.add_argument('--fresh', type=int, default=40)
+    parser.add_argument('--repeats', type=int, default=3)
+    parser.add_argument('--confirm-limit', type=int, default=0)
+    parser.add_argument('--time-limit', type=float, default=0.0)
+    parser.add_argument('--seed-schedule', default='fixed')
+    parser.add_argument('--population', type=int, default=12)
+    parser.add_argument('--maps-per-member', type=int, default=3)
+    parser.add_argument('--output', type=Path, default=Path('runs/bench-fault-finding'))
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    command = ' '.join(sys.argv[1:] if argv is None else argv)
+    for controller in args.controllers.split(',') if args.controllers else ['']:
+        config = CompareConfig(
+            scenario=args.scenario, controller=controller,
+            methods=tuple(m for m in args.methods.split(',') if m),
+            search_seeds=tuple(int(s) for s in args.seeds.split(',') if s),
+            budget=args.budget, fresh_episodes=args.fresh, repeats=args.repeats,
+            confirm_limit=args.confirm_limit, time_limit=args.time_limit,
+            seed_schedule=args.seed_schedule, population=args.population,
+            maps_per_member=args.maps_per_member)
+        output = args.output / f'{args.scenario}-{controller or "default"}'
+        result = run_comparison(
+            config, output, f'python tests/benchmarks/bench_fault_finding.py {command}',
+            log=lambda message: print(f'[compare] {message}', file=sys.stderr, flush=True))
+        print(f'\n## {args.scenario}, {controller or "default controller"} '
+              f'({result.wall_time / 60:.1f} min; report {result.report_path})\n')
+        print(method_table(config, result.runs))
+        for other in ('random', 'grid_ga', 'latent'):
+            if 'sessgan' in config.methods and other in config.methods:
+                print(describe_ratio(result.runs, 'sessgan', other, 'confirmed_per_1000'))
+        sessgan = [r for r in result.runs if r.figures.method == 'sessgan']
+        shipped = next((s for key, s in result.fresh.items() if key == 'pyramid:base'), None)
+        if sessgan and shipped is not None:
+            rates = [r.figures.fresh_failure_rate for r in sessgan]
+            print(f'fresh-seed failure rate: SESS-GAN final generators {rates} vs shipped '
+                  f'{shipped.failure_rate}')
+            tpkls = [result.fresh[r.source_key].tpkl for r in sessgan]
+            print(f'fresh-seed TPKL: SESS-GAN {[round(t, 3) for t in tpkls]} vs shipped '
+                  f'{shipped.tpkl:.3f}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

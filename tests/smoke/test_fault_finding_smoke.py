@@ -1,0 +1,42 @@
+"""Tiny runs of the fault-finding commands: an in-process campaign, its fresh-seed evaluation
+and a comparison of two methods, through `ros2 run`."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.smoke
+
+
+def run(command: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    result = subprocess.run(['ros2', 'run', 'sessgan_evolver', *command], cwd=cwd,
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return result
+
+
+def test_campaign_in_process_then_fresh_seeds_then_compare(ros_workspace, tmp_path):
+    campaign = run(['campaign', '--in-process', '--generations', '2', '--population', '3',
+                    '--maps-per-member', '1', '--time-limit', '4', '--seed', '3',
+                    '--seed-schedule', 'rotating', '--run', 'tiny', '--runs-root', 'runs',
+                    '--bags-root', 'bags'], tmp_path)
+    assert 'report:' in campaign.stdout
+    assert (tmp_path / 'runs' / 'tiny' / 'report' / 'report.md').exists()
+
+    run(['evaluate', '--run', 'runs/tiny', '--member', 'final', '--shipped', '--episodes', '2',
+         '--time-limit', '4', '--output', 'fresh'], tmp_path)
+    with open(tmp_path / 'fresh' / 'summary.csv') as handle:
+        generators = [row['generator'] for row in csv.DictReader(handle)]
+    assert generators == ['shipped generator', 'tiny g1 m0', 'tiny g1 m1', 'tiny g1 m2']
+    with open(tmp_path / 'fresh' / 'episodes.csv') as handle:
+        assert len(list(csv.DictReader(handle))) == 8
+
+    run(['compare', '--methods', 'random,cellular_automaton', '--search-seeds', '0,1,2',
+         '--budget', '3', '--time-limit', '3', '--fresh-episodes', '2', '--repeats', '1',
+         '--output', 'compare'], tmp_path)
+    for name in ('report.md', 'compare.png', 'failing_maps.png', 'runs.csv'):
+        assert (tmp_path / 'compare' / name).stat().st_size > 0

@@ -1,0 +1,64 @@
+"""A tiny comparison of every method: equal budgets, one fresh-seed evaluation per generator,
+the report's files."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+import torch
+
+from sessgan_evolver.comparison import CompareConfig, CompareError, run_comparison, spread
+from sessgan_evolver.search_methods import METHODS
+
+pytestmark = pytest.mark.unit
+torch.set_num_threads(1)
+
+
+def read(path):
+    with open(path) as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_every_method_runs_at_equal_budget_and_is_reported(tmp_path):
+    config = CompareConfig(search_seeds=(0, 1), budget=4, population=2, maps_per_member=2,
+                           time_limit=2.0, fresh_episodes=2, repeats=1, max_fault_records=1)
+    result = run_comparison(config, tmp_path / 'compare', 'compare --tiny', log=lambda _: None)
+    assert [(r.figures.method, r.figures.search_seed) for r in result.runs] == \
+        [(m, s) for s in (0, 1) for m in METHODS]
+    for run in result.runs:
+        figures = run.figures
+        assert figures.episodes == 4 == len(run.records)
+        assert figures.confirmed_faults <= figures.checked_faults == figures.distinct_faults
+        assert figures.distinct_faults <= figures.valid_failures <= figures.valid_maps <= 4
+        assert figures.confirmed_per_1000 == pytest.approx(250 * figures.confirmed_faults)
+        if figures.confirmed_faults:
+            assert 1 <= figures.first_confirmed_episode <= 4
+            assert figures.first_confirmed_wall > 0
+        if figures.method == 'grid_ga':  # no generator to evaluate on fresh seeds
+            assert figures.generator == '' and figures.fresh_valid_fraction is None
+        else:
+            assert figures.generator and figures.fresh_valid_fraction is not None
+    # One fresh-seed evaluation per distinct generator: 2 SESS-GAN members, the shipped
+    # generator (random and latent), the cellular automaton.
+    assert len(result.fresh) == 4
+    output = tmp_path / 'compare'
+    for name in ('report.md', 'compare.png', 'failing_maps.png', 'fresh_seed.csv',
+                 'fresh_seed_plan.txt'):
+        assert (output / name).stat().st_size > 0
+    assert len(read(output / 'runs.csv')) == 10 and len(read(output / 'episodes.csv')) == 40
+    report = (output / 'report.md').read_text()
+    assert 'compare --tiny' in report and all(method in report for method in METHODS)
+    with pytest.raises(CompareError, match='holds a comparison'):
+        run_comparison(config, output, log=lambda _: None)
+
+
+def test_bad_settings_and_the_spread():
+    with pytest.raises(CompareError, match='unknown'):
+        CompareConfig(methods=('random', 'magic')).validate()
+    with pytest.raises(CompareError, match='distinct'):
+        CompareConfig(search_seeds=(1, 1)).validate()
+    with pytest.raises(CompareError, match='no SESS-GAN generation'):
+        CompareConfig(budget=10).validate()
+    assert spread([1.0, 3.0, None]) == (2.0, pytest.approx(2 ** 0.5), 2)
+    assert spread([None]) == (None, None, 0)

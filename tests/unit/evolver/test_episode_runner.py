@@ -1,0 +1,84 @@
+"""In-process episodes: deterministic per seed, traces consistent with the metrics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sessgan_evolver.episode_runner import EpisodeRunner, EpisodeRunnerError
+from sessgan_evolver.in_process import NOT_SIMULATED, InProcessEvaluator
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.token_map import load_example_map
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.fixture(scope='module')
+def factory():
+    return make_environment(load_example_map('factory').cells, 'factory', 'example')
+
+
+def test_same_seed_same_episode_and_the_trace_matches_the_metrics(factory):
+    with EpisodeRunner('factory', time_limit=4.0) as runner:
+        first = runner.run(factory, seed=3, trace=True)
+        second = runner.run(factory, seed=3, trace=True, keep_scans=True)
+        other = runner.run(factory, seed=4)
+    ignore = {'wall_time'}
+    assert {k: v for k, v in first.metrics.items() if k not in ignore} == \
+        {k: v for k, v in second.metrics.items() if k not in ignore}
+    assert other.trace is None
+    trace = first.trace
+    ticks = first.metrics['ticks']
+    assert len(trace.times) == len(trace.poses) == len(trace.agents) == ticks + 1
+    assert len(trace.commands) == ticks
+    assert np.array_equal(trace.poses, second.trace.poses)
+    assert trace.scans is None and second.trace.scans.shape == (ticks + 1, 360)
+    assert len(trace.contacts) == first.metrics['collisions'] == len(first.metrics['contacts'])
+    assert [c.to_dict() for c in trace.contacts] == first.metrics['contacts']
+    assert trace.agents.shape[1] == 2  # the factory's two dummy agents
+    assert trace.times[-1] == pytest.approx(first.metrics['simulation_time'])
+    assert first.metrics['bag_path'] == '' and first.metrics['wall_time'] > 0
+
+
+def test_bad_settings_are_named(factory):
+    with pytest.raises(EpisodeRunnerError, match='unknown controller'):
+        EpisodeRunner('factory', controller='no_such_controller')
+    with pytest.raises(EpisodeRunnerError, match='time limit'):
+        EpisodeRunner('factory', time_limit=-1.0)
+    drone = make_environment(load_example_map('drone').cells, 'drone', 'drone')
+    with EpisodeRunner('factory', time_limit=1.0) as runner, \
+            pytest.raises(EpisodeRunnerError, match='drone map'):
+        runner.run(drone, seed=0)
+
+
+def test_maps_without_a_certified_route_are_not_simulated_when_asked(factory):
+    walls = np.ones((32, 32), dtype=np.int64)
+    invalid = make_environment(walls, 'factory', 'walls')
+    assert not invalid.feasible
+    seen = []
+    with InProcessEvaluator('factory', time_limit=1.0, simulate_invalid=False,
+                            observer=lambda env, seed, run, origin: seen.append(
+                                (env.id, seed, run.metrics['outcome'], origin))) as evaluator:
+        run = evaluator.run_environment(invalid, 7, 'test')
+        assert run.metrics['outcome'] == 'invalid_environment'
+        assert run.metrics['detail'] == NOT_SIMULATED and run.metrics['ticks'] == 0
+        valid = evaluator.run_environment(factory, 7, 'test')
+        assert valid.metrics['ticks'] > 0 and evaluator.episodes == 2
+    assert seen == [('walls', 7, 'invalid_environment', 'test'),
+                    ('example', 7, valid.metrics['outcome'], 'test')]
+
+
+def test_the_controller_sees_what_its_node_decodes(factory):
+    from sessgan_evolver.episode_runner import node_inputs
+    from sessgan_sim.episode import Episode, EpisodeConfig
+
+    with Episode() as episode:
+        observation = episode.reset(factory, EpisodeConfig(seed=1))
+    scan, state = node_inputs(observation)
+    # LaserScan's float32 geometry, the yaw read back from the odometry quaternion.
+    assert scan.angle_increment == float(np.float32(observation.lidar.angle_increment))
+    assert scan.angle_increment != observation.lidar.angle_increment
+    assert scan.range_max == float(np.float32(observation.lidar.range_max))
+    assert np.array_equal(scan.ranges, observation.scan)
+    assert state.yaw == pytest.approx(observation.pose.yaw, abs=1e-12)
+    assert (state.x, state.y) == (observation.pose.x, observation.pose.y)

@@ -82,3 +82,17 @@ def test_the_controller_sees_what_its_node_decodes(factory):
     assert np.array_equal(scan.ranges, observation.scan)
     assert state.yaw == pytest.approx(observation.pose.yaw, abs=1e-12)
     assert (state.x, state.y) == (observation.pose.x, observation.pose.y)
+
+
+def test_as_in_a_campaign_the_controller_gets_the_map_and_its_robot(factory):
+    # The node gets the map topic (the paper's controllers steer along a route on it), and a
+    # campaign hosts the tricycle for the tricycle controller: in process the same.
+    with EpisodeRunner('factory') as runner:
+        assert runner.robot == 'diff_drive'
+        routed = runner.run(factory, seed=0)
+    # Without the map, Nearness-Diagram is stuck in a dead end of this map.
+    assert routed.metrics['outcome'] == 'goal_reached', routed.metrics['detail']
+    with EpisodeRunner('factory', 'tricycle_nearness_diagram') as runner:
+        assert runner.robot == 'tricycle' and runner.episode_config(0).robot == 'tricycle'
+    with EpisodeRunner('racetrack', 'reference_navigator') as runner:
+        assert runner.robot == 'car'

@@ -4,7 +4,7 @@ package_name = 'sessgan_controllers'
 # One executable per registered controller (sessgan_controllers.registry), all running the same
 # node: the executable's name selects the controller.
 controllers = ('nearness_diagram', 'velocity_projection', 'race_controller',
-               'reference_navigator')
+               'reference_navigator', 'tricycle_nearness_diagram')
 
 setup(
     name=package_name,

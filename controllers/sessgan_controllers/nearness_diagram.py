@@ -1,4 +1,4 @@
-"""Nearness-Diagram (ND) navigation for a circular differential-drive robot.
+"""Nearness-Diagram (ND) navigation for a circular ground robot (differential drive or tricycle).
 
 Minguez, J. and Montano, L., "Nearness Diagram (ND) Navigation: Collision
 Avoidance in Troublesome Scenarios", IEEE Trans. Robotics and Automation 20(1),
@@ -7,7 +7,10 @@ the LS1/LS2 and HSWR laws, the motion generator for non-holonomic robots), this
 follows the authors' reference implementation (Minguez's ``nd.c``, shipped with
 the Player robot server), for a circular robot.
 
-One step:
+One step, towards the waypoint of a route on the map
+(:mod:`~sessgan_controllers.route_guidance`; the goal itself without a map or with
+``use_map`` false, when ND is purely reactive and dead ends trap it, as in Player where
+``nd`` ran behind the ``wavefront`` planner):
 
 1. Sectorise the scan: the nearest obstacle point in each of ``sector_count``
    sectors around the robot (the PND; a sector without a return is free).
@@ -36,14 +39,32 @@ One step:
 
    where d_obs is the distance from the robot's boundary to the nearest obstacle
    in the security zone (c = 1 without one).
+6. Protective field (not in ND; every industrial AGV has one): the forward speed is at
+   most the one from which the robot, braking at ``braking_deceleration``, stops
+   ``stop_distance`` short of the nearest return straight ahead while that return comes
+   closer at ``obstacle_speed``. Without it ND at 1 m/s cannot stop inside its 0.2 m
+   security distance and drives into every robot coming the other way.
+7. A robot that cannot turn in place (``min_turn_radius`` > 0, sessgan_sim's
+   ``tricycle``): the forward speed is raised to ``|w| * min_turn_radius`` (at most v_max)
+   and, after the protective field, the yaw rate capped at ``v / min_turn_radius``. Where
+   the protective field leaves no room ahead for the turn, it backs up at
+   ``reverse_speed`` on the arc that turns it the same way (a three-point turn), as far as
+   the protective field behind it allows.
 
-The algorithm is purely reactive and plans for a point that can move in any
-direction; the motion generator only turns in place when theta reaches +-90
-degrees and otherwise drives an arc whose forward speed never drops below
-``min_speed_factor * v_max * cos(theta)``, while the turn rate shrinks with the
-same factor near obstacles. In a corridor barely wider than the robot, a sharp
-turn therefore cuts the inner corner or overshoots into the outer wall: the
-narrow-space fault of the paper.
+**Intended weakness** (what a test generator should rediscover): narrow-space turns. The
+algorithm is reactive and plans for a point that can move in any direction; the motion
+generator only turns in place when theta reaches +-90 degrees and otherwise drives an arc
+whose forward speed never drops below ``min_speed_factor * v_max * cos(theta)``, while the
+turn rate shrinks with the same factor near obstacles. In a corridor barely wider than the
+robot, a sharp turn therefore cuts the inner corner or overshoots into the outer wall: the
+narrow-space fault of the paper. The protective field looks straight ahead only, so it
+does not see the corner an arc cuts. In open space ND is fine.
+
+**Intended weakness of the tricycle** (``tricycle_nearness_diagram``): it needs room to
+turn. Where ND asks for a turn on the spot (an obstacle ahead, the waypoint to the side)
+it must drive arcs of at least ``min_turn_radius``, forwards and backwards: in a tight
+passage its arcs overshoot into the walls, and with no room ahead or behind it stays
+stuck, the paper's "unable to turn in place" fault.
 """
 
 from __future__ import annotations
@@ -55,12 +76,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from sessgan_controllers.errors import InvalidConfigError
+from sessgan_controllers.route_guidance import (
+    RouteGuidanceConfig,
+    RouteGuide,
+    RouteGuidedController,
+)
 from sessgan_controllers.types import (
     STOP,
     Goal,
     RobotState,
     ScanData,
-    StatelessController,
     VelocityCommand,
     parameter,
     wrap_angle,
@@ -90,11 +115,37 @@ class NearnessDiagramConfig:
         'may enter; 0 means the robot diameter (2 * robot_radius).')
     goal_tolerance: float = parameter(
         0.15, 'Distance in m to the goal at which the robot stops.')
+    braking_deceleration: float = parameter(
+        0.8, 'Deceleration in m/s^2 the forward speed allows for stopping stop_distance short of '
+        'the nearest return straight ahead; 0 turns this limit off.')
+    stop_distance: float = parameter(
+        0.1, 'Gap in m to the nearest return straight ahead at which the robot has stopped.')
+    obstacle_speed: float = parameter(
+        0.5, 'Speed in m/s at which a return straight ahead may come closer while the robot '
+        'brakes (another robot driving towards it).')
+    min_turn_radius: float = parameter(
+        0.0, 'Tightest turn in m of a robot that cannot turn in place (a steered drive wheel); '
+        'the forward speed is raised to what the turn needs and the yaw rate capped at speed / '
+        'radius. 0: the robot turns in place.')
+    reverse_speed: float = parameter(
+        0.0, 'Robots that cannot turn in place: speed in m/s at which to back up on an arc '
+        'turning the wanted way when there is no room ahead for the turn; 0: never reverse.')
+    use_map: bool = parameter(
+        True, 'Steer for a waypoint on a route planned on the map topic (true) or for the goal '
+        'itself (false: purely reactive, trapped by dead ends).')
+    waypoint_distance: float = parameter(
+        1.5, 'Route length in m from the nearest route point to the waypoint steered for.')
+    route_clearance: float = parameter(
+        0.1, 'Clearance in m beyond the radius that the route keeps where the map has room.')
+    replan_deviation: float = parameter(
+        1.0, 'Distance in m from the route beyond which the route is planned again.')
+    planning_resolution: float = parameter(0.1, 'Route planning cell size in m.')
 
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first parameter out of range."""
         for name in ('robot_radius', 'security_distance', 'max_linear_speed',
-                     'max_angular_speed', 'goal_tolerance'):
+                     'max_angular_speed', 'goal_tolerance', 'waypoint_distance',
+                     'replan_deviation', 'planning_resolution'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise InvalidConfigError(f'{name} must be a positive number, got {value}')
@@ -106,11 +157,38 @@ class NearnessDiagramConfig:
                 f'sector_count must be an integer >= 8, got {self.sector_count!r}')
         if not (math.isfinite(self.gap_threshold) and self.gap_threshold >= 0.0):
             raise InvalidConfigError(f'gap_threshold must be >= 0, got {self.gap_threshold}')
+        for name in ('route_clearance', 'braking_deceleration', 'stop_distance',
+                     'obstacle_speed', 'min_turn_radius', 'reverse_speed'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise InvalidConfigError(f'{name} must be >= 0, got {value}')
+
+    def route_guidance(self) -> RouteGuidanceConfig:
+        """The route guidance these parameters ask for."""
+        return RouteGuidanceConfig(
+            robot_radius=self.robot_radius, route_clearance=self.route_clearance,
+            waypoint_distance=self.waypoint_distance, replan_deviation=self.replan_deviation,
+            planning_resolution=self.planning_resolution, enabled=bool(self.use_map))
 
     @property
     def effective_gap_threshold(self) -> float:
         """The discontinuity threshold in metres actually used."""
         return self.gap_threshold if self.gap_threshold > 0.0 else 2.0 * self.robot_radius
+
+
+@dataclass
+class TricycleNearnessDiagramConfig(NearnessDiagramConfig):
+    """ND for sessgan_sim's ``tricycle`` robot, which cannot turn in place: the same
+    parameters, turning no tighter than its 0.5 m radius, and slower (a turn that the robot
+    sees coming late needs room, the faster the more)."""
+
+    max_linear_speed: float = parameter(0.8, 'Maximum forward speed v_max in m/s.')
+    min_turn_radius: float = parameter(
+        0.5, 'Tightest turn in m of the robot (it cannot turn in place); the forward speed is '
+        'raised to what a turn needs and the yaw rate capped at speed / radius.')
+    reverse_speed: float = parameter(
+        0.2, 'Speed in m/s at which the robot backs up on an arc turning the wanted way when '
+        'there is no room ahead for the turn; 0: never reverse.')
 
 
 class Situation(enum.Enum):
@@ -156,12 +234,13 @@ class NearnessDiagramDecision:
     command: VelocityCommand
 
 
-class NearnessDiagramController(StatelessController):
-    """ND navigation; see the module docstring. Stateless between steps."""
+class NearnessDiagramController(RouteGuidedController):
+    """ND navigation; see the module docstring. Keeps only its route between steps."""
 
     def __init__(self, config: NearnessDiagramConfig | None = None) -> None:
         self.config = config or NearnessDiagramConfig()
         self.config.validate()
+        self.guide = RouteGuide(self.config.route_guidance())
         count = self.config.sector_count
         self._sector_width = 2.0 * math.pi / count
         # Sector i is centred on -pi + (i + 0.5) * width: index grows counter-clockwise.
@@ -182,6 +261,8 @@ class NearnessDiagramController(StatelessController):
         if goal_distance <= config.goal_tolerance:
             return NearnessDiagramDecision(
                 Situation.GOAL_REACHED, 0.0, goal_bearing, None, True, math.inf, STOP)
+        goal_distance, goal_bearing = self.guide.waypoint(state, goal).target.in_body_frame(
+            state)
         nearness = self.sector_distances(scan)
         selection = self._select_region(nearness, goal_distance, goal_bearing)
         if selection is None:
@@ -190,7 +271,7 @@ class NearnessDiagramController(StatelessController):
         region, target_direction, goal_directed, boundary = selection
         situation, direction, closest = self._action(
             nearness, region, target_direction, goal_directed, boundary)
-        command = self._motion(direction, closest)
+        command = self._limit(self._motion(direction, closest), scan)
         return NearnessDiagramDecision(
             situation, direction, target_direction, region, goal_directed, closest, command)
 
@@ -424,6 +505,53 @@ class NearnessDiagramController(StatelessController):
             0.5 * self.config.effective_gap_threshold + self.config.security_distance, distance)
         angle = float(self._sector_angles[outer])
         return wrap_angle(angle + margin if valley_ccw else angle - margin)
+
+    def _stopping_speed(self, scan: ScanData, backwards: bool = False) -> float:
+        """Forward (``backwards``: reverse) speed in m/s from which the robot stops
+        ``stop_distance`` short of the nearest return in its path straight ahead (behind):
+        its protective field."""
+        config = self.config
+        if config.braking_deceleration <= 0.0:
+            return math.inf
+        angles, ranges = scan.points()
+        along, across = ranges * np.cos(angles), np.abs(ranges * np.sin(angles))
+        if backwards:
+            along = -along
+        radius = config.robot_radius
+        ahead = (along > 0.0) & (across < radius)
+        if not ahead.any():
+            return math.inf
+        # Distance the disc can move forward before touching each return.
+        gaps = along[ahead] - np.sqrt(radius * radius - across[ahead] ** 2)
+        room = max(0.0, float(gaps.min()) - config.stop_distance)
+        # Stop within the room while the return closes in at obstacle_speed meanwhile:
+        # v^2 / (2 a) + obstacle_speed * v / a <= room.
+        closing = config.obstacle_speed
+        return -closing + math.sqrt(closing * closing
+                                    + 2.0 * config.braking_deceleration * room)
+
+    def _limit(self, command: VelocityCommand, scan: ScanData) -> VelocityCommand:
+        """The motion law's command within the protective field and, for a robot that cannot
+        turn in place, on an arc no tighter than ``min_turn_radius`` (backing up to turn
+        where there is no room ahead)."""
+        config = self.config
+        radius = config.min_turn_radius
+        linear, angular = command.vx, command.wz
+        if radius > 0.0:
+            # It turns only while moving: drive as fast as the turn asks for.
+            linear = max(linear, min(config.max_linear_speed, abs(angular) * radius))
+        stopping_speed = self._stopping_speed(scan)
+        if radius > 0.0 and config.reverse_speed > 0.0 and angular != 0.0 \
+                and stopping_speed < min(linear, config.reverse_speed):
+            # No room ahead for the turn: back up on the arc that turns the same way.
+            reverse = min(config.reverse_speed, self._stopping_speed(scan, backwards=True))
+            return VelocityCommand(vx=-reverse, vy=0.0,
+                                   wz=math.copysign(reverse / radius, angular))
+        linear = min(linear, stopping_speed)
+        if radius > 0.0:
+            limit = linear / radius
+            angular = min(max(angular, -limit), limit)
+        return VelocityCommand(vx=linear, vy=0.0, wz=angular)
 
     def _motion(self, direction: float, closest: float) -> VelocityCommand:
         """The reference implementation's non-holonomic motion generator (module docstring)."""

@@ -14,6 +14,7 @@ from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.nearness_diagram import (
     NearnessDiagramConfig,
     NearnessDiagramController,
+    TricycleNearnessDiagramConfig,
 )
 from sessgan_controllers.race_controller import RaceController, RaceControllerConfig
 from sessgan_controllers.reference_navigator import (
@@ -47,6 +48,11 @@ class ControllerSpec:
     def drives(self, robot: str) -> bool:
         """Whether it can drive sessgan_sim's robot model ``robot``."""
         return robot in (self.robots or (self.robot,))
+
+    def robot_in(self, scenario_robot: str) -> str:
+        """The robot model it drives in a scenario of ``scenario_robot``: that one where it can
+        drive it, else its own (the tricycle of tricycle_nearness_diagram in the factory)."""
+        return scenario_robot if self.drives(scenario_robot) else self.robot
 
     def node_arguments(self, robot: str) -> list[str]:
         """ROS arguments that make its node drive ``robot`` (``-p robot:=...`` for a
@@ -108,4 +114,12 @@ register_controller(ControllerSpec(
                 'and a rotation shim + regulated pure pursuit (diff_drive), bicycle pure pursuit '
                 'with a curvature speed profile (car) or holonomic pursuit (flyer).',
     robots=('diff_drive', 'car', 'flyer'),
+))
+register_controller(ControllerSpec(
+    name='tricycle_nearness_diagram',
+    config_type=TricycleNearnessDiagramConfig,
+    factory=NearnessDiagramController,
+    robot='tricycle',
+    description='Nearness-Diagram navigation for the factory robot on a steered drive wheel, '
+                'which cannot turn in place (turns no tighter than min_turn_radius).',
 ))

@@ -3,6 +3,9 @@
 The avoidance method of the paper's drone (its Fig. 2): the flyer heads for the
 goal, projects its motion direction forward and checks the scan only inside a
 narrow field of view around that direction, up to a speed-dependent look-ahead.
+"The goal" below is the waypoint of a route on the map
+(:mod:`~sessgan_controllers.route_guidance`), or the goal itself without a map or with
+``use_map`` false.
 
 One step:
 
@@ -20,11 +23,14 @@ One step:
 4. The free candidate closest to the goal bearing wins; speed is the arrival
    speed towards the goal, limited by the distance to the nearest point in view.
    With no free candidate the flyer brakes to a hover and, once at rest, looks
-   around for a new direction.
+   around for a new direction. It also brakes when the route turns out of view (a
+   waypoint more than half the field of view off its motion): it stops to look that way.
 
-Points outside the field of view are ignored by design: an agent closing in
-from the side or from behind is not seen until it is in front, the fault the
-paper reports for this controller.
+**Intended weakness** (what a test generator should rediscover): the narrow field of
+view. Points outside it are ignored by design: an agent closing in from the side or from
+behind is not seen until it is in front, the fault the paper reports for this controller;
+for the same reason the flyer may clip the corner of a passage it turns into, which is
+beside it when it gets there.
 """
 
 from __future__ import annotations
@@ -34,13 +40,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sessgan_controllers.costmap import FREE, LOW_OBSTACLE
 from sessgan_controllers.errors import InvalidConfigError
+from sessgan_controllers.route_guidance import (
+    RouteGuidanceConfig,
+    RouteGuide,
+    RouteGuidedController,
+)
 from sessgan_controllers.types import (
     STOP,
     Goal,
     RobotState,
     ScanData,
-    StatelessController,
     VelocityCommand,
     parameter,
     wrap_angle,
@@ -75,16 +86,27 @@ class VelocityProjectionConfig:
         '(0 keeps the heading).')
     max_yaw_rate: float = parameter(1.5, 'Maximum yaw rate in rad/s.')
     goal_tolerance: float = parameter(0.15, 'Distance in m to the goal at which the flyer stops.')
+    use_map: bool = parameter(
+        True, 'Steer for a waypoint on a route planned on the map topic (true) or for the goal '
+        'itself (false: purely reactive).')
+    waypoint_distance: float = parameter(
+        1.5, 'Route length in m from the nearest route point to the waypoint steered for.')
+    route_clearance: float = parameter(
+        0.1, 'Clearance in m beyond the radius that the route keeps where the map has room.')
+    replan_deviation: float = parameter(
+        1.0, 'Distance in m from the route beyond which the route is planned again.')
+    planning_resolution: float = parameter(0.1, 'Route planning cell size in m.')
 
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first parameter out of range."""
         for name in ('robot_radius', 'field_of_view', 'look_ahead_distance', 'max_speed',
                      'arrival_gain', 'clearance_gain', 'min_speed', 'max_yaw_rate',
-                     'goal_tolerance'):
+                     'goal_tolerance', 'waypoint_distance', 'replan_deviation',
+                     'planning_resolution'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise InvalidConfigError(f'{name} must be a positive number, got {value}')
-        for name in ('safety_margin', 'look_ahead_time', 'yaw_gain'):
+        for name in ('safety_margin', 'look_ahead_time', 'yaw_gain', 'route_clearance'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise InvalidConfigError(f'{name} must be >= 0, got {value}')
@@ -94,6 +116,14 @@ class VelocityProjectionConfig:
         if not isinstance(self.candidate_count, int) or self.candidate_count < 4:
             raise InvalidConfigError(
                 f'candidate_count must be an integer >= 4, got {self.candidate_count!r}')
+
+    def route_guidance(self) -> RouteGuidanceConfig:
+        """The route guidance these parameters ask for (the flyer crosses low obstacles)."""
+        return RouteGuidanceConfig(
+            robot_radius=self.robot_radius, route_clearance=self.route_clearance,
+            waypoint_distance=self.waypoint_distance, replan_deviation=self.replan_deviation,
+            planning_resolution=self.planning_resolution,
+            passable_values=(FREE, LOW_OBSTACLE), enabled=bool(self.use_map))
 
 
 @dataclass(frozen=True)
@@ -110,12 +140,14 @@ class ProjectionDecision:
     command: VelocityCommand
 
 
-class VelocityProjectionController(StatelessController):
-    """Velocity-projection avoidance; see the module docstring. Stateless between steps."""
+class VelocityProjectionController(RouteGuidedController):
+    """Velocity-projection avoidance; see the module docstring. Keeps only its route between
+    steps."""
 
     def __init__(self, config: VelocityProjectionConfig | None = None) -> None:
         self.config = config or VelocityProjectionConfig()
         self.config.validate()
+        self.guide = RouteGuide(self.config.route_guidance())
         count = self.config.candidate_count
         self._ring = -math.pi + (2.0 * math.pi / count) * np.arange(count)
 
@@ -128,8 +160,16 @@ class VelocityProjectionController(StatelessController):
         reference = math.atan2(state.vy, state.vx) if moving else goal_bearing
         if goal_distance <= config.goal_tolerance:
             return ProjectionDecision(None, reference, 0, STOP)
+        waypoint = self.guide.waypoint(state, goal)
+        goal_distance, goal_bearing = waypoint.target.in_body_frame(state)
+        if not moving:
+            reference = goal_bearing
         look_ahead = config.look_ahead_distance + config.look_ahead_time * speed
         half_view = 0.5 * config.field_of_view
+        if moving and not waypoint.is_goal \
+                and abs(wrap_angle(goal_bearing - reference)) > half_view:
+            # The route turns out of view (a side passage): stop to look that way first.
+            return ProjectionDecision(None, reference, 0, self._brake(reference))
         angles, ranges = scan.points()
         near = ranges <= look_ahead + config.robot_radius
         angles, ranges = angles[near], ranges[near]
@@ -165,7 +205,9 @@ class VelocityProjectionController(StatelessController):
         if len(view_ranges):
             clearance = float(view_ranges.min()) - config.robot_radius
             speed_limit = min(speed_limit, config.clearance_gain * max(clearance, 0.0))
-        target_speed = max(0.0, min(speed_limit, config.arrival_gain * goal_distance))
+        if waypoint.is_goal:
+            speed_limit = min(speed_limit, config.arrival_gain * goal_distance)
+        target_speed = max(0.0, speed_limit)
         command = VelocityCommand(
             vx=target_speed * math.cos(direction),
             vy=target_speed * math.sin(direction),

@@ -420,7 +420,12 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
     from sessgan_controllers.registry import CONTROLLERS
 
     spec = CONTROLLERS.get(controller)
-    robot_args = spec.node_arguments(get_scenario(config.scenario).robot) if spec else []
+    scenario_robot = get_scenario(config.scenario).robot
+    robot = spec.robot_in(scenario_robot) if spec else scenario_robot
+    robot_args = spec.node_arguments(robot) if spec else []
+    # The simulators host the robot the controller is written for where it cannot drive the
+    # scenario's (the tricycle of tricycle_nearness_diagram).
+    simulator_args = robot_args or (['-p', f'robot:={robot}'] if robot != scenario_robot else [])
     for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'
         ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
@@ -428,7 +433,8 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
             namespace,
             (f'simulator_w{worker}', [
                 'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
-                '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}']),
+                '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}',
+                *simulator_args]),
             (f'{controller}_w{worker}', [
                 'ros2', 'run', 'sessgan_controllers', controller, *ros_args,
                 '-p', 'use_sim_time:=true', *robot_args]),

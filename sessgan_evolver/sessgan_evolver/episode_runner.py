@@ -2,7 +2,10 @@
 
 The episode the ROS graph runs in lockstep mode, minus the messages: every control tick the
 controller core (from sessgan_controllers' registry) turns the observation into the command
-applied during the next tick, as a controller node answering every scan does. The simulator
+applied during the next tick, as a controller node answering every scan does; a controller
+that plans on the map gets the environment's map first, as the node gets the ``map`` topic,
+and drives the robot a campaign gives it (the scenario's where it can, else its own: the
+tricycle of tricycle_nearness_diagram). The simulator
 settings are a simulator worker's (sessgan_sim.simulator_settings.SimulatorSettings; by
 default the node's defaults: the scenario's robot, agents and time limit), and the
 controller sees its inputs exactly as the node decodes them from the messages
@@ -24,6 +27,7 @@ into robot).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -39,10 +43,10 @@ from sessgan_controllers.types import (
     STOP,
     Controller,
     Goal,
+    MapAwareController,
     MapData,
     RobotState,
     ScanData,
-    accepts_map,
 )
 from sessgan_evolver.errors import SessganEvolverError
 from sessgan_gen.environment import Environment
@@ -163,6 +167,10 @@ class EpisodeRunner:
             raise EpisodeRunnerError(f'time limit must be >= 0 s (0: the scenario default), got '
                                      f'{time_limit}')
         self.settings = settings or SimulatorSettings()
+        # The robot the campaign's simulators host for this controller (campaign_cli).
+        self.robot = self.settings.robot or self.controller_spec.robot_in(spec.robot)
+        if self.robot != (self.settings.robot or spec.robot):
+            self.settings = dataclasses.replace(self.settings, robot=self.robot)
         if self.settings.mode != 'lockstep':
             raise EpisodeRunnerError('in-process episodes are lockstep episodes; the settings '
                                      f'ask for {self.settings.mode!r}')
@@ -210,7 +218,7 @@ class EpisodeRunner:
         topic carries it (a controller that plans on one), reset for the new goal."""
         spec = self.controller_spec
         controller = spec.make(robot=self.robot) if spec.robots else spec.make()
-        if accepts_map(controller):
+        if isinstance(controller, MapAwareController):
             # OccupancyGrid carries the resolution as float32.
             controller.set_map(MapData(np.asarray(environment.occupancy, dtype=np.int8),
                                        _float32(environment.resolution),

@@ -7,6 +7,10 @@ motion through its own dynamics:
 * ``diff_drive``: a differential-drive cylinder. linear.x is the forward speed,
   angular.z the yaw rate, each under speed and acceleration limits; linear.y is
   ignored (it cannot move sideways).
+* ``tricycle``: the differential drive's body, speeds and accelerations on a steered
+  drive wheel (a tugger or forklift AGV whose steering stops short of 90 degrees): its
+  yaw rate is at most ``|forward speed| / min_turn_radius``, so it cannot turn in place
+  and needs room to turn.
 * ``car``: a kinematic bicycle (rear-axle reference) with a steering angle
   limit, a steering rate limit, separate acceleration and braking limits and a
   high top speed. angular.z is turned into a steering angle through the bicycle
@@ -301,7 +305,7 @@ class DiffDriveRobot(Robot):
     params: DiffDriveParams
 
     def validate(self) -> None:
-        _check_positive('diff_drive', self.params, (
+        _check_positive(self.name, self.params, (
             'radius', 'height', 'mass', 'sensor_height', 'max_linear_speed',
             'max_reverse_speed', 'max_angular_speed', 'max_linear_acceleration',
             'max_angular_acceleration'))
@@ -348,6 +352,34 @@ class DiffDriveRobot(Robot):
         # Wheels do not slide sideways: only the forward part of a deflection survives.
         self._speed = vx
         self._turn_rate = wz
+
+
+@dataclass(frozen=True)
+class TricycleParams(DiffDriveParams):
+    """The factory robot on a steered drive wheel instead of two driven wheels."""
+
+    min_turn_radius: float = 0.5
+    """m, tightest turn of the robot's centre (at any speed): no turning in place."""
+
+
+@register_robot
+class TricycleRobot(DiffDriveRobot):
+    """Differential-drive body and limits, but turning only while moving: the yaw rate is
+    capped at the current forward speed / ``min_turn_radius``."""
+
+    name = 'tricycle'
+    params_type = TricycleParams
+    params: TricycleParams
+
+    def validate(self) -> None:
+        super().validate()
+        _check_positive('tricycle', self.params, ('min_turn_radius',))
+
+    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+        speed, _, turn_rate = super()._advance(command, dt)
+        limit = abs(speed) / self.params.min_turn_radius
+        self._turn_rate = _clip(turn_rate, -limit, limit)
+        return speed, 0.0, self._turn_rate
 
 
 # --- car (bicycle model) --------------------------------------------------------------------

@@ -1,13 +1,15 @@
 """The controller node's map subscription and its timer mode: real nodes over DDS, in-process.
 
-Map-aware controllers (the reference navigator) subscribe ``map`` and get each map; the
-others never subscribe it. In ``control_mode:=timer`` the node publishes at its own rate from
+Map-aware controllers (every built-in one: the reference navigator plans on the map, the
+paper's controllers their routes) subscribe ``map`` and get each map; a controller without
+``set_map`` never subscribes it. In ``control_mode:=timer`` the node publishes at its own rate from
 the latest scan and the odometry of that scan's tick, instead of once per scan.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import pytest
 
@@ -18,6 +20,8 @@ from nav_msgs.msg import OccupancyGrid  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 from sessgan_controllers.controller_node import MAP_QOS, ControllerNode  # noqa: E402
+from sessgan_controllers.registry import CONTROLLERS, ControllerSpec  # noqa: E402
+from sessgan_controllers.types import VelocityCommand, parameter  # noqa: E402
 from tests.graph.test_controller_node import goal_msg, harness, odom_msg, scan_msg  # noqa: E402,F401
 
 pytestmark = pytest.mark.graph
@@ -58,8 +62,41 @@ def test_a_map_aware_controller_gets_the_map_and_plans_on_it(harness):  # noqa: 
     assert run.node._map is not None and run.node._map.occupancy.shape == (12, 12)
 
 
-def test_controllers_without_a_map_never_subscribe_it(harness):  # noqa: F811
-    run = harness('nearness_diagram')
+@dataclass
+class CreepConfig:
+    goal_tolerance: float = parameter(0.1, 'Distance in m to the goal that counts as reached.')
+
+    def validate(self) -> None:
+        """Nothing to check."""
+
+
+class Creep:
+    """A controller without set_map: it creeps forward."""
+
+    def __init__(self, config: CreepConfig) -> None:
+        self.config = config
+
+    def compute_command(self, scan, state, goal) -> VelocityCommand:
+        return VelocityCommand(0.1, 0.0, 0.0)
+
+    def goal_reached(self, state, goal) -> bool:
+        return goal.distance_from(state) <= self.config.goal_tolerance
+
+    def reset(self) -> None:
+        """Nothing kept."""
+
+
+@pytest.fixture
+def map_free_controller():
+    """A registered controller that takes no map (every built-in one takes it)."""
+    name = 'map_free_test_controller'
+    CONTROLLERS[name] = ControllerSpec(name, CreepConfig, Creep, 'diff_drive', 'takes no map')
+    yield name
+    del CONTROLLERS[name]
+
+
+def test_controllers_without_a_map_never_subscribe_it(harness, map_free_controller):  # noqa: F811
+    run = harness(map_free_controller)
     namespace = run.node.get_namespace()
     for _ in range(20):
         run.executor.spin_once(timeout_sec=0.02)

@@ -21,11 +21,20 @@ def test_the_built_in_controllers_are_registered():
         'velocity_projection': 'flyer',
         'race_controller': 'car',
         'reference_navigator': 'diff_drive',
+        'tricycle_nearness_diagram': 'tricycle',
     }
     assert get_controller('nearness_diagram').drives('diff_drive')
     assert not get_controller('nearness_diagram').drives('car')
     assert all(get_controller('reference_navigator').drives(robot)
                for robot in ('diff_drive', 'car', 'flyer'))
+
+
+def test_a_controller_drives_the_scenario_robot_where_it_can_else_its_own():
+    assert get_controller('reference_navigator').robot_in('car') == 'car'
+    assert get_controller('nearness_diagram').robot_in('diff_drive') == 'diff_drive'
+    # The tricycle controller brings its robot to the factory (campaigns start the
+    # simulators with robot:=tricycle).
+    assert get_controller('tricycle_nearness_diagram').robot_in('diff_drive') == 'tricycle'
 
 
 def test_unknown_controller_lists_the_known_ones():

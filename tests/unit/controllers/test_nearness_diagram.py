@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -137,3 +138,52 @@ def test_rejects_bad_config():
         NearnessDiagramController(NearnessDiagramConfig(robot_radius=0.0))
     with pytest.raises(ValueError, match='min_speed_factor'):
         NearnessDiagramController(NearnessDiagramConfig(min_speed_factor=1.5))
+
+
+def test_slows_to_stop_short_of_what_is_straight_ahead(scan_factory):
+    controller = NearnessDiagramController()
+    unlimited = NearnessDiagramController(NearnessDiagramConfig(braking_deceleration=0.0))
+    state = RobotState(0.0, 0.0, 0.0)
+    goal = Goal(5.0, 0.0)
+
+    def commands(post_x: float):
+        scan = scan_factory(state, discs=[(post_x, 0.0, 0.1)])
+        return (controller.compute_command(scan, state, goal),
+                unlimited.compute_command(scan, state, goal))
+
+    far, far_unlimited = commands(3.0)
+    assert far == far_unlimited  # room enough to stop
+    # 0.5 m of room to the post: stop 0.1 m short of it, at 0.8 m/s^2, while it may come
+    # closer at 0.5 m/s: v^2 / 1.6 + 0.5 v / 0.8 <= 0.4.
+    near, near_unlimited = commands(0.8)
+    assert near.vx == pytest.approx(-0.5 + math.sqrt(0.25 + 1.6 * 0.4), abs=0.02)
+    assert near_unlimited.vx > near.vx and near.wz == near_unlimited.wz
+
+
+def test_a_robot_that_cannot_turn_in_place_turns_on_arcs(scan_factory):
+    config = NearnessDiagramConfig(min_turn_radius=0.5, reverse_speed=0.0)
+    controller = NearnessDiagramController(config)
+    state = RobotState(0.0, 0.0, 0.0)
+    # The goal behind: the diff-drive robot turns in place, this one drives a 0.5 m arc.
+    behind = controller.compute_command(scan_factory(state), state, Goal(-3.0, 0.1))
+    assert behind.vx > 0.0
+    assert abs(behind.wz) == pytest.approx(behind.vx / 0.5)
+    # Facing a wall closer than the stop distance, the goal behind, it cannot turn: it stands
+    # (the diff-drive robot turns in place).
+    wall = ('####', '#..#', '#..#', '#..#', '####')
+    facing = RobotState(0.75, 1.75, math.pi / 2.0)  # 0.05 m from the top wall's face
+    command = controller.compute_command(scan_factory(facing, wall), facing, Goal(0.75, 0.6))
+    assert command.vx == 0.0 and command.wz == 0.0
+    spinning = NearnessDiagramController().compute_command(scan_factory(facing, wall), facing,
+                                                           Goal(0.75, 0.6))
+    assert spinning.vx == 0.0 and abs(spinning.wz) > 0.5
+    # Allowed to reverse, it backs up on an arc that turns it the same way.
+    backing = NearnessDiagramController(dataclasses.replace(config, reverse_speed=0.2))
+    command = backing.compute_command(scan_factory(facing, wall), facing, Goal(0.75, 0.6))
+    assert command.vx == pytest.approx(-0.2)
+    assert command.wz == pytest.approx(math.copysign(0.2 / 0.5, spinning.wz))
+    # With a wall behind it too (a 0.9 m deep box), it has no room at all.
+    box = ('####', '#..#', '####')
+    boxed = RobotState(0.75, 0.75, math.pi / 2.0)
+    command = backing.compute_command(scan_factory(boxed, box), boxed, Goal(0.75, 0.6))
+    assert command.vx == pytest.approx(0.0, abs=1e-9)

@@ -64,9 +64,9 @@ def test_bad_parameters_are_named(overrides, name):
         ReferenceNavigatorConfig(**overrides).validate()
 
 
-def test_it_takes_the_map_and_the_others_do_not():
+def test_it_takes_the_map():
+    # So do the paper's controllers, for their route guidance (test_route_guidance.py).
     assert accepts_map(get_controller('reference_navigator').make())
-    assert not accepts_map(get_controller('nearness_diagram').make())
 
 
 def test_without_a_map_it_stands_still(scan_factory):

@@ -299,7 +299,8 @@ def test_malformed_environments_end_with_a_clear_detail(episode, change, words):
 def test_an_unknown_robot_is_an_invalid_environment(episode):
     episode.reset(corridor(), config(robot='tank'))
     assert episode.outcome is Outcome.INVALID_ENVIRONMENT
-    assert episode.metrics().detail == "unknown robot 'tank'; known robots: car, diff_drive, flyer"
+    assert episode.metrics().detail == ("unknown robot 'tank'; known robots: car, "
+                                        'diff_drive, flyer, tricycle')
     observation = episode.reset(corridor(), config())  # the next episode runs normally
     assert not episode.done and observation.pose.x == 1.0
 

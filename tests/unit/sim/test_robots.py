@@ -14,6 +14,7 @@ from sessgan_sim.robots import (
     CarRobot,
     DiffDriveRobot,
     FlyerRobot,
+    TricycleRobot,
     VelocityCommand,
     create_robot,
     get_robot_class,
@@ -65,9 +66,10 @@ def episode():
         yield running
 
 
-def test_registry_holds_the_three_robots():
-    assert robot_names() == ['car', 'diff_drive', 'flyer']
+def test_registry_holds_the_four_robots():
+    assert robot_names() == ['car', 'diff_drive', 'flyer', 'tricycle']
     assert ROBOTS['diff_drive'] is DiffDriveRobot
+    assert ROBOTS['tricycle'] is TricycleRobot
     assert get_robot_class('car') is CarRobot
     assert get_robot_class('flyer') is FlyerRobot
 
@@ -75,7 +77,8 @@ def test_registry_holds_the_three_robots():
 def test_unknown_robot_lists_the_known_ones():
     with pytest.raises(UnknownRobotError) as error:
         create_robot('tank')
-    assert str(error.value) == "unknown robot 'tank'; known robots: car, diff_drive, flyer"
+    assert str(error.value) == ("unknown robot 'tank'; known robots: car, diff_drive, flyer, "
+                                'tricycle')
     assert isinstance(error.value, KeyError)
 
 
@@ -115,6 +118,25 @@ def test_diff_drive_reverse_speed_is_limited(episode):
     episode.reset(environment(open_room(40, 8), 'factory', (15.0, 2.0, 0.0)), config())
     observation = drive(episode, VelocityCommand(-2.0, 0.0, 0.0), 1.0)
     assert observation.twist.vx == pytest.approx(-0.3, abs=1e-6)
+
+
+def test_tricycle_cannot_turn_in_place(episode):
+    episode.reset(environment(open_room(12, 12), 'factory', (3.0, 3.0, 0.0)),
+                  config(robot='tricycle'))
+    observation = drive(episode, VelocityCommand(0.0, 0.0, 2.0), 1.0)
+    assert observation.pose.yaw == pytest.approx(0.0, abs=1e-6)
+    assert (observation.pose.x, observation.pose.y) == pytest.approx((3.0, 3.0), abs=1e-6)
+
+
+def test_tricycle_turns_no_tighter_than_its_radius(episode):
+    episode.reset(environment(open_room(16, 16), 'factory', (2.0, 2.0, 0.0)),
+                  config(robot='tricycle'))
+    observation = drive(episode, VelocityCommand(0.5, 0.0, 2.0), 1.0)  # speed up first
+    observation = drive(episode, VelocityCommand(0.5, 0.0, 2.0), 0.5)
+    assert observation.twist.vx == pytest.approx(0.5, abs=1e-3)
+    assert observation.twist.wz == pytest.approx(0.5 / 0.5, abs=1e-3)  # not 2 rad/s
+    with pytest.raises(InvalidConfigError, match='tricycle: min_turn_radius'):
+        create_robot('tricycle', {'min_turn_radius': 0.0})
 
 
 def test_car_steering_follows_the_bicycle_model():

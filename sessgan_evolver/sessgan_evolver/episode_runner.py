@@ -41,6 +41,7 @@ from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.registry import get_controller
 from sessgan_controllers.types import (
     STOP,
+    Controller,
     Goal,
     MapAwareController,
     MapData,
@@ -166,16 +167,22 @@ class EpisodeRunner:
             raise EpisodeRunnerError(f'time limit must be >= 0 s (0: the scenario default), got '
                                      f'{time_limit}')
         self.settings = settings or SimulatorSettings()
-        # The robot the campaign's simulators host for this controller (campaign_cli).
-        self.robot = self.settings.robot or self.controller_spec.robot_in(spec.robot)
-        if self.robot != (self.settings.robot or spec.robot):
-            self.settings = dataclasses.replace(self.settings, robot=self.robot)
+        # The robot the campaign's simulators host for this controller (campaign_cli): its own
+        # where it cannot drive the scenario's (the tricycle of tricycle_nearness_diagram).
+        robot = self.controller_spec.robot_in(spec.robot)
+        if not self.settings.robot and robot != spec.robot:
+            self.settings = dataclasses.replace(self.settings, robot=robot)
         if self.settings.mode != 'lockstep':
             raise EpisodeRunnerError('in-process episodes are lockstep episodes; the settings '
                                      f'ask for {self.settings.mode!r}')
         self.time_limit = float(time_limit) or float(self.settings.time_limit) \
             or spec.time_limit
-        self.episode_config(0).validate()
+        config = self.episode_config(0)
+        config.validate()
+        self.robot = str(config.robot)
+        if not self.controller_spec.drives(self.robot):
+            raise EpisodeRunnerError(f'controller {self.controller_name!r} does not drive the '
+                                     f'{self.robot} robot of the {self.scenario} scenario')
         self._clock = clock
         self._episode: Episode | None = None
 
@@ -206,6 +213,21 @@ class EpisodeRunner:
         return self.settings.episode_config(time_limit=self.time_limit, seed=int(seed)) \
             .resolved(get_scenario(self.scenario))
 
+    def make_controller(self, environment: Environment) -> Controller:
+        """A fresh controller for an episode in ``environment``, set up as its node would be:
+        told which robot it drives (a controller of several), given the map as the ``map``
+        topic carries it (a controller that plans on one), reset for the new goal."""
+        spec = self.controller_spec
+        controller = spec.make(robot=self.robot) if spec.robots else spec.make()
+        if isinstance(controller, MapAwareController):  # accepts_map, typed for mypy
+            # OccupancyGrid carries the resolution as float32.
+            controller.set_map(MapData(np.asarray(environment.occupancy, dtype=np.int8),
+                                       _float32(environment.resolution),
+                                       (float(environment.origin[0]),
+                                        float(environment.origin[1]))))
+        controller.reset()
+        return controller
+
     def run(self, environment: Environment, seed: int, trace: bool = False,
             keep_scans: bool = False) -> EpisodeRun:
         """Run one episode of ``environment`` with simulator seed ``seed``.
@@ -220,11 +242,7 @@ class EpisodeRunner:
         self.open()
         episode = self._episode
         assert episode is not None
-        spec = self.controller_spec
-        controller = spec.make(**({'robot': self.robot} if spec.robots else {}))
-        if isinstance(controller, MapAwareController):
-            controller.set_map(MapData.of(environment))
-        controller.reset()
+        controller = self.make_controller(environment)
         goal = Goal(environment.goal.x, environment.goal.y)
         started = self._clock()
         observation = episode.reset(environment, self.episode_config(seed))

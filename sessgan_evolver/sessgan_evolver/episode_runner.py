@@ -219,7 +219,7 @@ class EpisodeRunner:
         topic carries it (a controller that plans on one), reset for the new goal."""
         spec = self.controller_spec
         controller = spec.make(robot=self.robot) if spec.robots else spec.make()
-        if isinstance(controller, MapAwareController):  # accepts_map, typed for mypy
+        if isinstance(controller, MapAwareController):
             # OccupancyGrid carries the resolution as float32.
             controller.set_map(MapData(np.asarray(environment.occupancy, dtype=np.int8),
                                        _float32(environment.resolution),

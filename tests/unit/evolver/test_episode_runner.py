@@ -104,3 +104,5 @@ def test_as_in_a_campaign_the_controller_gets_the_map_and_its_robot(factory):
     assert routed.metrics['outcome'] == 'goal_reached', routed.metrics['detail']
     with EpisodeRunner('factory', 'tricycle_nearness_diagram') as runner:
         assert runner.robot == 'tricycle' and runner.episode_config(0).robot == 'tricycle'
+    with EpisodeRunner('racetrack', 'reference_navigator') as runner:
+        assert runner.robot == 'car'

@@ -44,15 +44,19 @@ class ControllerSpec:
     robots: tuple[str, ...] = ()
     """Every robot model it can drive, chosen with its ``robot`` parameter; empty: ``robot``
     only."""
+    stands_in_for: tuple[str, ...] = ()
+    """Scenario robot models its own ``robot`` replaces in a campaign (the tricycle is a
+    factory robot like diff_drive, with the same footprint)."""
 
     def drives(self, robot: str) -> bool:
         """Whether it can drive sessgan_sim's robot model ``robot``."""
         return robot in (self.robots or (self.robot,))
 
     def robot_in(self, scenario_robot: str) -> str:
-        """The robot model it drives in a scenario of ``scenario_robot``: that one where it can
-        drive it, else its own (the tricycle of tricycle_nearness_diagram in the factory)."""
-        return scenario_robot if self.drives(scenario_robot) else self.robot
+        """The robot model it drives in a scenario of ``scenario_robot``: its own where that
+        stands in for the scenario's (the tricycle of tricycle_nearness_diagram in the
+        factory), else the scenario's (which it may not be able to drive)."""
+        return self.robot if scenario_robot in self.stands_in_for else scenario_robot
 
     def node_arguments(self, robot: str) -> list[str]:
         """ROS arguments that make its node drive ``robot`` (``-p robot:=...`` for a
@@ -122,4 +126,5 @@ register_controller(ControllerSpec(
     robot='tricycle',
     description='Nearness-Diagram navigation for the factory robot on a steered drive wheel, '
                 'which cannot turn in place (turns no tighter than min_turn_radius).',
+    stands_in_for=('diff_drive',),
 ))

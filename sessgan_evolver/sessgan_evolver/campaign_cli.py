@@ -423,8 +423,8 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
     scenario_robot = get_scenario(config.scenario).robot
     robot = spec.robot_in(scenario_robot) if spec else scenario_robot
     robot_args = spec.node_arguments(robot) if spec else []
-    # The simulators host the robot the controller is written for where it cannot drive the
-    # scenario's (the tricycle of tricycle_nearness_diagram).
+    # The simulators host the controller's own robot where it stands in for the scenario's
+    # (the tricycle of tricycle_nearness_diagram).
     simulator_args = robot_args or (['-p', f'robot:={robot}'] if robot != scenario_robot else [])
     for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'

@@ -167,10 +167,11 @@ class EpisodeRunner:
             raise EpisodeRunnerError(f'time limit must be >= 0 s (0: the scenario default), got '
                                      f'{time_limit}')
         self.settings = settings or SimulatorSettings()
-        # The robot the campaign's simulators host for this controller (campaign_cli).
-        self.robot = self.settings.robot or self.controller_spec.robot_in(spec.robot)
-        if self.robot != (self.settings.robot or spec.robot):
-            self.settings = dataclasses.replace(self.settings, robot=self.robot)
+        # The robot the campaign's simulators host for this controller (campaign_cli): its own
+        # where it cannot drive the scenario's (the tricycle of tricycle_nearness_diagram).
+        robot = self.controller_spec.robot_in(spec.robot)
+        if not self.settings.robot and robot != spec.robot:
+            self.settings = dataclasses.replace(self.settings, robot=robot)
         if self.settings.mode != 'lockstep':
             raise EpisodeRunnerError('in-process episodes are lockstep episodes; the settings '
                                      f'ask for {self.settings.mode!r}')

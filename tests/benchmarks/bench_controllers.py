@@ -158,16 +158,6 @@ def valid_maps(scenario: str, count: int, first_seed: int,
     return maps[:count]
 
 
-def robot_for(spec: ControllerSpec, scenario: str) -> str:
-    """The robot a controller drives in a scenario: the scenario's own when the controller
-    can drive it (e.g. the reference navigator), else the controller's (e.g. the tricycle)."""
-    robot = get_scenario(scenario).robot
-    drives = getattr(spec, 'drives', None)
-    if robot == spec.robot or (drives is not None and drives(robot)):
-        return robot
-    return spec.robot
-
-
 def run_episode(spec: ControllerSpec, robot: str, environment: Environment,
                 overrides: dict[str, object]) -> EpisodeResult:
     """One lockstep episode of a fresh controller on ``environment``; ``overrides`` are
@@ -201,7 +191,7 @@ def run_episode(spec: ControllerSpec, robot: str, environment: Environment,
 def benchmark(scenario: str, controller: str, maps: Sequence[Environment],
               overrides: dict[str, object], progress: ProgressPrinter) -> Row:
     spec = CONTROLLERS[controller]
-    robot = robot_for(spec, scenario)
+    robot = spec.robot_in(get_scenario(scenario).robot)  # the tricycle's own in the factory
     results = []
     started = time.perf_counter()
     progress.start(f'{scenario}: {controller}', len(maps))

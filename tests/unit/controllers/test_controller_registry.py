@@ -29,12 +29,13 @@ def test_the_built_in_controllers_are_registered():
                for robot in ('diff_drive', 'car', 'flyer'))
 
 
-def test_a_controller_drives_the_scenario_robot_where_it_can_else_its_own():
+def test_a_controller_drives_the_scenario_robot_unless_its_own_stands_in_for_it():
     assert get_controller('reference_navigator').robot_in('car') == 'car'
     assert get_controller('nearness_diagram').robot_in('diff_drive') == 'diff_drive'
     # The tricycle controller brings its robot to the factory (campaigns start the
-    # simulators with robot:=tricycle).
+    # simulators with robot:=tricycle); a race car does not (it cannot drive that robot).
     assert get_controller('tricycle_nearness_diagram').robot_in('diff_drive') == 'tricycle'
+    assert get_controller('race_controller').robot_in('diff_drive') == 'diff_drive'
 
 
 def test_unknown_controller_lists_the_known_ones():

@@ -91,13 +91,14 @@ def test_a_controller_of_several_robots_gets_its_robot_and_the_map(factory):
         run = runner.run(factory, seed=0)
     # The reference navigator crosses the example map (the controllers' own tests say so).
     assert run.metrics['outcome'] == 'goal_reached' and run.metrics['fault_collisions'] == 0
+    with pytest.raises(EpisodeRunnerError, match='does not drive'):
+        EpisodeRunner('factory', controller='race_controller')
 
 
 def test_as_in_a_campaign_the_controller_gets_the_map_and_its_robot(factory):
     # The node gets the map topic (the paper's controllers steer along a route on it), and a
     # campaign hosts the tricycle for the tricycle controller: in process the same.
     with EpisodeRunner('factory') as runner:
-        assert runner.robot == 'diff_drive'
         routed = runner.run(factory, seed=0)
     # Without the map, Nearness-Diagram is stuck in a dead end of this map.
     assert routed.metrics['outcome'] == 'goal_reached', routed.metrics['detail']

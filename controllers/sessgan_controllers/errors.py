@@ -14,3 +14,7 @@ class UnknownControllerError(SessganControllersError, KeyError):
 
     def __str__(self) -> str:  # KeyError would quote the message
         return str(self.args[0]) if self.args else ''
+
+
+class PlanningError(SessganControllersError, ValueError):
+    """No path: the message says why."""

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sessgan_controllers.costmap import Costmap
+from sessgan_controllers.errors import PlanningError
 
 SQRT2 = math.sqrt(2.0)
 
@@ -202,10 +203,6 @@ class PlannerConfig:
     """Curvature is the heading change over about this arc length."""
     escape_radius: float = 1.0
     """How far from a lethal start or goal cell the nearest passable cell is looked for."""
-
-
-class PlanningError(ValueError):
-    """No path: the message says why."""
 
 
 def nearest_passable_cell(costmap: Costmap, x: float, y: float, radius: float) -> Cell | None:

@@ -12,7 +12,6 @@ contact events), which the fault pictures read.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -20,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from sessgan_evolver.episode_runner import EpisodeTrace
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import BagExportError
 from sessgan_gen.environment import Environment
+from sessgan_gen.quaternion import quaternion_from_yaw
 from sessgan_sim import cdr
 from sessgan_sim.bag_recording import BagRecord, jazzy_typestore, write_episode_bag
 
@@ -30,10 +30,6 @@ ODOM_FRAME = 'odom'
 BASE_FOOTPRINT = 'base_footprint'
 BASE_LINK = 'base_link'
 SCAN_FRAME = 'base_scan'
-
-
-class BagExportError(SessganEvolverError):
-    """A trace that cannot become a bag (no scans kept, inconsistent lengths)."""
 
 
 def _nanoseconds(seconds: float) -> int:
@@ -58,8 +54,8 @@ class _Messages:
         return self.types['std_msgs/msg/Header'](stamp=self.time(seconds), frame_id=frame)
 
     def quaternion(self, yaw: float) -> Any:
-        return self.types['geometry_msgs/msg/Quaternion'](
-            x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+        x, y, z, w = quaternion_from_yaw(yaw)
+        return self.types['geometry_msgs/msg/Quaternion'](x=x, y=y, z=z, w=w)
 
     def pose(self, x: float, y: float, yaw: float) -> Any:
         point = self.types['geometry_msgs/msg/Point'](x=float(x), y=float(y), z=0.0)

@@ -25,14 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import CellularAutomatonError
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.scenarios import BLOCKED, FREE, LOW_OBSTACLE, Scenario, get_scenario
 from sessgan_gen.token_map import load_example_map
-
-
-class CellularAutomatonError(SessganEvolverError, ValueError):
-    """Settings or a scenario the cellular automaton cannot work with."""
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import CompareError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
 from sessgan_evolver.fault_records import confirm_faults
 from sessgan_evolver.faults import FaultEntry, FaultRule, group_faults
@@ -60,10 +60,6 @@ from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
-
-
-class CompareError(SessganEvolverError):
-    """Settings a comparison cannot run with."""
 
 
 @dataclass(frozen=True)

@@ -48,17 +48,14 @@ from sessgan_controllers.types import (
     RobotState,
     ScanData,
 )
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import EpisodeRunnerError
 from sessgan_gen.environment import Environment
+from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_gen.scenarios import get_scenario
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import ContactEvent
 from sessgan_sim.simulator_settings import SimulatorSettings
-
-
-class EpisodeRunnerError(SessganEvolverError):
-    """An episode that cannot be run in process (unknown controller, bad settings)."""
 
 
 def _float32(value: float) -> float:
@@ -77,11 +74,8 @@ def node_inputs(observation: Observation) -> tuple[ScanData, RobotState]:
     scan = ScanData(np.asarray(observation.scan, dtype=float), _float32(lidar.angle_min),
                     _float32(lidar.angle_increment), _float32(lidar.range_min),
                     _float32(lidar.range_max))
-    # sessgan_sim.cdr.odometry writes (0, 0, sin(yaw/2), cos(yaw/2)); the node reads the yaw
-    # back with sessgan_controllers.messages.yaw_from_quaternion (same expression here).
-    x = y = 0.0
-    z, w = math.sin(pose.yaw / 2.0), math.cos(pose.yaw / 2.0)
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    # The odometry carries the yaw as a quaternion; the node reads it back from it.
+    yaw = yaw_from_quaternion(*quaternion_from_yaw(pose.yaw))
     return scan, RobotState(float(pose.x), float(pose.y), yaw, float(twist.vx),
                             float(twist.vy), float(twist.wz))
 

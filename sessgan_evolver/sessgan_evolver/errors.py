@@ -32,3 +32,43 @@ class ReportError(SessganEvolverError):
 
 class CampaignError(SessganEvolverError):
     """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""
+
+
+class CellularAutomatonError(SessganEvolverError, ValueError):
+    """Settings or a scenario the cellular automaton cannot work with."""
+
+
+class FaultPictureError(SessganEvolverError):
+    """A bag or run that holds too little to draw."""
+
+
+class SearchError(SessganEvolverError):
+    """A search that cannot run (no budget, a method that proposes nothing)."""
+
+
+class FaultError(SessganEvolverError, ValueError):
+    """A fault rule or a failure that cannot be keyed (bad cell sizes, no trace)."""
+
+
+class FreshSeedError(SessganEvolverError):
+    """A generator or run that cannot be evaluated, or seeds that are not fresh."""
+
+
+class BagExportError(SessganEvolverError):
+    """A trace that cannot become a bag (no scans kept, inconsistent lengths)."""
+
+
+class CompareError(SessganEvolverError):
+    """Settings a comparison cannot run with."""
+
+
+class MapOperatorError(SessganEvolverError, ValueError):
+    """Operator settings or parents that do not fit."""
+
+
+class EpisodeRunnerError(SessganEvolverError):
+    """An episode that cannot be run in process (unknown controller, bad settings)."""
+
+
+class SearchMethodError(SessganEvolverError, ValueError):
+    """A method name or setting that does not exist or does not fit."""

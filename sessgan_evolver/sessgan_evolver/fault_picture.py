@@ -20,6 +20,8 @@ from typing import Any
 
 import matplotlib
 
+from sessgan_evolver.errors import FaultPictureError
+
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
@@ -27,7 +29,6 @@ from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
 
 from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json  # noqa: E402
 from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
-from sessgan_evolver.errors import SessganEvolverError  # noqa: E402
 from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
 from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
 from sessgan_gen.navigation import certify_environment  # noqa: E402
@@ -36,10 +37,6 @@ from sessgan_sim.bag_recording import jazzy_typestore  # noqa: E402
 FIGURE_DPI = 120
 _MAP_COLOURS = ListedColormap(['#ffffff', '#9e9e9e', '#202020'])
 _MAP_NORM = BoundaryNorm([-0.5, 25, 75, 100.5], 3)
-
-
-class FaultPictureError(SessganEvolverError):
-    """A bag or run that holds too little to draw."""
 
 
 @dataclass

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from sessgan_evolver.episode_runner import EpisodeTrace
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import FaultError
 from sessgan_gen.environment import Environment
 from sessgan_sim.metrics import ContactKind, is_controller_failure
 
@@ -51,10 +51,6 @@ EXACT_FIELDS = ('outcome', 'collisions', 'fault_collisions', 'ticks', 'risk_scor
 
 OUTSIDE = -1
 """Context value of cells beyond the grid."""
-
-
-class FaultError(SessganEvolverError, ValueError):
-    """A fault rule or a failure that cannot be keyed (bad cell sizes, no trace)."""
 
 
 def is_valid_failure(metrics: Mapping[str, Any]) -> bool:

@@ -31,7 +31,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from sessgan_evolver.cellular_automaton import CellularAutomatonGenerator
-from sessgan_evolver.errors import RunStoreError, SessganEvolverError
+from sessgan_evolver.errors import FreshSeedError, RunStoreError
 from sessgan_evolver.faults import FaultEntry, FaultRule, group_faults
 from sessgan_evolver.genome import Genome
 from sessgan_evolver.in_process import InProcessEvaluator
@@ -43,10 +43,6 @@ from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.token_map import load_example_map
-
-
-class FreshSeedError(SessganEvolverError):
-    """A generator or run that cannot be evaluated, or seeds that are not fresh."""
 
 
 class MapSource(Protocol):

@@ -25,13 +25,9 @@ import math
 
 import numpy as np
 
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import MapOperatorError
 
 NoiseMaps = list[np.ndarray]
-
-
-class MapOperatorError(SessganEvolverError, ValueError):
-    """Operator settings or parents that do not fit."""
 
 
 def _rectangle(rng: np.random.Generator, shape: tuple[int, int], low: int, high: int

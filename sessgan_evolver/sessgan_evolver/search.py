@@ -20,16 +20,12 @@ from typing import Any
 
 from sessgan_evolver.campaign import Campaign, CampaignConfig
 from sessgan_evolver.episode_runner import EpisodeRun
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import SearchError
 from sessgan_evolver.faults import FaultKey, FaultRule, is_valid_failure, key_of_failure
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search_methods import Evaluated, SearchMethod
 from sessgan_gen.environment import Environment
 from sessgan_gen.navigation import make_environment
-
-
-class SearchError(SessganEvolverError):
-    """A search that cannot run (no budget, a method that proposes nothing)."""
 
 
 @dataclass

@@ -37,7 +37,7 @@ from sessgan_evolver.cellular_automaton import (
     CellularAutomatonConfig,
     CellularAutomatonGenerator,
 )
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import SearchMethodError
 from sessgan_evolver.fitness import FitnessConfig, member_fitness
 from sessgan_evolver.map_operators import (
     NoiseMaps,
@@ -60,10 +60,6 @@ from sessgan_gen.token_map import load_example_map
 
 SEED_BOUND = 2**32
 """Map and simulator seeds lie in [0, SEED_BOUND), like the campaign's."""
-
-
-class SearchMethodError(SessganEvolverError, ValueError):
-    """A method name or setting that does not exist or does not fit."""
 
 
 @dataclass(frozen=True)

@@ -34,9 +34,11 @@ def test_a_child_is_pinned_and_batch_scheduled_and_stopped(tmp_path):
     assert pinned.process.poll() is not None and plain.process.poll() is not None
 
 
-def announcing_sleeper(text: str) -> list[str]:
-    """A process that prints ``text`` and then sleeps (a simulator saying it is ready)."""
-    return [sys.executable, '-c', f'import time; print({text!r}, flush=True); time.sleep(60)']
+def announcing_sleeper(text: str, delay: float = 0.0) -> list[str]:
+    """A process that prints ``text`` after ``delay`` seconds and then sleeps (a simulator
+    saying it is ready)."""
+    return [sys.executable, '-c',
+            f'import time; time.sleep({delay}); print({text!r}, flush=True); time.sleep(60)']
 
 
 def wait_until(predicate, timeout: float = 10.0) -> None:
@@ -49,7 +51,9 @@ def wait_until(predicate, timeout: float = 10.0) -> None:
 def test_a_dead_controller_is_seen_at_once_and_its_pair_restarted(tmp_path):
     with ProcessSupervisor(tmp_path) as supervisor:
         pool = WorkerPool(supervisor, max_restarts=2)
-        pair = pool.start_pair('/w0', ('simulator_w0', announcing_sleeper('simulator ready')),
+        # The announcement comes 1 s after start, so a restarted simulator has not yet made it
+        # when the assertion below runs: only the predecessor's log line could satisfy it.
+        pair = pool.start_pair('/w0', ('simulator_w0', announcing_sleeper('simulator ready', 1.0)),
                                ('controller_w0', SLEEPER))
         other = pool.start_pair('/w1', ('simulator_w1', SLEEPER), ('controller_w1', SLEEPER))
         wait_until(lambda: pair.logged_since_start('simulator ready'))

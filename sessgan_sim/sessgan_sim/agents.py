@@ -5,8 +5,8 @@ random cells of the footprint-free space (walls inflated by the agent's radius)
 joined by a 4-connected shortest path (sessgan_gen.navigation), at a constant
 speed. Agents are kinematic: static pybullet bodies moved every physics step,
 which the robot under test can hit (a contact counts as a collision) but cannot
-push. They move in the robot's plane (ground agents for ground robots, flyers at
-cruise altitude for the flyer) and are seen by its lidar. No agent starts within
+push. They move in the robot's plane (ground agents for ground robots, flyers at the
+flyer's traffic altitude) and are seen by its lidar when its scan plane cuts them. No agent starts within
 ``min_start_distance`` of the robot's start, and no patrol begins or ends inside the
 ``keep_clear`` discs the episode names (around the goal and on the certified route's narrow
 passages, so an agent never parks where the robot must pass).
@@ -129,7 +129,7 @@ class DummyAgents:
         if count < 0:
             raise InvalidConfigError(f'agents: count must be >= 0, got {count}')
         self._client = client
-        self._height = robot.ride_height
+        self._height = robot.traffic_height
         self._robot_radius = robot.footprint_radius
         self.body_ids, self.paths = [], []
         self._index_of_body = {}
@@ -180,6 +180,11 @@ class DummyAgents:
         self._travelled = [0.0] * len(self.paths)
         self._index_of_body = {body: index for index, body in enumerate(self.body_ids)}
         return len(self.body_ids)
+
+    @property
+    def centre_height(self) -> float:
+        """Height (m) of the agents' centres above the ground."""
+        return self._height
 
     def index_of(self, body_id: int) -> int | None:
         """Index of the agent whose pybullet body is ``body_id``; None for any other body."""

@@ -51,17 +51,19 @@ from sessgan_sim.metrics import (
     MetricsRecorder,
     Outcome,
 )
-from sessgan_sim.robots import STOP, Robot, VelocityCommand, create_robot
+from sessgan_sim.robots import STOP, FlyerRobot, Robot, VelocityCommand, create_robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
     Lidar,
     LidarConfig,
     LidarInfo,
+    RangeFinder,
+    RangeFinderConfig,
     Twist2D,
     contact_partners,
     read_odometry,
 )
-from sessgan_sim.world import World, WorldLayout, WorldStyle
+from sessgan_sim.world import ObstacleKind, World, WorldLayout, WorldStyle
 
 AGENT_WAIT_DISTANCE = 1.0
 """m between bodies within which a robot waiting for an agent is not counted stuck."""
@@ -99,6 +101,8 @@ class EpisodeConfig:
     """Farthest clearance measured, at least the proximity distance: min_clearance is capped
     here. None: the proximity distance (the cheapest query)."""
     lidar: LidarConfig = field(default_factory=LidarConfig)
+    range_finder: RangeFinderConfig = field(default_factory=RangeFinderConfig)
+    """The downward range sensor; only a flying robot has one."""
     dummy_agents: int | None = None
     """Number of moving dummy agents."""
     agents: AgentConfig = field(default_factory=AgentConfig)
@@ -139,6 +143,7 @@ class EpisodeConfig:
                 raise InvalidConfigError(f'episode config: {name} must be an integer >= 0, '
                                          f'got {count!r}')
         self.lidar.validate()
+        self.range_finder.validate()
         self.agents.validate()
         self.world.validate()
 
@@ -191,6 +196,14 @@ class Observation:
     """Body-frame velocity."""
     goal: Pose2D
     in_contact: bool
+    altitude: float = 0.0
+    """m, the body's underside above the ground (odometry's z; 0 for ground robots)."""
+    climb_rate: float = 0.0
+    """m/s, up positive."""
+    range_down: float | None = None
+    """m, the downward range sensor's reading (REP 117 infinities); None without one."""
+    range_finder: RangeFinderConfig | None = None
+    """The downward range sensor's geometry; None for robots without one."""
 
 
 class StepResult(NamedTuple):
@@ -219,8 +232,10 @@ class TickProfile:
 def _as_command(command: VelocityCommand | Sequence[float]) -> VelocityCommand:
     if isinstance(command, VelocityCommand):
         return command
-    vx, vy, wz = command
-    return VelocityCommand(float(vx), float(vy), float(wz))
+    values = tuple(command)
+    if len(values) not in (3, 4):
+        raise EpisodeError(f'a command is (vx, vy, wz) or (vx, vy, wz, vz), got {values!r}')
+    return VelocityCommand(*(float(value) for value in values))
 
 
 @dataclass
@@ -261,6 +276,7 @@ class _Live:
     robot: Robot
     lidar: Lidar
     clearance: ClearanceSensor
+    range_finder: RangeFinder | None
     progress: ProgressField
     time_limit: float
     proximity_distance: float
@@ -376,6 +392,10 @@ class Episode:
             scenario_limit = config.time_limit is None
             config = record.config = config.resolved(get_scenario(environment.scenario))
             robot = create_robot(str(config.robot), config.robot_params)
+            if isinstance(robot, FlyerRobot) and robot.top >= config.world.wall_height:
+                raise InvalidConfigError(
+                    f'the flyer reaches {robot.top:.2f} m (max_altitude + height): walls '
+                    f'must be taller, but world wall_height is {config.world.wall_height} m')
             if scenario_limit and environment.route_length > 0:
                 route_time = ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
                 config = dataclasses.replace(
@@ -389,13 +409,15 @@ class Episode:
 
         client = self._world.client
         layout = self._world.build(environment, config.physics_timestep, config.world)
-        robot.spawn(client, environment.start)
+        robot.spawn(client, environment.start,
+                    robot.start_altitude(self._support_height(environment, robot, layout)))
         overlap = self._start_overlap(environment, robot, layout)
         if overlap is not None:
             self._end(Outcome.INVALID_ENVIRONMENT, overlap)
             return self._blank_observation()
 
-        noise_seed, agent_seed = np.random.SeedSequence(config.seed).spawn(2)
+        # A third stream for the range finder leaves the first two as they were before it.
+        noise_seed, agent_seed, range_seed = np.random.SeedSequence(config.seed).spawn(3)
         spec = get_scenario(environment.scenario)
         grid = map_clearance(environment.occupancy, environment.resolution,
                              environment.origin, spec)
@@ -407,9 +429,14 @@ class Episode:
                                                              progress, route_need))
         lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
         lidar.attach(client, robot, layout, self._agents)
+        clearance = ClearanceSensor(client, robot, layout, clearance_range)
+        clearance.set_agent_heights(self._agents.centre_height, config.agents.height)
+        range_finder = None
+        if robot.flies:
+            range_finder = RangeFinder(config.range_finder, np.random.default_rng(range_seed))
+            range_finder.attach(robot, layout)
         live = _Live(
-            robot=robot, lidar=lidar,
-            clearance=ClearanceSensor(client, robot, layout, clearance_range),
+            robot=robot, lidar=lidar, clearance=clearance, range_finder=range_finder,
             progress=progress,
             time_limit=float(config.time_limit or 0.0),
             proximity_distance=float(config.proximity_distance or 0.0),
@@ -421,14 +448,15 @@ class Episode:
         return self._observation(record, live, scan_updated=True)
 
     def step(self, command: VelocityCommand | Sequence[float]) -> StepResult:
-        """Apply ``command`` (body-frame vx, vy, wz) for one control tick; return the result."""
+        """Apply ``command`` (body-frame vx, vy, wz, and the flyer's climb rate vz, 0 when
+        left out) for one control tick; return the result."""
         record = self._require_record()
         if record.outcome is not None:
             raise EpisodeError(f'the episode is over ({record.outcome.value}); call reset()')
         live = self._require_live()
         command = _as_command(command)
         if not (math.isfinite(command.vx) and math.isfinite(command.vy)
-                and math.isfinite(command.wz)):
+                and math.isfinite(command.wz) and math.isfinite(command.vz)):
             record.recorder.invalid_commands += 1
             command = STOP
         config, robot, recorder = record.config, live.robot, record.recorder
@@ -691,11 +719,36 @@ class Episode:
         return None
 
     def _observation(self, record: _Record, live: _Live, scan_updated: bool) -> Observation:
-        odometry = read_odometry(live.robot)
+        robot = live.robot
+        odometry = read_odometry(robot)
+        range_finder = live.range_finder
+        if range_finder is None:
+            return Observation(
+                time=self.time, scan=record.scan, scan_updated=scan_updated,
+                lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
+                goal=record.environment.goal, in_contact=record.touching)
         return Observation(
             time=self.time, scan=record.scan, scan_updated=scan_updated,
             lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
-            goal=record.environment.goal, in_contact=record.touching)
+            goal=record.environment.goal, in_contact=record.touching,
+            altitude=robot.altitude, climb_rate=robot.state.vz,
+            range_down=range_finder.measure(), range_finder=range_finder.config)
+
+    @staticmethod
+    def _support_height(environment: Environment, robot: Robot, layout: WorldLayout) -> float:
+        """Height (m) of the tallest low obstacle under the robot's footprint at the start
+        (0 on bare ground): a flyer starts landed on it."""
+        start = environment.start
+        x, y, radius = float(start.x), float(start.y), robot.footprint_radius
+        support = 0.0
+        for box in layout.obstacles:
+            if box.kind is not ObstacleKind.LOW_OBSTACLE:
+                continue
+            dx = max(box.x_min - x, 0.0, x - box.x_max)
+            dy = max(box.y_min - y, 0.0, y - box.y_max)
+            if dx * dx + dy * dy < radius * radius:
+                support = max(support, box.height)
+        return support
 
     def _blank_observation(self) -> Observation:
         """The observation of an episode that could not start: no returns, at the start."""

@@ -19,18 +19,23 @@ motion through its own dynamics:
   lock. The tyres' grip caps the lateral acceleration: beyond it the car
   understeers (its yaw rate saturates at grip / speed), so a sharp turn taken
   too fast runs wide into the barrier. linear.y is ignored.
-* ``flyer``: a holonomic flyer at a fixed cruise altitude, above low obstacles.
-  linear.x and linear.y are body-frame velocities, angular.z the yaw rate; the
-  velocity follows the command through a first-order lag (its response time)
-  under an acceleration limit and a top speed.
+* ``flyer``: a holonomic flyer with altitude. linear.x and linear.y are body-frame
+  velocities, linear.z the climb rate (m/s, up positive), angular.z the yaw rate; the
+  velocity follows the command through a first-order lag (its response time) under
+  acceleration limits, a top speed and a top climb rate. Its **altitude** is the height of
+  the body's underside above the ground, between 0 (on the ground) and ``max_altitude``
+  (walls are taller, see :class:`sessgan_sim.world.WorldStyle`). It starts landed at the
+  start pose: on the ground, or resting on top of a low obstacle that lies under its
+  footprint. At any altitude it may move sideways (at 0 it skims the ground); a low
+  obstacle it flies into below the obstacle's height is a contact like a wall.
 
 How the dynamics are integrated: each physics step the model advances its state
 (speed, steering, ...) toward the command and sets the body's velocity; pybullet
 then resolves contacts, so a wall stops or deflects the robot. After the step
 the model reads the body's real velocity back, so a robot pressed against a
-wall does not keep a speed it does not have. Bodies ride at a fixed height with
-gravity off (the world is planar); contact-induced tilt and height drift are
-removed after each step.
+wall does not keep a speed it does not have. Gravity is off: ground robots ride at a
+fixed height and the flyer at its model's altitude (the model sets the vertical
+velocity too); contact-induced tilt and height drift are removed after each step.
 """
 
 from __future__ import annotations
@@ -66,6 +71,8 @@ class VelocityCommand(NamedTuple):
     """linear.y in m/s (left); only the flyer uses it."""
     wz: float = 0.0
     """angular.z in rad/s (counter-clockwise)."""
+    vz: float = 0.0
+    """linear.z in m/s (up); only the flyer uses it."""
 
 
 STOP = VelocityCommand()
@@ -80,6 +87,10 @@ class RobotState(NamedTuple):
     vx: float
     vy: float
     wz: float
+    z: float = 0.0
+    """Altitude in m: the body's underside above the ground (0 for ground robots)."""
+    vz: float = 0.0
+    """Climb rate in m/s."""
 
 
 def _clip(value: float, low: float, high: float) -> float:
@@ -118,6 +129,7 @@ class Robot(abc.ABC):
         self._x = self._y = self._yaw = 0.0
         self._cos_yaw, self._sin_yaw = 1.0, 0.0
         self._vx = self._vy = self._wz = 0.0
+        self._altitude = self._climb_rate = 0.0
 
     @classmethod
     def with_overrides(cls, overrides: Mapping[str, float] | None = None) -> Robot:
@@ -144,7 +156,30 @@ class Robot(abc.ABC):
     @property
     @abc.abstractmethod
     def sensor_height(self) -> float:
-        """Height (m) of the lidar's scan plane above the ground."""
+        """Height (m) of the lidar's scan plane above the robot's underside at altitude 0 (the
+        ground for ground robots): ``base_scan`` above ``base_footprint``."""
+
+    @property
+    def traffic_height(self) -> float:
+        """Height (m) of the centre of the moving agents sharing the robot's space: its own
+        ride height for ground robots."""
+        return self.ride_height
+
+    @property
+    def altitude(self) -> float:
+        """Height (m) of the body's underside above the ground after the last step: 0 for
+        ground robots; ``base_footprint``'s z in the odom frame."""
+        return self._altitude
+
+    @property
+    def scan_height(self) -> float:
+        """Height (m) of the scan plane above the ground now."""
+        return self._altitude + self.sensor_height
+
+    def start_altitude(self, support_height: float) -> float:
+        """Altitude (m) to spawn at when the tallest obstacle under the start footprint is
+        ``support_height`` m tall: 0 for ground robots (they never stand on obstacles)."""
+        return 0.0
 
     @abc.abstractmethod
     def validate(self) -> None:
@@ -179,14 +214,23 @@ class Robot(abc.ABC):
     def _observe(self, vx: float, vy: float, wz: float) -> None:
         """Take the body's real body-frame velocity after a step back into the model."""
 
+    def _advance_altitude(self, command: VelocityCommand, dt: float) -> float:
+        """Advance the altitude model by ``dt`` seconds toward ``command``; return the
+        vertical velocity (m/s) to impose for this step. Ground robots do not climb."""
+        return 0.0
+
     # --- the body ------------------------------------------------------------------------
 
-    def spawn(self, client: int, pose: Pose2D) -> int:
-        """Create the robot's body in ``client`` at ``pose``, at rest; return the body id."""
+    def spawn(self, client: int, pose: Pose2D, altitude: float = 0.0) -> int:
+        """Create the robot's body in ``client`` at ``pose`` and ``altitude`` m (the flyer's;
+        ground robots stay on the ground), at rest; return the body id."""
+        self._altitude = float(altitude) if self.flies else 0.0
+        self._climb_rate = 0.0
         shape = self._create_shape(client)
         orientation = p.getQuaternionFromEuler([0.0, 0.0, pose.yaw])
         body = p.createMultiBody(self.mass, shape,
-                                 basePosition=[pose.x, pose.y, self.ride_height],
+                                 basePosition=[pose.x, pose.y,
+                                               self.ride_height + self._altitude],
                                  baseOrientation=orientation, physicsClientId=client)
         inertia = p.getDynamicsInfo(body, -1, physicsClientId=client)[2]
         p.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, restitution=0.0,
@@ -207,9 +251,10 @@ class Robot(abc.ABC):
     def apply(self, command: VelocityCommand, dt: float) -> None:
         """Advance the model by one physics step of ``dt`` s and set the body's velocity."""
         vx, vy, wz = self._advance(command, dt)
+        vz = self._advance_altitude(command, dt) if self.flies else 0.0
         cos_yaw, sin_yaw = self._cos_yaw, self._sin_yaw
         p.resetBaseVelocity(self.body_id,
-                            [cos_yaw * vx - sin_yaw * vy, sin_yaw * vx + cos_yaw * vy, 0.0],
+                            [cos_yaw * vx - sin_yaw * vy, sin_yaw * vx + cos_yaw * vy, vz],
                             [0.0, 0.0, wz], physicsClientId=self.client)
 
     def sync(self) -> None:
@@ -220,10 +265,13 @@ class Robot(abc.ABC):
         linear, angular = p.getBaseVelocity(self.body_id, physicsClientId=client)
         x, y, z = position
         yaw = yaw_from_quaternion(qx, qy, qz, qw)
-        if (abs(z - self.ride_height) > DRIFT_TOLERANCE or abs(qx) > DRIFT_TOLERANCE
+        if self.flies:
+            self._observe_altitude(z - self.ride_height, linear[2])
+        height = self.ride_height + self._altitude
+        if (abs(z - height) > DRIFT_TOLERANCE or abs(qx) > DRIFT_TOLERANCE
                 or abs(qy) > DRIFT_TOLERANCE):
             p.resetBasePositionAndOrientation(
-                self.body_id, [x, y, self.ride_height],
+                self.body_id, [x, y, height],
                 quaternion_from_yaw(yaw), physicsClientId=client)
         cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
         self._x, self._y, self._yaw = x, y, yaw
@@ -233,10 +281,14 @@ class Robot(abc.ABC):
         self._wz = angular[2]
         self._observe(self._vx, self._vy, self._wz)
 
+    def _observe_altitude(self, altitude: float, climb_rate: float) -> None:
+        """Take the body's altitude and vertical velocity after a step (fliers only)."""
+
     @property
     def state(self) -> RobotState:
-        """Pose (map frame) and body-frame twist after the last step."""
-        return RobotState(self._x, self._y, self._yaw, self._vx, self._vy, self._wz)
+        """Pose (map frame), body-frame twist, altitude and climb rate after the last step."""
+        return RobotState(self._x, self._y, self._yaw, self._vx, self._vy, self._wz,
+                          self._altitude, self._climb_rate)
 
     @property
     def position(self) -> tuple[float, float]:
@@ -502,18 +554,25 @@ class CarRobot(Robot):
 
 @dataclass(frozen=True)
 class FlyerParams:
-    """A small quadrotor holding its altitude."""
+    """A small quadrotor with altitude control."""
 
     radius: float = 0.2
     height: float = 0.1
     mass: float = 1.5
-    cruise_altitude: float = 1.0
-    """m, height of the body's centre and of its scan plane: above low obstacles (0.3 m),
-    below walls (2 m)."""
+    max_altitude: float = 1.5
+    """m, highest altitude (the body's underside above the ground); walls must be taller than
+    ``max_altitude + height`` (the episode checks it against the world's wall height)."""
+    traffic_altitude: float = 0.95
+    """m, the altitude the other flyers (dummy agents) fly at: their centres at
+    ``traffic_altitude + height / 2`` (1.0 m), the scan plane of a flyer cruising there."""
     max_speed: float = 2.0
     """m/s, horizontal."""
     max_acceleration: float = 3.0
     """m/s^2, horizontal."""
+    max_climb_rate: float = 1.0
+    """m/s, up or down: linear.z is clipped to it."""
+    max_vertical_acceleration: float = 2.0
+    """m/s^2."""
     response_time: float = 0.3
     """s, time constant of the first-order lag from commanded to actual velocity."""
     max_yaw_rate: float = 2.0
@@ -522,9 +581,14 @@ class FlyerParams:
     """rad/s^2."""
 
 
+START_SUPPORT_GAP = 0.005
+"""m between a flyer that starts on top of a low obstacle and the obstacle: resting on it,
+not touching it (a touch would count as a collision)."""
+
+
 @register_robot
 class FlyerRobot(Robot):
-    """Holonomic flyer with inertia at a fixed cruise altitude."""
+    """Holonomic flyer with inertia and altitude (see the module docstring)."""
 
     name = 'flyer'
     params_type = FlyerParams
@@ -534,10 +598,13 @@ class FlyerRobot(Robot):
 
     def validate(self) -> None:
         _check_positive('flyer', self.params, (
-            'radius', 'height', 'mass', 'cruise_altitude', 'max_speed', 'max_acceleration',
+            'radius', 'height', 'mass', 'max_altitude', 'traffic_altitude', 'max_speed',
+            'max_acceleration', 'max_climb_rate', 'max_vertical_acceleration',
             'response_time', 'max_yaw_rate', 'max_yaw_acceleration'))
-        if self.params.cruise_altitude <= self.params.height / 2:
-            raise InvalidConfigError('flyer: cruise_altitude must exceed half its height')
+        if self.params.traffic_altitude > self.params.max_altitude:
+            raise InvalidConfigError(
+                f'flyer: traffic_altitude ({self.params.traffic_altitude}) must not exceed '
+                f'max_altitude ({self.params.max_altitude})')
 
     @property
     def footprint_radius(self) -> float:
@@ -545,11 +612,20 @@ class FlyerRobot(Robot):
 
     @property
     def ride_height(self) -> float:
-        return self.params.cruise_altitude
+        return self.params.height / 2
 
     @property
     def sensor_height(self) -> float:
-        return self.params.cruise_altitude
+        return self.params.height / 2
+
+    @property
+    def traffic_height(self) -> float:
+        return self.params.traffic_altitude + self.params.height / 2
+
+    @property
+    def top(self) -> float:
+        """Height (m) of the body's top at its highest altitude."""
+        return self.params.max_altitude + self.params.height
 
     @property
     def mass(self) -> float:
@@ -558,6 +634,12 @@ class FlyerRobot(Robot):
     @property
     def top_speed(self) -> float:
         return self.params.max_speed
+
+    def start_altitude(self, support_height: float) -> float:
+        """Landed: on the ground, or on top of the tallest obstacle under the footprint."""
+        if support_height <= 0.0:
+            return 0.0
+        return min(support_height + START_SUPPORT_GAP, self.params.max_altitude)
 
     def _create_shape(self, client: int) -> int:
         return p.createCollisionShape(p.GEOM_CYLINDER, radius=self.params.radius,
@@ -593,8 +675,25 @@ class FlyerRobot(Robot):
         return (cos_yaw * self._world_vx + sin_yaw * self._world_vy,
                 -sin_yaw * self._world_vx + cos_yaw * self._world_vy, self._turn_rate)
 
+    def _advance_altitude(self, command: VelocityCommand, dt: float) -> float:
+        params = self.params
+        target = _clip(command.vz, -params.max_climb_rate, params.max_climb_rate)
+        gain = min(1.0, dt / params.response_time)
+        limit = params.max_vertical_acceleration * dt
+        rate = self._climb_rate + _clip((target - self._climb_rate) * gain, -limit, limit)
+        # The ground and the ceiling (max_altitude) stop it within this step.
+        rate = _clip(rate, -self._altitude / dt, (params.max_altitude - self._altitude) / dt)
+        self._climb_rate = rate
+        return rate
+
     def _observe(self, vx: float, vy: float, wz: float) -> None:
         cos_yaw, sin_yaw = self._cos_yaw, self._sin_yaw
         self._world_vx = cos_yaw * vx - sin_yaw * vy
         self._world_vy = sin_yaw * vx + cos_yaw * vy
         self._turn_rate = wz
+
+    def _observe_altitude(self, altitude: float, climb_rate: float) -> None:
+        # The body's altitude after the step (a low obstacle's top stops a descent onto it),
+        # within the model's bounds.
+        self._altitude = _clip(altitude, 0.0, self.params.max_altitude)
+        self._climb_rate = climb_rate

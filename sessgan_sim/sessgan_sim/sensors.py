@@ -6,13 +6,16 @@ axis). What it sees follows from that height:
 
 * ground robots (scan plane 0.2 m) see walls, out-of-bounds barriers, low
   obstacles (0.3 m) and ground agents;
-* the flyer (scan plane at its cruise altitude, 1.0 m) sees walls and other
-  flyers, but not low obstacles: they lie below its scan plane, as they would
-  for a real planar lidar on a drone. They remain on the ``map`` topic (value 50)
-  for controllers that must consider them.
+* the flyer's scan plane moves with it (half its body height above its altitude):
+  cruising at its traffic altitude (plane at 1.0 m) it sees walls and other flyers but
+  not low obstacles, which lie below the plane as they would for a real planar lidar on
+  a drone; flying lower than a low obstacle's height (0.3 m) it sees them too. They
+  remain on the ``map`` topic (value 50) for controllers that must consider them, and
+  the flyer's downward range sensor (:class:`RangeFinder`) reads them from above.
 
 In general a cell is opaque to the scan when its obstacle is taller than the scan
-plane, and an agent (a vertical cylinder) when the plane cuts it. Two casters
+plane, and an agent (a vertical cylinder) when the plane cuts it; both are decided at
+every scan from the plane's height then. Two casters
 compute the same ranges (:class:`RayCaster`): the default casts analytically in
 numpy against the faces where opacity changes and against the agents' circles
 (:class:`PlanarRayCaster`); the baseline casts with ``p.rayTestBatch`` against the
@@ -31,6 +34,7 @@ within [range_min, range_max].
 
 from __future__ import annotations
 
+import bisect
 import enum
 import math
 import operator
@@ -407,6 +411,11 @@ class Lidar:
         self._robot: Robot | None = None
         self._agents: DummyAgents | None = None
         self._planar: PlanarRayCaster | None = None
+        self._casters: dict[int, PlanarRayCaster] = {}
+        self._levels: list[float] = []
+        self._padded_heights = np.zeros((0, 0))
+        self._padded_origin = (0.0, 0.0)
+        self._resolution = 1.0
         self._starts: list[list[float]] = []
         self._ends: list[list[float]] = []
 
@@ -417,9 +426,11 @@ class Lidar:
         its body frame."""
         self._client = client
         self._robot = robot
-        self._agents = None
+        self._agents = agents
         self._planar = None
+        self._casters = {}
         if self.caster is RayCaster.PYBULLET:
+            # Rays start in the body's frame: the scan plane follows the body up and down.
             angles = self.info.angles()
             offset = robot.sensor_height - robot.ride_height
             starts = np.zeros((self.info.beams, 3))
@@ -430,17 +441,24 @@ class Lidar:
             self._starts, self._ends = starts.tolist(), ends.tolist()
             return
         # The scan plane meets exactly the cells taller than it (walls, and for a ground
-        # robot low obstacles and barriers too), and the world's ring of blocked cells.
+        # robot or a low flyer low obstacles and barriers too), and the world's ring of
+        # blocked cells. One caster per set of opaque cells, made when first needed.
         resolution = layout.resolution
-        heights = np.pad(layout.heights, 1, constant_values=layout.border_height)
-        self._planar = PlanarRayCaster(
-            heights > robot.sensor_height, resolution,
-            (layout.origin[0] - resolution, layout.origin[1] - resolution), self.info)
-        # Agents are upright cylinders centred at the robot's ride height (DummyAgents.spawn):
-        # seen when the scan plane passes between their bottom and top.
-        if (agents is not None
-                and abs(robot.sensor_height - robot.ride_height) < agents.config.height / 2):
-            self._agents = agents
+        self._padded_heights = np.pad(layout.heights, 1, constant_values=layout.border_height)
+        self._padded_origin = (layout.origin[0] - resolution, layout.origin[1] - resolution)
+        self._resolution = resolution
+        self._levels = sorted({float(h) for h in np.unique(self._padded_heights)} - {0.0})
+        self._planar = self._caster_at(robot.scan_height)
+
+    def _caster_at(self, scan_height: float) -> PlanarRayCaster:
+        """The caster of the cells opaque to a scan plane ``scan_height`` m above the ground."""
+        key = bisect.bisect_right(self._levels, scan_height)
+        caster = self._casters.get(key)
+        if caster is None:
+            caster = PlanarRayCaster(self._padded_heights > scan_height, self._resolution,
+                                     self._padded_origin, self.info)
+            self._casters[key] = caster
+        return caster
 
     def scan(self) -> np.ndarray:
         """Ranges of one scan in metres (float32, a new read-only array)."""
@@ -448,8 +466,17 @@ class Lidar:
             raise SessganSimError('lidar: attach() it to a spawned robot before scanning')
         config = self.config
         if self._planar is not None:
-            state = self._robot.state
+            robot = self._robot
+            state = robot.state
             agents = self._agents
+            scan_height = robot.scan_height
+            if robot.flies:
+                self._planar = self._caster_at(scan_height)
+            # Agents are upright cylinders: seen when the scan plane passes between their
+            # bottom and top.
+            if agents is not None and not (abs(scan_height - agents.centre_height)
+                                           < agents.config.height / 2):
+                agents = None
             if agents is not None:
                 distances = self._planar.cast(state.x, state.y, state.yaw, agents.positions,
                                               agents.config.radius)
@@ -478,6 +505,95 @@ class Lidar:
         result = ranges.astype(np.float32)
         result.flags.writeable = False
         return result
+
+
+@dataclass(frozen=True)
+class RangeFinderConfig:
+    """The flyer's downward range sensor (sensor_msgs/Range on ``range_down``, frame
+    ``base_range_down`` at the centre of the body's underside). Lengths in metres.
+
+    It casts one beam straight down and reads the distance to the ground or to the top of
+    the obstacle below (a low obstacle; walls are taller than the flyer ever flies); agents
+    are not seen by it. REP 117: a reading below ``min_range`` (the sensor inside an
+    obstacle) is -inf, one beyond ``max_range`` +inf; others get Gaussian noise of
+    ``noise_std`` from the episode's seeded generator, kept within the range limits.
+    """
+
+    min_range: float = 0.0
+    """0: a landed flyer reads 0 (the sensor sits flush with the underside)."""
+    max_range: float = 4.0
+    field_of_view: float = 0.05
+    """rad, as the message states it (a narrow infrared beam)."""
+    noise_std: float = 0.005
+
+    def validate(self) -> None:
+        """Raise InvalidConfigError naming the first unusable parameter."""
+        if not (math.isfinite(self.min_range) and self.min_range >= 0):
+            raise InvalidConfigError(f'range finder: min_range must be >= 0 m, got '
+                                     f'{self.min_range}')
+        if not (math.isfinite(self.max_range) and self.max_range > self.min_range):
+            raise InvalidConfigError(f'range finder: max_range must exceed min_range, got '
+                                     f'{self.max_range} <= {self.min_range}')
+        if not (math.isfinite(self.field_of_view) and 0 < self.field_of_view < math.pi):
+            raise InvalidConfigError(f'range finder: field_of_view must be in (0, pi) rad, '
+                                     f'got {self.field_of_view}')
+        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
+            raise InvalidConfigError(f'range finder: noise_std must be >= 0 m, got '
+                                     f'{self.noise_std}')
+
+
+class RangeFinder:
+    """The downward range sensor of one episode (see :class:`RangeFinderConfig`)."""
+
+    def __init__(self, config: RangeFinderConfig, rng: np.random.Generator) -> None:
+        config.validate()
+        self.config = config
+        self._rng = rng
+        self._robot: Robot | None = None
+        self._heights: list[list[float]] = []
+        self._origin = (0.0, 0.0)
+        self._resolution = 1.0
+
+    def attach(self, robot: Robot, layout: WorldLayout) -> None:
+        """Mount the sensor under ``robot``, spawned in ``layout``'s world."""
+        self._robot = robot
+        resolution = layout.resolution
+        # The world's ring of blocked cells closes the map; beyond it lies bare ground.
+        self._heights = np.pad(layout.heights, 1,
+                               constant_values=layout.border_height).tolist()
+        self._origin = (layout.origin[0] - resolution, layout.origin[1] - resolution)
+        self._resolution = resolution
+
+    def surface_below(self, x: float, y: float) -> float:
+        """Height (m) of what lies under the point (x, y): an obstacle's top, or 0."""
+        col = math.floor((x - self._origin[0]) / self._resolution)
+        row = math.floor((y - self._origin[1]) / self._resolution)
+        heights = self._heights
+        if 0 <= row < len(heights) and 0 <= col < len(heights[0]):
+            return heights[row][col]
+        return 0.0
+
+    def exact_range(self) -> float:
+        """Noise-free distance (m) from the sensor straight down to what lies below it;
+        negative when the sensor is inside an obstacle."""
+        robot = self._robot
+        if robot is None:
+            raise SessganSimError('range finder: attach() it to a spawned robot first')
+        x, y = robot.position
+        return robot.altitude - self.surface_below(x, y)
+
+    def measure(self) -> float:
+        """One reading in metres (REP 117: -inf too close, +inf nothing within range)."""
+        config = self.config
+        distance = self.exact_range()
+        if distance < config.min_range:
+            return -math.inf
+        if distance > config.max_range:
+            return math.inf
+        if config.noise_std > 0:
+            distance += float(self._rng.normal(0.0, config.noise_std))
+            distance = min(max(distance, config.min_range), config.max_range)
+        return distance
 
 
 class Twist2D(NamedTuple):
@@ -557,7 +673,7 @@ class ClearanceSensor:
 
     Analytic (the default) when the robot's body is an upright box or cylinder, as every
     model in :mod:`sessgan_sim.robots` is: obstacles are boxes standing on the ground and
-    agents upright cylinders at the robot's ride height, and the distance between two
+    agents upright cylinders (:meth:`set_agent_heights`), and the distance between two
     upright prisms is the hypotenuse of their horizontal distance and their vertical gap.
     The horizontal distance is exact between a disc or a rotated rectangle (the robot) and
     an axis-aligned rectangle or a disc. Candidate boxes come from a cache per square of
@@ -581,13 +697,16 @@ class ClearanceSensor:
         self.footprint = upright_footprint(client, robot) if analytic else None
         self._near: dict[tuple[int, int], list[tuple[float, float, float, float, float]]] = {}
         self._boxes = np.zeros((0, 5))
+        # Until told (set_agent_heights), agents span every height: no vertical gap.
+        self._agent_centre = 0.0
+        self._agent_half_height = math.inf
         if self.footprint is not None:
             bottom = self.footprint.bottom
-            boxes = np.array([(box.x_min, box.y_min, box.x_max, box.y_max,
-                               max(bottom - box.height, 0.0) ** 2)
+            boxes = np.array([(box.x_min, box.y_min, box.x_max, box.y_max, box.height)
                               for box in layout.obstacles]).reshape(-1, 5)
-            # A box whose top lies a range or more below the body never counts.
-            self._boxes = boxes[boxes[:, 4] < range_ * range_]
+            # A box whose top lies a range or more below the body at its lowest (altitude 0)
+            # never counts.
+            self._boxes = boxes[bottom - boxes[:, 4] < range_]
 
     @property
     def analytic(self) -> bool:
@@ -613,8 +732,13 @@ class ClearanceSensor:
                     clearance = point[8]
         return max(clearance, 0.0)
 
+    def set_agent_heights(self, centre: float, height: float) -> None:
+        """Where the agents fly: their centres ``centre`` m above the ground, ``height`` m
+        tall (analytic clearance; pybullet's knows the bodies)."""
+        self._agent_centre, self._agent_half_height = centre, height / 2
+
     def _boxes_near(self, x: float, y: float) -> list[tuple[float, float, float, float, float]]:
-        """Boxes (x_min, y_min, x_max, y_max, squared vertical gap) within reach of a body
+        """Boxes (x_min, y_min, x_max, y_max, height) within reach of a body
         centred anywhere in the square of (x, y), computed once per square."""
         size = self._reach
         key = (math.floor(x / size), math.floor(y / size))
@@ -632,16 +756,28 @@ class ClearanceSensor:
 
     def _measure_analytic(self, agent_positions: np.ndarray, agent_radius: float,
                           footprint: Footprint) -> float:
-        state = self._robot.state
+        robot = self._robot
+        state = robot.state
         x, y = state.x, state.y
+        # The body's underside and top now: a flyer's move with its altitude.
+        altitude = robot.altitude
+        bottom, top = footprint.bottom + altitude, footprint.top + altitude
         # Squared distances; capped at the range, as pybullet's threshold caps them.
         best = self.range * self.range
         boxes = self._boxes_near(x, y)
-        # Agents ride at the robot's ride height, centred like its body: no vertical gap.
+        # Agents: the vertical gap between the body and theirs (0 for ground robots, whose
+        # agents ride at their height, and for a flyer at the agents' altitude).
         agents = agent_positions.tolist() if len(agent_positions) else []
+        agent_gap = max(self._agent_centre - self._agent_half_height - top,
+                        bottom - self._agent_centre - self._agent_half_height, 0.0)
+        agent_vertical = agent_gap * agent_gap
         radius = footprint.radius
         if radius > 0.0:
-            for x_min, y_min, x_max, y_max, vertical in boxes:
+            for x_min, y_min, x_max, y_max, box_height in boxes:
+                vertical = bottom - box_height
+                vertical = vertical * vertical if vertical > 0.0 else 0.0
+                if vertical >= best:
+                    continue
                 horizontal = max(_point_to_box(x, y, x_min, y_min, x_max, y_max) - radius, 0.0)
                 squared = horizontal * horizontal + vertical
                 if squared < best:
@@ -649,11 +785,14 @@ class ClearanceSensor:
             for agent_x, agent_y in agents:
                 gap = math.hypot(agent_x - x, agent_y - y) - radius - agent_radius
                 horizontal = max(gap, 0.0)
-                if horizontal * horizontal < best:
-                    best = horizontal * horizontal
+                squared = horizontal * horizontal + agent_vertical
+                if squared < best:
+                    best = squared
             return math.sqrt(best)
         rectangle = _Rectangle(x, y, state.yaw, footprint.half_length, footprint.half_width)
-        for x_min, y_min, x_max, y_max, vertical in boxes:
+        for x_min, y_min, x_max, y_max, box_height in boxes:
+            vertical = bottom - box_height
+            vertical = vertical * vertical if vertical > 0.0 else 0.0
             if vertical >= best:
                 continue
             horizontal = rectangle.distance_to_box(x_min, y_min, x_max, y_max,
@@ -663,8 +802,9 @@ class ClearanceSensor:
                 best = squared
         for agent_x, agent_y in agents:
             horizontal = max(rectangle.distance_to_point(agent_x, agent_y) - agent_radius, 0.0)
-            if horizontal * horizontal < best:
-                best = horizontal * horizontal
+            squared = horizontal * horizontal + agent_vertical
+            if squared < best:
+                best = squared
         return math.sqrt(best)
 
 

@@ -234,15 +234,76 @@ def test_flyer_is_holonomic_with_a_lag(episode):
     assert math.hypot(observation.twist.vx, observation.twist.vy) == pytest.approx(2.0, abs=1e-3)
 
 
-@pytest.mark.parametrize('robot, hits', [('diff_drive', True), ('flyer', False)])
-def test_low_obstacles_stop_ground_robots_but_not_the_flyer(episode, robot, hits):
-    rows = ['################', '#..............#', '#....OO........#', '#..............#',
-            '################']
-    env = environment(rows, 'drone', (1.25, 1.25, 0.0))
+LOW_ROW = ['################', '#..............#', '#....OO........#', '#..............#',
+           '################']
+
+
+@pytest.mark.parametrize('robot, climb, hits', [('diff_drive', 0.0, True), ('flyer', 0.0, True),
+                                                ('flyer', 0.5, False)])
+def test_low_obstacles_stop_ground_robots_and_a_low_flyer_but_not_a_high_one(
+        episode, robot, climb, hits):
+    env = environment(LOW_ROW, 'drone', (1.25, 1.25, 0.0))
     episode.reset(env, config(robot=robot))
+    if climb:  # one second's climb at 0.5 m/s: well above the low obstacles' 0.3 m
+        drive(episode, VelocityCommand(0.0, 0.0, 0.0, climb), 1.5)
     observation = drive(episode, VelocityCommand(0.8, 0.0, 0.0), 5.0)
     assert (episode.metrics().collisions == 1) is hits
     assert (observation.pose.x < 2.5 - 0.2 + 0.02) is hits
+
+
+def test_flyer_starts_landed_and_its_climb_rate_is_bounded_with_a_lag(episode):
+    env = environment(open_room(12, 12), 'drone', (3.0, 3.0, 0.0))
+    observation = episode.reset(env, config(robot='flyer'))
+    assert observation.altitude == 0.0 and observation.climb_rate == 0.0
+    assert episode.robot.state.z == 0.0
+    params = episode.robot.params
+    # The climb rate lags the command (response time 0.3 s, 2 m/s^2) and stops at its limit.
+    observation = drive(episode, VelocityCommand(0.0, 0.0, 0.0, 5.0), 0.1)
+    assert 0.0 < observation.climb_rate < 0.2 + 1e-9
+    observation = drive(episode, VelocityCommand(0.0, 0.0, 0.0, 5.0), 1.0)
+    assert params.max_climb_rate - 0.05 < observation.climb_rate <= params.max_climb_rate + 1e-9
+    assert 0.5 < observation.altitude < 1.1
+    # The ceiling holds it at max_altitude.
+    observation = drive(episode, VelocityCommand(0.0, 0.0, 0.0, 5.0), 2.0)
+    assert observation.altitude == pytest.approx(params.max_altitude, abs=1e-9)
+    assert observation.climb_rate == pytest.approx(0.0, abs=1e-6)
+    # Horizontal motion keeps the altitude; descending stops on the ground.
+    observation = drive(episode, VelocityCommand(1.0, 0.0, 0.0), 1.0)
+    assert observation.altitude == pytest.approx(params.max_altitude, abs=1e-6)
+    assert observation.twist.vx > 0.9
+    observation = drive(episode, VelocityCommand(0.0, 0.0, 0.0, -5.0), 3.0)
+    assert observation.altitude == 0.0
+    assert episode.metrics().collisions == 0
+
+
+def test_flyer_hovers_over_a_low_obstacle_and_touches_it_when_descending(episode):
+    env = environment(LOW_ROW, 'drone', (1.25, 1.25, 0.0))
+    episode.reset(env, config(robot='flyer'))
+    drive(episode, VelocityCommand(0.0, 0.0, 0.0, 0.5), 1.5)
+    observation = drive(episode, lambda o: VelocityCommand(
+        4.0 * (2.75 - o.pose.x) if o else 0.0, 0.0, 0.0), 4.0)
+    assert observation.pose.x == pytest.approx(2.75, abs=0.02) and not observation.in_contact
+    observation = drive(episode, VelocityCommand(0.0, 0.0, 0.0, -0.5), 3.0)
+    # It comes to rest on the obstacle's top (0.3 m), which counts as one contact.
+    assert observation.altitude == pytest.approx(0.3, abs=0.01)
+    assert episode.metrics().collisions == 1
+
+
+def test_flyer_starts_on_top_of_a_low_obstacle_under_its_footprint(episode):
+    env = environment(LOW_ROW, 'drone', (2.6, 1.25, 0.0))
+    observation = episode.reset(env, config(robot='flyer'))
+    assert not episode.done
+    assert observation.altitude == pytest.approx(0.3 + 0.005)
+    drive(episode, VelocityCommand(0.0, 0.0, 0.0, 0.5), 1.0)
+    assert episode.metrics().collisions == 0
+
+
+def test_walls_must_be_taller_than_the_flyer_flies(episode):
+    env = environment(open_room(12, 12), 'drone', (3.0, 3.0, 0.0))
+    with pytest.raises(InvalidConfigError, match='walls must be taller'):
+        episode.reset(env, config(robot='flyer', robot_params={'max_altitude': 1.95}))
+    with pytest.raises(InvalidConfigError, match='traffic_altitude'):
+        create_robot('flyer', {'max_altitude': 0.5})
 
 
 def test_a_wall_stops_the_diff_drive_and_counts_one_collision(episode):

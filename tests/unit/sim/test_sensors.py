@@ -17,6 +17,8 @@ from sessgan_sim.sensors import (
     ClearanceSensor,
     Lidar,
     LidarConfig,
+    RangeFinder,
+    RangeFinderConfig,
     RayCaster,
     grid_faces,
     upright_footprint,
@@ -132,14 +134,44 @@ def test_noise_is_gaussian_and_seeded(episode):
     assert np.std(scans[0] - exact) == pytest.approx(0.01, rel=0.2)
 
 
-def test_ground_robots_see_low_obstacles_and_the_flyer_sees_over_them(episode):
+def test_ground_robots_and_a_low_flyer_see_low_obstacles_and_a_high_flyer_sees_over_them(
+        episode):
     rows = ['############', '#..........#', '#......OO..#', '#..........#', '############']
     env = environment(rows, (1.25, 1.25, 0.0), scenario='drone', goal=(5.0, 1.75))
     ahead = 180
     ground = episode.reset(env, config(robot='diff_drive'))
     assert ground.scan[ahead] == pytest.approx(3.5 - 1.25, abs=1e-4)
-    flyer = episode.reset(env, config(robot='flyer'))
-    assert flyer.scan[ahead] == pytest.approx(5.5 - 1.25, abs=1e-4)
+    landed = episode.reset(env, config(robot='flyer'))
+    assert landed.altitude == 0.0
+    assert landed.scan[ahead] == pytest.approx(3.5 - 1.25, abs=1e-4)
+    climbing = VelocityCommand(0.0, 0.0, 0.0, 1.0)
+    for _ in range(10):  # 0.5 s: still below 0.3 m - 0.05 m (the scan plane is mid-body)
+        observation = episode.step(climbing).observation
+    assert observation.altitude < 0.25
+    assert observation.scan[ahead] == pytest.approx(3.5 - 1.25, abs=1e-4)
+    for _ in range(20):
+        observation = episode.step(climbing).observation
+    assert observation.altitude > 0.3
+    assert observation.scan[ahead] == pytest.approx(5.5 - 1.25, abs=1e-4)
+
+
+def test_flying_agents_are_seen_only_when_the_scan_plane_cuts_them(episode):
+    rows = ['#' * 16] + ['#' + '.' * 14 + '#'] * 14 + ['#' * 16]
+    env = environment(rows, (1.25, 1.25, 0.0), scenario='drone', goal=(6.0, 6.0))
+    episode.reset(env, config(robot='flyer', dummy_agents=3, seed=2))
+    robot, agents = episode.robot, episode.agents
+    assert agents.centre_height == pytest.approx(robot.traffic_height)
+    assert robot.traffic_height == pytest.approx(1.0)
+    with_agents, walls_only = (Lidar(LidarConfig(noise_std=0.0), np.random.default_rng(0))
+                               for _ in range(2))
+    with_agents.attach(robot.client, robot, episode.layout, agents)
+    walls_only.attach(robot.client, robot, episode.layout, None)
+    # Landed, the scan plane (0.05 m) passes under the agents (0.85 to 1.15 m).
+    np.testing.assert_array_equal(with_agents.scan(), walls_only.scan())
+    move(robot, 1.25, 1.25, 0.0, robot.params.traffic_altitude)
+    assert (with_agents.scan() < walls_only.scan() - 0.1).sum() > 3
+    move(robot, 1.25, 1.25, 0.0, robot.params.max_altitude)  # plane at 1.55 m: above them
+    np.testing.assert_array_equal(with_agents.scan(), walls_only.scan())
 
 
 def test_agents_show_up_in_the_scan(episode):
@@ -211,9 +243,10 @@ def example(scenario: str) -> Environment:
     return make_environment(load_example_map(scenario).cells, scenario, scenario)
 
 
-def move(robot: Robot, x: float, y: float, yaw: float) -> None:
-    """Put the robot's body at (x, y, yaw) and read its state back, as after a step."""
-    p.resetBasePositionAndOrientation(robot.body_id, [x, y, robot.ride_height],
+def move(robot: Robot, x: float, y: float, yaw: float, altitude: float = 0.0) -> None:
+    """Put the robot's body at (x, y, yaw) and ``altitude`` (a flyer's) and read its state
+    back, as after a step."""
+    p.resetBasePositionAndOrientation(robot.body_id, [x, y, robot.ride_height + altitude],
                                       p.getQuaternionFromEuler([0.0, 0.0, yaw]),
                                       physicsClientId=robot.client)
     robot.sync()
@@ -272,15 +305,20 @@ def test_analytic_lidar_matches_pybullet_rays_on_the_example_maps(episode, scena
     episode.reset(env, EpisodeConfig(robot=robot, dummy_agents=0))
     body = episode.robot
     analytic, bullet = lidars(episode, LidarConfig())
-    ends, slack = face_ends(episode.layout, body.sensor_height)
+    # A flyer scans low (below the low obstacles' 0.3 m) and at its traffic altitude.
+    altitudes = (0.1, 0.95) if body.flies else (0.0,)
+    faces = {altitude: face_ends(episode.layout, body.sensor_height + altitude)
+             for altitude in altitudes}
     rng = np.random.default_rng(7)
     height, width = np.array(env.occupancy.shape) * env.resolution
     inside = compared = grazing = 0
-    for _ in range(60):
+    for index in range(60):
         # Anywhere, obstacles and the outside of the map included.
         x, y = rng.uniform(-1.0, width + 1.0), rng.uniform(-1.0, height + 1.0)
         yaw = rng.uniform(-math.pi, math.pi)
-        move(body, x, y, yaw)
+        altitude = altitudes[index % len(altitudes)]
+        ends, slack = faces[altitude]
+        move(body, x, y, yaw, altitude)
         row, col = env.cell_of(x, y)
         inside += (0 <= row < env.occupancy.shape[0] and 0 <= col < env.occupancy.shape[1]
                    and int(env.occupancy[row, col]) not in body.passable_values)
@@ -448,6 +486,7 @@ def test_analytic_clearance_matches_pybullet(episode, scenario, robot, range_):
     episode.reset(env, EpisodeConfig(robot=robot, dummy_agents=4, seed=1))
     body, agents = episode.robot, episode.agents
     analytic = ClearanceSensor(body.client, body, episode.layout, range_)
+    analytic.set_agent_heights(agents.centre_height, agents.config.height)
     bullet = ClearanceSensor(body.client, body, episode.layout, range_, analytic=False)
     assert analytic.analytic and not bullet.analytic
     rng = np.random.default_rng(5)
@@ -457,7 +496,9 @@ def test_analytic_clearance_matches_pybullet(episode, scenario, robot, range_):
         x, y = rng.uniform(0.0, width), rng.uniform(0.0, height)
         if index % 3 == 0 and len(agents.positions):
             x, y = agents.positions[index % len(agents.positions)] + rng.uniform(-1, 1, 2)
-        move(body, x, y, rng.uniform(-math.pi, math.pi))
+        # A flyer anywhere between the ground and its ceiling: the distance is 3-D.
+        altitude = rng.uniform(0.0, body.params.max_altitude) if body.flies else 0.0
+        move(body, x, y, rng.uniform(-math.pi, math.pi), altitude)
         readings.append([sensor.measure(agents.body_ids, agents.positions,
                                         agents.config.radius)
                          for sensor in (analytic, bullet)])
@@ -506,3 +547,49 @@ def test_clearance_falls_back_to_pybullet_for_other_shapes():
         sensor = ClearanceSensor(world.client, ball, layout, 1.0)
         assert not sensor.analytic
         assert sensor.measure([], np.zeros((0, 2)), 0.2) == pytest.approx(0.55, abs=1e-6)
+
+
+# --- the flyer's downward range sensor ---------------------------------------------------------
+
+
+def test_range_down_reads_the_ground_or_the_low_obstacle_below(episode):
+    rows = ['############', '#..........#', '#......OO..#', '#..........#', '############']
+    env = environment(rows, (1.25, 1.25, 0.0), scenario='drone', goal=(5.0, 1.75))
+    exact = RangeFinderConfig(noise_std=0.0)
+    landed = episode.reset(env, config(robot='flyer', range_finder=exact))
+    assert landed.range_down == 0.0 and landed.range_finder == exact
+    robot = episode.robot
+    move(robot, 1.25, 1.25, 0.0, 0.8)
+    sensor = episode._live.range_finder
+    assert sensor.measure() == pytest.approx(0.8)
+    move(robot, 3.75, 1.25, 0.0, 0.8)  # above the low obstacle (0.3 m tall)
+    assert sensor.measure() == pytest.approx(0.5)
+    move(robot, 3.75, 1.25, 0.0, 0.2)  # inside it: too close (REP 117)
+    assert sensor.measure() == -math.inf
+    far = RangeFinder(RangeFinderConfig(max_range=0.6, noise_std=0.0), np.random.default_rng(0))
+    far.attach(robot, episode.layout)
+    move(robot, 1.25, 1.25, 0.0, 0.8)
+    assert far.measure() == math.inf
+
+
+def test_range_down_noise_is_seeded_and_stays_within_range(episode):
+    rows = ['############', '#..........#', '#..........#', '############']
+    env = environment(rows, (1.25, 1.25, 0.0), scenario='drone', goal=(5.0, 1.25))
+    readings = []
+    for _ in range(2):
+        observation = episode.reset(env, config(robot='flyer', seed=4))
+        series = [observation.range_down]
+        for _ in range(20):
+            observation = episode.step(VelocityCommand(0.0, 0.0, 0.0, 0.5)).observation
+            series.append(observation.range_down)
+        readings.append(series)
+        assert observation.range_down == pytest.approx(observation.altitude, abs=0.03)
+    assert readings[0] == readings[1]
+    assert min(readings[0]) >= 0.0  # a landed flyer's noisy reading stays within min_range
+
+
+def test_only_the_flyer_has_a_range_sensor(episode):
+    observation = episode.reset(environment(ROOM, (2.0, 1.0, 0.0)), config())
+    assert observation.range_down is None and observation.range_finder is None
+    with pytest.raises(InvalidConfigError, match='max_range'):
+        RangeFinderConfig(min_range=1.0, max_range=0.5).validate()

@@ -51,14 +51,16 @@ def clock(time: tuple[int, int]) -> bytes:
 
 
 def odometry(time: tuple[int, int], frame_id: str, child_frame_id: str, x: float, y: float,
-             yaw: float, vx: float, vy: float, wz: float, z: float = 0.0) -> bytes:
-    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id``, no covariance."""
+             yaw: float, vx: float, vy: float, wz: float, z: float = 0.0,
+             vz: float = 0.0) -> bytes:
+    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id``, no covariance;
+    ``z`` and ``vz`` are a flyer's altitude and climb rate."""
     buffer = _header(time, frame_id)
     _string(buffer, child_frame_id)
     _align(buffer, 8)
     buffer += struct.pack('<7d', x, y, z, *quaternion_from_yaw(yaw))
     buffer += _ZERO_COVARIANCE
-    buffer += struct.pack('<6d', vx, vy, 0.0, 0.0, 0.0, wz)
+    buffer += struct.pack('<6d', vx, vy, vz, 0.0, 0.0, wz)
     buffer += _ZERO_COVARIANCE
     return bytes(buffer)
 
@@ -75,4 +77,19 @@ def laser_scan(time: tuple[int, int], frame_id: str, ranges: np.ndarray, angle_m
     buffer += struct.pack('<I', len(ranges))
     buffer += np.ascontiguousarray(ranges, dtype='<f4').tobytes()
     buffer += struct.pack('<I', 0)
+    return bytes(buffer)
+
+
+RANGE_INFRARED = 1
+"""sensor_msgs/Range radiation_type of an infrared (or laser) ranger."""
+
+
+def range_reading(time: tuple[int, int], frame_id: str, reading: float, field_of_view: float,
+                  min_range: float, max_range: float,
+                  radiation_type: int = RANGE_INFRARED) -> bytes:
+    """sensor_msgs/Range; ``reading`` in metres (REP 117 infinities), variance 0 (unknown)."""
+    buffer = _header(time, frame_id)
+    buffer += struct.pack('<B', radiation_type)
+    _align(buffer, 4)
+    buffer += struct.pack('<5f', field_of_view, min_range, max_range, reading, 0.0)
     return bytes(buffer)

@@ -3,11 +3,13 @@
 
 from __future__ import annotations
 
+import math
+
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TransformStamped, Twist
 from tf2_msgs.msg import TFMessage
 
-from sessgan_gen.quaternion import quaternion_from_yaw
+from sessgan_gen.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
 
 MAP_FRAME = 'map'
@@ -15,6 +17,8 @@ ODOM_FRAME = 'odom'
 BASE_FOOTPRINT = 'base_footprint'
 BASE_LINK = 'base_link'
 SCAN_FRAME = 'base_scan'
+RANGE_DOWN_FRAME = 'base_range_down'
+"""The flyer's downward range sensor: its x axis (the beam) points down."""
 
 
 def time_msg(seconds: float) -> Time:
@@ -22,12 +26,12 @@ def time_msg(seconds: float) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
-def _set_yaw(quaternion, yaw: float) -> None:
-    quaternion.x, quaternion.y, quaternion.z, quaternion.w = quaternion_from_yaw(yaw)
+def _set_yaw(quaternion, yaw: float, pitch: float = 0.0) -> None:
+    quaternion.x, quaternion.y, quaternion.z, quaternion.w = quaternion_from_yaw_pitch(yaw, pitch)
 
 
 def transform(stamp: Time, parent: str, child: str, x: float = 0.0, y: float = 0.0,
-              z: float = 0.0, yaw: float = 0.0) -> TransformStamped:
+              z: float = 0.0, yaw: float = 0.0, pitch: float = 0.0) -> TransformStamped:
     msg = TransformStamped()
     msg.header.stamp = stamp
     msg.header.frame_id = parent
@@ -35,22 +39,28 @@ def transform(stamp: Time, parent: str, child: str, x: float = 0.0, y: float = 0
     msg.transform.translation.x = float(x)
     msg.transform.translation.y = float(y)
     msg.transform.translation.z = float(z)
-    _set_yaw(msg.transform.rotation, yaw)
+    _set_yaw(msg.transform.rotation, yaw, pitch)
     return msg
 
 
-def dynamic_tf_msg(stamp: Time, x: float, y: float, yaw: float) -> TFMessage:
-    """map->odom (identity: perfect localisation) and odom->base_footprint."""
+def dynamic_tf_msg(stamp: Time, x: float, y: float, yaw: float, z: float = 0.0) -> TFMessage:
+    """map->odom (identity: perfect localisation) and odom->base_footprint (``z``: a flyer's
+    altitude)."""
     return TFMessage(transforms=[transform(stamp, MAP_FRAME, ODOM_FRAME),
-                                 transform(stamp, ODOM_FRAME, BASE_FOOTPRINT, x, y, yaw=yaw)])
+                                 transform(stamp, ODOM_FRAME, BASE_FOOTPRINT, x, y, z, yaw)])
 
 
-def static_tf_msg(stamp: Time, base_height: float, scan_height: float) -> TFMessage:
-    """base_footprint->base_link->base_scan, all in one message (tf_static convention)."""
-    return TFMessage(transforms=[
-        transform(stamp, BASE_FOOTPRINT, BASE_LINK, z=base_height),
-        transform(stamp, BASE_LINK, SCAN_FRAME, z=scan_height - base_height),
-    ])
+def static_tf_msg(stamp: Time, base_height: float, scan_height: float,
+                  range_down: bool = False) -> TFMessage:
+    """base_footprint->base_link->base_scan, and with ``range_down`` base_link->
+    base_range_down (at the body's underside, x axis down), all in one message (tf_static
+    convention)."""
+    transforms = [transform(stamp, BASE_FOOTPRINT, BASE_LINK, z=base_height),
+                  transform(stamp, BASE_LINK, SCAN_FRAME, z=scan_height - base_height)]
+    if range_down:
+        transforms.append(transform(stamp, BASE_LINK, RANGE_DOWN_FRAME, z=-base_height,
+                                    pitch=math.pi / 2))
+    return TFMessage(transforms=transforms)
 
 
 def goal_msg(stamp: Time, x: float, y: float, yaw: float) -> PoseStamped:
@@ -63,7 +73,8 @@ def goal_msg(stamp: Time, x: float, y: float, yaw: float) -> PoseStamped:
     return msg
 
 
-def twist_values(msg) -> tuple[float, float, float]:
-    """(vx, vy, wz) of a Twist or TwistStamped."""
+def twist_values(msg) -> tuple[float, float, float, float]:
+    """(vx, vy, wz, vz) of a Twist or TwistStamped (vz: linear.z, a flyer's climb rate)."""
     twist: Twist = getattr(msg, 'twist', msg)
-    return float(twist.linear.x), float(twist.linear.y), float(twist.angular.z)
+    return (float(twist.linear.x), float(twist.linear.y), float(twist.angular.z),
+            float(twist.linear.z))

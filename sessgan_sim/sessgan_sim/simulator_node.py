@@ -215,7 +215,7 @@ class SimulatorNode(Node):
         else:
             self.topics.publish_world(environment, episode.robot.ride_height,
                                       episode.robot.sensor_height, clock.stamp_ns(0.0),
-                                      recording)
+                                      recording, range_down=episode.robot.flies)
 
             def prepare_stack() -> str | None:
                 """Costmap resets, then the goal: before time advances."""

@@ -16,7 +16,7 @@ from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import LaserScan
+from sensor_msgs.msg import LaserScan, Range
 from tf2_msgs.msg import TFMessage
 
 from sessgan_gen.environment import Pose2D
@@ -35,7 +35,7 @@ MESSAGE_TYPES = {
     'scan': 'sensor_msgs/msg/LaserScan', 'odom': 'nav_msgs/msg/Odometry',
     'tf': 'tf2_msgs/msg/TFMessage', 'tf_static': 'tf2_msgs/msg/TFMessage',
     'clock': 'rosgraph_msgs/msg/Clock', 'map': 'nav_msgs/msg/OccupancyGrid',
-    'goal_pose': 'geometry_msgs/msg/PoseStamped'}
+    'goal_pose': 'geometry_msgs/msg/PoseStamped', 'range_down': 'sensor_msgs/msg/Range'}
 """ROS type name of every published topic (as failure bags record it)."""
 
 
@@ -76,6 +76,8 @@ class RobotTopics:
             'clock': node.create_publisher(Clock, 'clock', SENSOR_QOS),
             'map': node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS),
             'goal_pose': node.create_publisher(PoseStamped, 'goal_pose', LATCHED_QOS),
+            # Published only while the robot is a flyer (the one with a downward ranger).
+            'range_down': node.create_publisher(Range, 'range_down', SENSOR_QOS),
         }
         self.names = {topic: node.resolve_topic_name(topic)
                       for topic in (*self.publishers, 'cmd_vel')}
@@ -94,12 +96,14 @@ class RobotTopics:
     # ---- an episode's messages ------------------------------------------------------------
 
     def publish_world(self, environment, ride_height: float, sensor_height: float,
-                      stamp_ns: int, recording: Recording | None) -> None:
-        """The episode's map and static transforms (both latched)."""
+                      stamp_ns: int, recording: Recording | None,
+                      range_down: bool = False) -> None:
+        """The episode's map and static transforms (both latched; ``range_down``: the robot
+        has the downward range sensor, base_range_down)."""
         stamp = time_of(stamp_ns)
         self.publish('map', occupancy_grid_msg(environment, stamp=stamp), stamp_ns, recording)
-        self.publish('tf_static', rm.static_tf_msg(stamp, ride_height, sensor_height),
-                     stamp_ns, recording)
+        self.publish('tf_static', rm.static_tf_msg(stamp, ride_height, sensor_height,
+                                                   range_down), stamp_ns, recording)
 
     def publish_goal(self, goal: Pose2D, stamp_ns: int, recording: Recording | None) -> None:
         """The goal on goal_pose (latched: a transient-local reader that joins later gets
@@ -139,18 +143,24 @@ class RobotTopics:
         return True
 
     def publish_tick(self, observation, stamp_ns: int, recording: Recording | None) -> None:
-        """clock, odom, tf (when anyone listens or records) and scan of one tick; the
-        messages of every tick are published serialized (sessgan_sim.cdr)."""
+        """clock, odom, tf (when anyone listens or records), the flyer's range_down and scan
+        of one tick; the messages of every tick are published serialized (sessgan_sim.cdr)."""
         stamp = stamp_of(stamp_ns)
         self.publish('clock', cdr.clock(stamp), stamp_ns, recording)
         pose = observation.pose
+        altitude = observation.altitude
         odom = cdr.odometry(stamp, rm.ODOM_FRAME, rm.BASE_FOOTPRINT, pose.x, pose.y, pose.yaw,
-                            *observation.twist)
+                            *observation.twist, z=altitude, vz=observation.climb_rate)
         self.publish('odom', odom, stamp_ns, recording)
         if recording is not None or self.readers('tf') > 0:
             # Building tf costs more than the check; most controllers under test use odom.
-            self.publish('tf', rm.dynamic_tf_msg(time_of(stamp_ns), pose.x, pose.y, pose.yaw),
-                         stamp_ns, recording)
+            self.publish('tf', rm.dynamic_tf_msg(time_of(stamp_ns), pose.x, pose.y, pose.yaw,
+                                                 altitude), stamp_ns, recording)
+        ranger = observation.range_finder
+        if ranger is not None and observation.range_down is not None:
+            self.publish('range_down', cdr.range_reading(
+                stamp, rm.RANGE_DOWN_FRAME, observation.range_down, ranger.field_of_view,
+                ranger.min_range, ranger.max_range), stamp_ns, recording)
         lidar = observation.lidar
         self.publish('scan', cdr.laser_scan(
             stamp, rm.SCAN_FRAME, observation.scan, lidar.angle_min, lidar.angle_increment,

@@ -13,7 +13,7 @@ pytest.importorskip('rclpy')
 from nav_msgs.msg import Odometry  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import LaserScan  # noqa: E402
+from sensor_msgs.msg import LaserScan, Range  # noqa: E402
 
 from sessgan_sim import cdr  # noqa: E402
 
@@ -64,3 +64,24 @@ def test_laser_scan(frame_id):
     data = cdr.laser_scan((1, 5), frame_id, ranges, -math.pi, increment, 0.12, 10.0, 0.05)
     assert_same(data, expected)
     assert np.array_equal(deserialize_message(data, LaserScan).ranges, ranges)
+
+
+@pytest.mark.parametrize('frame_id, reading', [('base_range_down', 0.734), ('abc', math.inf),
+                                               ('x', -math.inf), ('abcd', 0.0)])
+def test_range(frame_id, reading):
+    expected = Range()
+    expected.header.stamp.sec, expected.header.stamp.nanosec = 3, 50_000_000
+    expected.header.frame_id = frame_id
+    expected.radiation_type = Range.INFRARED
+    expected.field_of_view, expected.min_range, expected.max_range = 0.05, 0.0, 4.0
+    expected.range = reading
+    data = cdr.range_reading((3, 50_000_000), frame_id, reading, 0.05, 0.0, 4.0)
+    assert_same(data, expected)
+
+
+def test_odometry_carries_altitude_and_climb_rate():
+    message = deserialize_message(
+        cdr.odometry((1, 0), 'odom', 'base_footprint', 1.0, 2.0, 0.5, 0.3, 0.0, 0.1,
+                     z=0.8, vz=-0.4), Odometry)
+    assert message.pose.pose.position.z == 0.8
+    assert message.twist.twist.linear.z == -0.4

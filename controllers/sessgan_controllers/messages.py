@@ -36,6 +36,8 @@ def state_from_odom(msg: Odometry) -> RobotState:
         vx=float(twist.linear.x),
         vy=float(twist.linear.y),
         wz=float(twist.angular.z),
+        z=float(pose.position.z),
+        vz=float(twist.linear.z),
     )
 
 
@@ -61,10 +63,11 @@ def odom_from_cdr(data: bytes) -> tuple[int, RobotState]:
     offset = (12 + frame_id_length + 3) & ~3  # child_frame_id's length, 4-aligned
     (child_frame_id_length,) = struct.unpack_from(order + 'I', body, offset)
     offset = (offset + 4 + child_frame_id_length + 7) & ~7  # pose.pose, 8-aligned doubles
-    x, y, _, qx, qy, qz, qw = struct.unpack_from(order + '7d', body, offset)
+    x, y, z, qx, qy, qz, qw = struct.unpack_from(order + '7d', body, offset)
     offset += 8 * (7 + 36)  # past pose.pose and pose.covariance: twist.twist
-    vx, vy, _, _, _, wz = struct.unpack_from(order + '6d', body, offset)
-    state = RobotState(x=x, y=y, yaw=yaw_from_quaternion(qx, qy, qz, qw), vx=vx, vy=vy, wz=wz)
+    vx, vy, vz, _, _, wz = struct.unpack_from(order + '6d', body, offset)
+    state = RobotState(x=x, y=y, yaw=yaw_from_quaternion(qx, qy, qz, qw), vx=vx, vy=vy, wz=wz,
+                       z=z, vz=vz)
     return sec * 1_000_000_000 + nanosec, state
 
 
@@ -93,6 +96,7 @@ def twist_from_command(command: VelocityCommand) -> Twist:
     twist = Twist()
     twist.linear.x = float(command.vx)
     twist.linear.y = float(command.vy)
+    twist.linear.z = float(command.vz)
     twist.angular.z = float(command.wz)
     return twist
 

@@ -28,7 +28,11 @@ generator finds in a competent planner-based navigator:
     the steering lock) with a curvature-based speed profile along the path that starts
     braking ``v^2 / (2 * deceleration)`` before each sharp turn;
   - ``flyer``: the same pursuit in 2-D with (vx, vy) towards the carrot, yaw turned along
-    the motion; low obstacles (50) are passable for it.
+    the motion. It starts landed: it first climbs in place to ``cruise_altitude`` and
+    navigates only above ``takeoff_altitude`` (:mod:`~sessgan_controllers.altitude_control`),
+    where low obstacles (50) lie below it and are passable for its planner; every command
+    holds the cruise altitude (``linear.z``). Below the take-off altitude the scan is not
+    marked: the low obstacles it sees there are on the map and will be below it.
 
   For every robot the speed is also limited so that it can stop (at ``deceleration``)
   ``stop_margin`` before the first point of the path ahead that an unexplained return
@@ -61,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_controllers.altitude_control import AltitudeHold
 from sessgan_controllers.costmap import FREE, LOW_OBSTACLE, Costmap, CostmapConfig
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.path_following import (
@@ -218,6 +223,20 @@ class ReferenceNavigatorConfig:
         'by this fraction of what remains (0..1).')
     goal_tolerance: float = parameter(
         0.0, 'Distance in m to the goal at which the robot stops; 0: robot preset.')
+    cruise_altitude: float = parameter(
+        0.95, 'flyer: altitude in m (underside above the ground) it climbs to and holds.')
+    takeoff_altitude: float = parameter(
+        0.45, 'flyer: altitude in m below which it only climbs (above the 0.3 m low obstacles).')
+    climb_gain: float = parameter(
+        2.0, 'flyer: climb rate in m/s per m of altitude error (1/s).')
+    max_climb_rate: float = parameter(
+        1.0, 'flyer: largest climb or descent rate commanded in m/s.')
+
+    def altitude_hold(self) -> AltitudeHold:
+        """The flyer's altitude control these parameters ask for."""
+        return AltitudeHold(cruise_altitude=self.cruise_altitude,
+                            takeoff_altitude=self.takeoff_altitude, climb_gain=self.climb_gain,
+                            max_climb_rate=self.max_climb_rate)
 
     def resolved(self) -> ReferenceNavigatorConfig:
         """This config with every 0 replaced by the robot preset (unknown robot: unchanged)."""
@@ -275,6 +294,7 @@ class ReferenceNavigatorConfig:
         if config.max_steering_angle >= 0.5 * math.pi:
             raise InvalidConfigError(
                 f'max_steering_angle must be below pi/2, got {config.max_steering_angle}')
+        config.altitude_hold().validate()
         if config.robot != 'car' and config.max_angular_speed <= 0.0:
             raise InvalidConfigError(f'max_angular_speed must be positive for the '
                                      f'{config.robot}, got {config.max_angular_speed}')
@@ -289,6 +309,8 @@ class Mode(enum.Enum):
     """No path to the goal: standing still until a plan succeeds."""
     ROTATE = 'rotate'
     """diff_drive turning in place towards the path (rotation shim)."""
+    TAKEOFF = 'takeoff'
+    """flyer climbing in place to its take-off altitude."""
     FOLLOW = 'follow'
     GOAL_REACHED = 'goal_reached'
 
@@ -343,6 +365,7 @@ class ReferenceNavigator:
             lateral_acceleration=settings.lateral_acceleration)
         self._holonomic_limits = HolonomicLimits(
             yaw_gain=settings.yaw_gain, max_yaw_rate=settings.max_angular_speed)
+        self._altitude = settings.altitude_hold() if settings.robot == 'flyer' else None
         self.costmap: Costmap | None = None
         self.reset()
 
@@ -377,13 +400,29 @@ class ReferenceNavigator:
     # One step
 
     def decide(self, scan: ScanData, state: RobotState, goal: Goal) -> NavigatorDecision:
-        """Run one step and return the full decision."""
+        """Run one step and return the full decision (a flyer takes off first, then holds
+        its cruise altitude)."""
         if self.goal_reached(state, goal):
             return NavigatorDecision(Mode.GOAL_REACHED, STOP, self.path, False, {})
-        costmap = self.costmap
-        if costmap is None:
+        if self.costmap is None:
             return NavigatorDecision(Mode.NO_MAP, STOP, None, False, {},
                                      'no map received yet')
+        altitude = self._altitude
+        if altitude is None:
+            return self._decide_planar(scan, state, goal)
+        climb = altitude.climb_rate(state.z)
+        if not altitude.airborne(state.z):
+            return NavigatorDecision(Mode.TAKEOFF, VelocityCommand(vz=climb), self.path, False,
+                                     {}, f'taking off at {state.z:.2f} m')
+        decision = self._decide_planar(scan, state, goal)
+        return dataclasses.replace(decision,
+                                   command=dataclasses.replace(decision.command, vz=climb))
+
+    def _decide_planar(self, scan: ScanData, state: RobotState,
+                       goal: Goal) -> NavigatorDecision:
+        """One step of the planar navigator (module docstring)."""
+        costmap = self.costmap
+        assert costmap is not None
         self._steps += 1
         costmap.update_marks(scan, state)
         deviation = self._tracker.update(state.x, state.y) if self._tracker else math.inf

@@ -6,9 +6,11 @@ Every controller core maps one tick's inputs to one velocity command::
 
 * ``scan``: a planar laser scan in the robot's body frame (the scanner is taken
   to sit at the robot's centre, as ``base_scan`` does in the simulator).
-* ``state``: the robot pose in the odom (= map) frame and its body-frame velocity.
+* ``state``: the robot pose in the odom (= map) frame and its body-frame velocity (a
+  flyer's also its altitude and climb rate: odometry's z and linear.z).
 * ``goal``: the goal position in the same frame as the pose.
-* ``command``: a body-frame velocity (vx, vy, wz), like geometry_msgs/Twist.
+* ``command``: a body-frame velocity (vx, vy, wz, and a flyer's climb rate vz), like
+  geometry_msgs/Twist.
 
 Controllers that plan on the episode's map (the ``map`` topic) also offer
 ``set_map(grid)`` (:class:`MapAwareController`); the node and in-process runners
@@ -98,6 +100,10 @@ class RobotState:
     """Leftward velocity in m/s (zero for non-holonomic robots)."""
     wz: float = 0.0
     """Yaw rate in rad/s."""
+    z: float = 0.0
+    """Altitude in m (a flyer's underside above the ground; 0 for ground robots)."""
+    vz: float = 0.0
+    """Climb rate in m/s (up positive)."""
 
     @property
     def speed(self) -> float:
@@ -132,9 +138,15 @@ class VelocityCommand:
     """Leftward velocity in m/s."""
     wz: float = 0.0
     """Yaw rate in rad/s, counter-clockwise positive."""
+    vz: float = 0.0
+    """Climb rate in m/s (linear.z; only a flyer uses it)."""
 
     def is_finite(self) -> bool:
-        return all(math.isfinite(value) for value in (self.vx, self.vy, self.wz))
+        return all(math.isfinite(value) for value in (self.vx, self.vy, self.wz, self.vz))
+
+    def values(self) -> tuple[float, float, float, float]:
+        """(vx, vy, wz, vz): what the simulator core's Episode.step takes."""
+        return float(self.vx), float(self.vy), float(self.wz), float(self.vz)
 
 
 STOP = VelocityCommand()
@@ -181,12 +193,14 @@ class MapData:
 
 def observed(observation: Any) -> tuple[ScanData, RobotState]:
     """The controller's view of a sessgan_sim Observation (``scan``, ``lidar``, ``pose``,
-    ``twist``), as the controller node gets it from scan and odom: for running a controller
-    in-process on the simulator core, without ROS."""
+    ``twist``, ``altitude``, ``climb_rate``), as the controller node gets it from scan and
+    odom: for running a controller in-process on the simulator core, without ROS."""
     lidar, pose, twist = observation.lidar, observation.pose, observation.twist
     scan = ScanData(np.asarray(observation.scan, dtype=float), lidar.angle_min,
                     lidar.angle_increment, lidar.range_min, lidar.range_max)
-    return scan, RobotState(pose.x, pose.y, pose.yaw, twist.vx, twist.vy, twist.wz)
+    return scan, RobotState(pose.x, pose.y, pose.yaw, twist.vx, twist.vy, twist.wz,
+                            float(getattr(observation, 'altitude', 0.0)),
+                            float(getattr(observation, 'climb_rate', 0.0)))
 
 
 class Controller(Protocol):

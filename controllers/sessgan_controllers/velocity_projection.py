@@ -26,6 +26,12 @@ One step:
    around for a new direction. It also brakes when the route turns out of view (a
    waypoint more than half the field of view off its motion): it stops to look that way.
 
+**Altitude** (:mod:`~sessgan_controllers.altitude_control`): the flyer starts landed. It
+first climbs in place to ``cruise_altitude`` (the other flyers' flight level) and moves
+sideways only above ``takeoff_altitude``, over the low obstacles; from there on the route
+treats low obstacles as free space (they lie below it, and below its scan plane) and every
+command holds the cruise altitude.
+
 **Intended weakness** (what a test generator should rediscover): the narrow field of
 view. Points outside it are ignored by design: an agent closing in from the side or from
 behind is not seen until it is in front, the fault the paper reports for this controller;
@@ -35,11 +41,13 @@ beside it when it gets there.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from sessgan_controllers.altitude_control import AltitudeHold
 from sessgan_controllers.costmap import FREE, LOW_OBSTACLE
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.route_guidance import (
@@ -96,6 +104,18 @@ class VelocityProjectionConfig:
     replan_deviation: float = parameter(
         1.0, 'Distance in m from the route beyond which the route is planned again.')
     planning_resolution: float = parameter(0.1, 'Route planning cell size in m.')
+    cruise_altitude: float = parameter(
+        0.95, 'Altitude in m (underside above the ground) the flyer climbs to and holds.')
+    takeoff_altitude: float = parameter(
+        0.45, 'Altitude in m below which the flyer only climbs (above the 0.3 m low obstacles).')
+    climb_gain: float = parameter(2.0, 'Climb rate in m/s per m of altitude error (1/s).')
+    max_climb_rate: float = parameter(1.0, 'Largest climb or descent rate commanded in m/s.')
+
+    def altitude_hold(self) -> AltitudeHold:
+        """The altitude control these parameters ask for."""
+        return AltitudeHold(cruise_altitude=self.cruise_altitude,
+                            takeoff_altitude=self.takeoff_altitude, climb_gain=self.climb_gain,
+                            max_climb_rate=self.max_climb_rate)
 
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first parameter out of range."""
@@ -116,6 +136,7 @@ class VelocityProjectionConfig:
         if not isinstance(self.candidate_count, int) or self.candidate_count < 4:
             raise InvalidConfigError(
                 f'candidate_count must be an integer >= 4, got {self.candidate_count!r}')
+        self.altitude_hold().validate()
 
     def route_guidance(self) -> RouteGuidanceConfig:
         """The route guidance these parameters ask for (the flyer crosses low obstacles)."""
@@ -148,11 +169,26 @@ class VelocityProjectionController(RouteGuidedController):
         self.config = config or VelocityProjectionConfig()
         self.config.validate()
         self.guide = RouteGuide(self.config.route_guidance())
+        self.altitude = self.config.altitude_hold()
         count = self.config.candidate_count
         self._ring = -math.pi + (2.0 * math.pi / count) * np.arange(count)
 
     def decide(self, scan: ScanData, state: RobotState, goal: Goal) -> ProjectionDecision:
-        """Run one step and return the full decision."""
+        """Run one step and return the full decision: take off first, then fly the planar
+        velocity projection at the cruise altitude."""
+        if goal.distance_from(state) <= self.config.goal_tolerance:
+            return ProjectionDecision(None, 0.0, 0, STOP)
+        climb = self.altitude.climb_rate(state.z)
+        if not self.altitude.airborne(state.z):
+            reference = math.atan2(state.vy, state.vx) if state.speed > 0.0 else 0.0
+            return ProjectionDecision(None, reference, 0, VelocityCommand(vz=climb))
+        decision = self._decide_planar(scan, state, goal)
+        return dataclasses.replace(decision,
+                                   command=dataclasses.replace(decision.command, vz=climb))
+
+    def _decide_planar(self, scan: ScanData, state: RobotState,
+                       goal: Goal) -> ProjectionDecision:
+        """One step of the planar velocity projection (see the module docstring)."""
         config = self.config
         goal_distance, goal_bearing = goal.in_body_frame(state)
         speed = state.speed

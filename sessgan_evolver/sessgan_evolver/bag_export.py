@@ -2,7 +2,8 @@
 
 An :class:`~sessgan_evolver.episode_runner.EpisodeTrace` kept with its scans holds everything a
 lockstep worker publishes: ``map``, ``tf_static`` and ``goal_pose`` at the start, then per
-tick ``clock``, ``odom``, ``tf`` and ``scan``, and the controller's ``cmd_vel`` answer. They
+tick ``clock``, ``odom``, ``tf``, a flyer's ``range_down`` and ``scan``, and the controller's
+``cmd_vel`` answer. They
 are serialized without ROS (clock, odom and scan with sessgan_sim.cdr, the same bytes the node
 publishes; the others with rosbags' Jazzy typestore) and written with
 ``sessgan_sim.bag_recording.write_episode_bag``, so the bag replays and re-simulates like a
@@ -12,6 +13,7 @@ contact events), which the fault pictures read.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -21,7 +23,7 @@ import numpy as np
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import BagExportError
 from sessgan_gen.environment import Environment
-from sessgan_gen.quaternion import quaternion_from_yaw
+from sessgan_gen.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
 from sessgan_sim.bag_recording import BagRecord, jazzy_typestore, write_episode_bag
 
@@ -30,6 +32,7 @@ ODOM_FRAME = 'odom'
 BASE_FOOTPRINT = 'base_footprint'
 BASE_LINK = 'base_link'
 SCAN_FRAME = 'base_scan'
+RANGE_DOWN_FRAME = 'base_range_down'
 
 
 def _nanoseconds(seconds: float) -> int:
@@ -53,8 +56,8 @@ class _Messages:
     def header(self, seconds: float, frame: str) -> Any:
         return self.types['std_msgs/msg/Header'](stamp=self.time(seconds), frame_id=frame)
 
-    def quaternion(self, yaw: float) -> Any:
-        x, y, z, w = quaternion_from_yaw(yaw)
+    def quaternion(self, yaw: float, pitch: float = 0.0) -> Any:
+        x, y, z, w = quaternion_from_yaw_pitch(yaw, pitch)
         return self.types['geometry_msgs/msg/Quaternion'](x=x, y=y, z=z, w=w)
 
     def pose(self, x: float, y: float, yaw: float) -> Any:
@@ -63,10 +66,10 @@ class _Messages:
                                                     orientation=self.quaternion(yaw))
 
     def transform(self, seconds: float, parent: str, child: str, x: float = 0.0,
-                  y: float = 0.0, z: float = 0.0, yaw: float = 0.0) -> Any:
+                  y: float = 0.0, z: float = 0.0, yaw: float = 0.0, pitch: float = 0.0) -> Any:
         vector = self.types['geometry_msgs/msg/Vector3'](x=float(x), y=float(y), z=float(z))
         transform = self.types['geometry_msgs/msg/Transform'](
-            translation=vector, rotation=self.quaternion(yaw))
+            translation=vector, rotation=self.quaternion(yaw, pitch))
         return self.types['geometry_msgs/msg/TransformStamped'](
             header=self.header(seconds, parent), child_frame_id=child, transform=transform)
 
@@ -87,10 +90,10 @@ class _Messages:
         return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
             header=self.header(seconds, MAP_FRAME), pose=self.pose(goal.x, goal.y, goal.yaw)))
 
-    def twist(self, vx: float, vy: float, wz: float) -> bytes:
+    def twist(self, vx: float, vy: float, wz: float, vz: float = 0.0) -> bytes:
         vector = self.types['geometry_msgs/msg/Vector3']
         return self.serialize(self.types['geometry_msgs/msg/Twist'](
-            linear=vector(x=float(vx), y=float(vy), z=0.0),
+            linear=vector(x=float(vx), y=float(vy), z=float(vz)),
             angular=vector(x=0.0, y=0.0, z=float(wz))))
 
 
@@ -111,10 +114,15 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
     start_ns = _nanoseconds(start)
     yield BagRecord(f'{prefix}/map', 'nav_msgs/msg/OccupancyGrid', start_ns,
                     messages.occupancy_grid(environment, start))
-    yield BagRecord(f'{prefix}/tf_static', 'tf2_msgs/msg/TFMessage', start_ns, messages.tf([
-        messages.transform(start, BASE_FOOTPRINT, BASE_LINK, z=trace.base_height),
-        messages.transform(start, BASE_LINK, SCAN_FRAME,
-                           z=trace.sensor_height - trace.base_height)]))
+    static = [messages.transform(start, BASE_FOOTPRINT, BASE_LINK, z=trace.base_height),
+              messages.transform(start, BASE_LINK, SCAN_FRAME,
+                                 z=trace.sensor_height - trace.base_height)]
+    ranger = trace.range_finder if trace.range_down is not None else {}
+    if ranger:
+        static.append(messages.transform(start, BASE_LINK, RANGE_DOWN_FRAME,
+                                         z=-trace.base_height, pitch=math.pi / 2))
+    yield BagRecord(f'{prefix}/tf_static', 'tf2_msgs/msg/TFMessage', start_ns,
+                    messages.tf(static))
     yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped', start_ns,
                     messages.goal(environment, start))
     for tick in range(ticks):
@@ -122,13 +130,21 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
         stamp, stamp_ns = cdr.stamp(seconds), _nanoseconds(seconds)
         x, y, yaw = (float(v) for v in trace.poses[tick])
         vx, vy, wz = (float(v) for v in trace.twists[tick])
+        z, vz = ((float(v) for v in trace.vertical[tick]) if trace.vertical is not None
+                 else (0.0, 0.0))
         yield BagRecord(f'{prefix}/clock', 'rosgraph_msgs/msg/Clock', stamp_ns,
                         cdr.clock(stamp))
         yield BagRecord(f'{prefix}/odom', 'nav_msgs/msg/Odometry', stamp_ns, cdr.odometry(
-            stamp, ODOM_FRAME, BASE_FOOTPRINT, x, y, yaw, vx, vy, wz))
+            stamp, ODOM_FRAME, BASE_FOOTPRINT, x, y, yaw, vx, vy, wz, z=z, vz=vz))
         yield BagRecord(f'{prefix}/tf', 'tf2_msgs/msg/TFMessage', stamp_ns, messages.tf([
             messages.transform(seconds, MAP_FRAME, ODOM_FRAME),
-            messages.transform(seconds, ODOM_FRAME, BASE_FOOTPRINT, x, y, yaw=yaw)]))
+            messages.transform(seconds, ODOM_FRAME, BASE_FOOTPRINT, x, y, z, yaw)]))
+        if ranger and trace.range_down is not None:
+            yield BagRecord(f'{prefix}/range_down', 'sensor_msgs/msg/Range', stamp_ns,
+                            cdr.range_reading(stamp, RANGE_DOWN_FRAME,
+                                              float(trace.range_down[tick]),
+                                              ranger['field_of_view'], ranger['min_range'],
+                                              ranger['max_range']))
         yield BagRecord(f'{prefix}/scan', 'sensor_msgs/msg/LaserScan', stamp_ns, cdr.laser_scan(
             stamp, SCAN_FRAME, trace.scans[tick], lidar['angle_min'], lidar['angle_increment'],
             lidar['range_min'], lidar['range_max'], lidar['scan_time']))

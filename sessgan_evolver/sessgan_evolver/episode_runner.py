@@ -77,7 +77,8 @@ def node_inputs(observation: Observation) -> tuple[ScanData, RobotState]:
     # The odometry carries the yaw as a quaternion; the node reads it back from it.
     yaw = yaw_from_quaternion(*quaternion_from_yaw(pose.yaw))
     return scan, RobotState(float(pose.x), float(pose.y), yaw, float(twist.vx),
-                            float(twist.vy), float(twist.wz))
+                            float(twist.vy), float(twist.wz), float(observation.altitude),
+                            float(observation.climb_rate))
 
 
 @dataclass
@@ -91,7 +92,7 @@ class EpisodeTrace:
     twists: np.ndarray
     """(n, 3) body-frame vx, vy (m/s) and wz (rad/s)."""
     commands: np.ndarray
-    """(n - 1, 3) the command applied after row i's observation: vx, vy, wz."""
+    """(n - 1, 4) the command applied after row i's observation: vx, vy, wz, vz."""
     agents: np.ndarray
     """(n, agents, 2) agent centres, metres."""
     contacts: list[ContactEvent] = field(default_factory=list)
@@ -108,6 +109,12 @@ class EpisodeTrace:
     """m, the robot body's centre above the ground (base_link)."""
     sensor_height: float = 0.0
     """m, the scan plane above the ground (base_scan)."""
+    vertical: np.ndarray | None = None
+    """(n, 2) a flyer's altitude (m) and climb rate (m/s); None for ground robots."""
+    range_down: np.ndarray | None = None
+    """(n,) a flyer's downward range readings in metres; None without the sensor."""
+    range_finder: dict[str, float] = field(default_factory=dict)
+    """field_of_view, min_range, max_range of the downward range sensor."""
 
     def summary(self, max_points: int = 400) -> dict[str, Any]:
         """Plain data for episode.json: the trajectory and agent paths thinned to at most
@@ -250,7 +257,7 @@ class EpisodeRunner:
             command = STOP if goal_reached else controller.compute_command(scan, state, goal)
             if not command.is_finite():
                 command = STOP
-            values = (float(command.vx), float(command.vy), float(command.wz))
+            values = command.values()
             observation = episode.step(values).observation
             if recorder is not None:
                 recorder.add(observation, values)
@@ -272,7 +279,10 @@ class _TraceRecorder:
         self.times: list[float] = []
         self.poses: list[tuple[float, float, float]] = []
         self.twists: list[tuple[float, float, float]] = []
-        self.commands: list[tuple[float, float, float]] = []
+        self.commands: list[tuple[float, float, float, float]] = []
+        self.vertical: list[tuple[float, float]] = []
+        self.range_down: list[float] = []
+        self.range_finder = observation.range_finder
         self.agents: list[np.ndarray] = []
         self.scans: list[np.ndarray] = []
         try:
@@ -290,11 +300,15 @@ class _TraceRecorder:
         self.times.append(float(observation.time))
         self.poses.append((float(pose.x), float(pose.y), float(pose.yaw)))
         self.twists.append((float(twist.vx), float(twist.vy), float(twist.wz)))
+        self.vertical.append((float(observation.altitude), float(observation.climb_rate)))
+        if observation.range_down is not None:
+            self.range_down.append(float(observation.range_down))
         self.agents.append(np.array(self.episode.agents.positions, dtype=float).reshape(-1, 2))
         if self.keep_scans:
             self.scans.append(np.array(observation.scan, dtype=np.float32))
 
-    def add(self, observation: Observation, command: tuple[float, float, float]) -> None:
+    def add(self, observation: Observation,
+            command: tuple[float, float, float, float]) -> None:
         self.commands.append(command)
         self._observe(observation)
 
@@ -307,7 +321,7 @@ class _TraceRecorder:
         return EpisodeTrace(
             times=np.array(self.times), poses=np.array(self.poses).reshape(-1, 3),
             twists=np.array(self.twists).reshape(-1, 3),
-            commands=np.array(self.commands).reshape(-1, 3), agents=agents,
+            commands=np.array(self.commands).reshape(-1, 4), agents=agents,
             contacts=contacts,
             scans=np.stack(self.scans) if self.keep_scans and self.scans else None,
             lidar={'angle_min': float(lidar.angle_min),
@@ -315,4 +329,10 @@ class _TraceRecorder:
                    'range_min': float(lidar.range_min), 'range_max': float(lidar.range_max),
                    'scan_time': float(lidar.scan_time)},
             robot_radius=self.robot_radius, agent_radius=self.agent_radius,
-            base_height=self.base_height, sensor_height=self.sensor_height)
+            base_height=self.base_height, sensor_height=self.sensor_height,
+            vertical=np.array(self.vertical).reshape(-1, 2) if self.range_finder else None,
+            range_down=np.array(self.range_down) if self.range_finder else None,
+            range_finder=({'field_of_view': self.range_finder.field_of_view,
+                           'min_range': self.range_finder.min_range,
+                           'max_range': self.range_finder.max_range}
+                          if self.range_finder else {}))

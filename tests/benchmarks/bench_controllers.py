@@ -181,7 +181,7 @@ def run_episode(spec: ControllerSpec, robot: str, environment: Environment,
             scan, state = observed(observation)
             command = (STOP if controller.goal_reached(state, goal)
                        else controller.compute_command(scan, state, goal))
-            observation, done, _ = episode.step((command.vx, command.vy, command.wz))
+            observation, done, _ = episode.step(command.values())
             events = episode.metrics().contacts
             speeds += [state.speed for event in events[contacts:] if event.fault]
             contacts = len(events)

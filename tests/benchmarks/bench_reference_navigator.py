@@ -102,7 +102,7 @@ def run_episode(environment: Environment, overrides: dict[str, object]) -> Resul
             command = controller.compute_command(scan, state, goal)
             spent += time.thread_time() - started
             steps += 1
-            observation, done, _ = episode.step((command.vx, command.vy, command.wz))
+            observation, done, _ = episode.step(command.values())
             if episode.metrics().collisions > len(contacts):
                 contacts.append(contact_kind(episode, state.speed))
         metrics = episode.metrics()

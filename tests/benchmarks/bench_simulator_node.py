@@ -143,7 +143,7 @@ def controller_compute_ms(environment) -> float:
             command = controller.compute_command(*observed(observation), goal)
             spent += time.thread_time() - started
             ticks += 1
-            observation = episode.step((command.vx, command.vy, command.wz)).observation
+            observation = episode.step(command.values()).observation
     return spent / ticks * 1e3
 
 

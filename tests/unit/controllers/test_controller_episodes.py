@@ -53,7 +53,7 @@ def run_episode(environment: Environment, controller: Controller,
             scan, state = observed(observation)
             command = (STOP if controller.goal_reached(state, goal)
                        else controller.compute_command(scan, state, goal))
-            observation, done, _ = episode.step((command.vx, command.vy, command.wz))
+            observation, done, _ = episode.step(command.values())
         return episode.metrics()
 
 

@@ -153,7 +153,9 @@ def test_low_obstacles_are_passable_for_the_flyer_only(scan_factory):
             '#########']
     state = RobotState(1.0, 1.25, 0.0)
     goal = Goal(3.5, 1.25)
-    flyer = navigator(rows, robot='flyer').decide(scan_factory(state, grid=rows), state, goal)
+    cruising = RobotState(1.0, 1.25, 0.0, z=0.95)
+    flyer = navigator(rows, robot='flyer').decide(scan_factory(state, grid=rows), cruising,
+                                                  goal)
     assert flyer.mode is Mode.FOLLOW and flyer.path.length < 3.0
     ground = navigator(rows).decide(scan_factory(state, grid=rows), state, goal)
     assert ground.mode is Mode.NO_PATH and ground.command == STOP
@@ -180,7 +182,8 @@ def test_commands_stay_finite_and_within_the_robot_limits(scan_factory, robot):
     rng = np.random.default_rng(3)
     for _ in range(20):
         x, y = rng.uniform(3.0, 17.0), rng.uniform(3.0, 7.0)
-        state = RobotState(x, y, rng.uniform(-math.pi, math.pi), vx=rng.uniform(0.0, 1.0))
+        state = RobotState(x, y, rng.uniform(-math.pi, math.pi), vx=rng.uniform(0.0, 1.0),
+                           z=0.95 if robot == 'flyer' else 0.0)
         decision = controller.decide(scan_factory(state, grid=rows, range_max=10.0), state,
                                      Goal(18.0, 8.0))
         command = decision.command
@@ -190,3 +193,27 @@ def test_commands_stay_finite_and_within_the_robot_limits(scan_factory, robot):
             assert command.vy == 0.0
         if robot == 'car':
             assert command.vx >= 0.0
+
+
+def test_the_flyer_takes_off_in_place_then_navigates_holding_its_cruise_altitude(
+        scan_factory):
+    rows = ['#########',
+            '#...o...#',
+            '#...o...#',
+            '#...o...#',
+            '#########']
+    controller = navigator(rows, robot='flyer')
+    settings = controller.settings
+    goal = Goal(3.5, 1.25)
+    landed = RobotState(1.0, 1.25, 0.0)
+    decision = controller.decide(scan_factory(landed, grid=rows), landed, goal)
+    assert decision.mode is Mode.TAKEOFF and not controller.costmap.marks
+    assert (decision.command.vx, decision.command.vy) == (0.0, 0.0)
+    assert decision.command.vz == pytest.approx(settings.max_climb_rate)
+    climbing = RobotState(1.0, 1.25, 0.0, z=settings.takeoff_altitude + 0.05)
+    decision = controller.decide(scan_factory(climbing, grid=rows), climbing, goal)
+    assert decision.mode is Mode.FOLLOW and decision.command.vx > 0.0
+    assert decision.command.vz == pytest.approx(
+        settings.climb_gain * (settings.cruise_altitude - climbing.z))
+    with pytest.raises(InvalidConfigError, match='takeoff_altitude'):
+        ReferenceNavigator(ReferenceNavigatorConfig(robot='flyer', cruise_altitude=0.3))

@@ -49,7 +49,7 @@ def run_episode(environment: Environment, seed: int) -> EpisodeMetrics:
         while not done:
             command = navigator.compute_command(*observed(observation), goal)
             assert command.is_finite()
-            observation, done, _ = episode.step((command.vx, command.vy, command.wz))
+            observation, done, _ = episode.step(command.values())
         return episode.metrics()
 
 

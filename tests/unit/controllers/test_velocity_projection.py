@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
 from sessgan_controllers.velocity_projection import (
     VelocityProjectionConfig,
@@ -15,7 +16,10 @@ from sessgan_controllers.velocity_projection import (
 
 pytestmark = pytest.mark.unit
 
-CRUISING = RobotState(0.0, 0.0, 0.0, vx=1.0)
+CRUISE = VelocityProjectionConfig().cruise_altitude
+"""States below fly at the cruise altitude (take-off has its own tests)."""
+
+CRUISING = RobotState(0.0, 0.0, 0.0, vx=1.0, z=CRUISE)
 """Flying along +x at 1 m/s."""
 FAR_GOAL = Goal(10.0, 0.0)
 
@@ -72,7 +76,7 @@ def test_brakes_when_everything_in_view_is_blocked(scan_factory):
 
 def test_at_rest_it_looks_all_around(scan_factory):
     controller = VelocityProjectionController()
-    at_rest = RobotState(0.0, 0.0, 0.0)
+    at_rest = RobotState(0.0, 0.0, 0.0, z=CRUISE)
     wall = [(0.8, y, 0.1) for y in np.arange(-1.5, 1.51, 0.1)]
     decision = controller.decide(scan_factory(at_rest, discs=wall), at_rest, FAR_GOAL)
     assert decision.direction is not None
@@ -82,7 +86,7 @@ def test_at_rest_it_looks_all_around(scan_factory):
 def test_arrives_slowly_and_stops_at_the_goal():
     controller = VelocityProjectionController()
     empty = ScanData(np.full(360, np.inf), -math.pi, math.radians(1.0), 0.05, 8.0)
-    state = RobotState(0.0, 0.0, 0.0, vx=0.5)
+    state = RobotState(0.0, 0.0, 0.0, vx=0.5, z=CRUISE)
     near = controller.compute_command(empty, state, Goal(0.5, 0.0))
     assert speed(near) == pytest.approx(controller.config.arrival_gain * 0.5)
     assert controller.compute_command(empty, state, Goal(0.1, 0.0)) == STOP
@@ -91,7 +95,7 @@ def test_arrives_slowly_and_stops_at_the_goal():
 def test_goal_next_to_a_wall_is_reachable(scan_factory):
     corner = ('#####', '#...#', '#...#', '#####')
     controller = VelocityProjectionController()
-    state = RobotState(1.25, 1.25, 0.0)
+    state = RobotState(1.25, 1.25, 0.0, z=CRUISE)
     goal = Goal(0.75, 0.75)  # 0.25 m from two walls: 5 cm clearance for the 0.2 m flyer
     decision = controller.decide(scan_factory(state, corner), state, goal)
     _, bearing = goal.in_body_frame(state)
@@ -100,7 +104,7 @@ def test_goal_next_to_a_wall_is_reachable(scan_factory):
 
 def test_faces_its_motion_direction(scan_factory):
     controller = VelocityProjectionController()
-    state = RobotState(0.0, 0.0, 0.0)
+    state = RobotState(0.0, 0.0, 0.0, z=CRUISE)
     command = controller.compute_command(scan_factory(state), state, Goal(0.0, 5.0))
     assert command.wz == pytest.approx(controller.config.max_yaw_rate)
 
@@ -129,3 +133,29 @@ def test_ring_blocking_matches_the_swept_corridor():
                     & (excess ** 2 + across ** 2 < corridor ** 2)).any(axis=1)
         marked = controller._blocked_ring(angles, ranges, length, corridor, half_view)
         np.testing.assert_array_equal(marked, expected)
+
+
+def test_takes_off_in_place_before_moving_and_then_holds_the_cruise_altitude(scan_factory):
+    controller = VelocityProjectionController()
+    config = controller.config
+    landed = RobotState(0.0, 0.0, 0.0)
+    command = controller.decide(scan_factory(landed), landed, FAR_GOAL).command
+    assert (command.vx, command.vy) == (0.0, 0.0)
+    assert command.vz == pytest.approx(config.max_climb_rate)
+    low = RobotState(0.0, 0.0, 0.0, z=config.takeoff_altitude - 0.01)
+    assert speed(controller.decide(scan_factory(low), low, FAR_GOAL).command) == 0.0
+    above = RobotState(0.0, 0.0, 0.0, z=config.takeoff_altitude + 0.01)
+    command = controller.decide(scan_factory(above), above, FAR_GOAL).command
+    assert speed(command) > 0.0
+    assert command.vz == pytest.approx(config.climb_gain * (CRUISE - above.z))
+    # Too high: it descends to the cruise altitude while flying.
+    high = RobotState(0.0, 0.0, 0.0, vx=1.0, z=CRUISE + 0.2)
+    command = controller.decide(scan_factory(high), high, FAR_GOAL).command
+    assert command.vz == pytest.approx(-0.4) and speed(command) > 0.0
+
+
+def test_altitude_parameters_are_checked():
+    with pytest.raises(InvalidConfigError, match='takeoff_altitude'):
+        VelocityProjectionController(VelocityProjectionConfig(takeoff_altitude=1.5))
+    with pytest.raises(InvalidConfigError, match='climb_gain'):
+        VelocityProjectionController(VelocityProjectionConfig(climb_gain=0.0))

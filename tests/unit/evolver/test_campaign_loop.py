@@ -57,7 +57,7 @@ class InProcessEvaluator:
                                         EpisodeConfig(seed=job.seed, time_limit=4.0))
             while not episode.done:
                 command = controller.compute_command(*observed(observation), goal)
-                observation = episode.step((command.vx, command.vy, command.wz)).observation
+                observation = episode.step(command.values()).observation
             metrics = episode.metrics().to_dict()
         return metrics
 

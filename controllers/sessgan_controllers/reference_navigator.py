@@ -228,7 +228,7 @@ class ReferenceNavigatorConfig:
     takeoff_altitude: float = parameter(
         0.45, 'flyer: altitude in m below which it only climbs (above the 0.3 m low obstacles).')
     climb_gain: float = parameter(
-        2.0, 'flyer: climb rate in m/s per m of altitude error (1/s).')
+        1.0, 'flyer: climb rate in m/s per m of altitude error (1/s).')
     max_climb_rate: float = parameter(
         1.0, 'flyer: largest climb or descent rate commanded in m/s.')
 

@@ -108,7 +108,7 @@ class VelocityProjectionConfig:
         0.95, 'Altitude in m (underside above the ground) the flyer climbs to and holds.')
     takeoff_altitude: float = parameter(
         0.45, 'Altitude in m below which the flyer only climbs (above the 0.3 m low obstacles).')
-    climb_gain: float = parameter(2.0, 'Climb rate in m/s per m of altitude error (1/s).')
+    climb_gain: float = parameter(1.0, 'Climb rate in m/s per m of altitude error (1/s).')
     max_climb_rate: float = parameter(1.0, 'Largest climb or descent rate commanded in m/s.')
 
     def altitude_hold(self) -> AltitudeHold:

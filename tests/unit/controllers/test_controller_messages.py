@@ -54,9 +54,11 @@ def test_serialized_odometry_reads_like_the_message(frames):
     msg.twist.twist.linear.x, msg.twist.twist.linear.y = 0.8, -0.05
     msg.twist.twist.angular.z = 1.25
     msg.twist.covariance[35] = -99.0
+    msg.pose.pose.position.z, msg.twist.twist.linear.z = 0.95, -0.3  # a flyer's altitude
     stamp, state = odom_from_cdr(serialize_message(msg))
     assert stamp == 12_345_678_901
     assert state == state_from_odom(msg)
+    assert (state.z, state.vz) == (0.95, -0.3)
 
 
 def test_scan_keeps_its_geometry_and_no_returns():
@@ -72,9 +74,10 @@ def test_scan_keeps_its_geometry_and_no_returns():
 
 
 def test_command_to_twist_and_twist_stamped():
-    command = VelocityCommand(0.1, 0.2, 0.3)
+    command = VelocityCommand(0.1, 0.2, 0.3, vz=-0.4)
     twist = twist_from_command(command)
     assert (twist.linear.x, twist.linear.y, twist.angular.z) == pytest.approx((0.1, 0.2, 0.3))
+    assert twist.linear.z == pytest.approx(-0.4)
     stamp = LaserScan().header.stamp
     stamp.sec = 7
     stamped = twist_stamped_from_command(command, stamp, 'base_footprint')

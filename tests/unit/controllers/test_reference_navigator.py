@@ -209,7 +209,8 @@ def test_the_flyer_takes_off_in_place_then_navigates_holding_its_cruise_altitude
     decision = controller.decide(scan_factory(landed, grid=rows), landed, goal)
     assert decision.mode is Mode.TAKEOFF and not controller.costmap.marks
     assert (decision.command.vx, decision.command.vy) == (0.0, 0.0)
-    assert decision.command.vz == pytest.approx(settings.max_climb_rate)
+    assert decision.command.vz == pytest.approx(
+        min(settings.max_climb_rate, settings.climb_gain * settings.cruise_altitude))
     climbing = RobotState(1.0, 1.25, 0.0, z=settings.takeoff_altitude + 0.05)
     decision = controller.decide(scan_factory(climbing, grid=rows), climbing, goal)
     assert decision.mode is Mode.FOLLOW and decision.command.vx > 0.0

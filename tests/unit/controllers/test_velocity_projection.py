@@ -141,7 +141,9 @@ def test_takes_off_in_place_before_moving_and_then_holds_the_cruise_altitude(sca
     landed = RobotState(0.0, 0.0, 0.0)
     command = controller.decide(scan_factory(landed), landed, FAR_GOAL).command
     assert (command.vx, command.vy) == (0.0, 0.0)
-    assert command.vz == pytest.approx(config.max_climb_rate)
+    assert command.vz == pytest.approx(min(config.max_climb_rate,
+                                           config.climb_gain * config.cruise_altitude))
+    assert command.vz > 0.5
     low = RobotState(0.0, 0.0, 0.0, z=config.takeoff_altitude - 0.01)
     assert speed(controller.decide(scan_factory(low), low, FAR_GOAL).command) == 0.0
     above = RobotState(0.0, 0.0, 0.0, z=config.takeoff_altitude + 0.01)
@@ -151,7 +153,7 @@ def test_takes_off_in_place_before_moving_and_then_holds_the_cruise_altitude(sca
     # Too high: it descends to the cruise altitude while flying.
     high = RobotState(0.0, 0.0, 0.0, vx=1.0, z=CRUISE + 0.2)
     command = controller.decide(scan_factory(high), high, FAR_GOAL).command
-    assert command.vz == pytest.approx(-0.4) and speed(command) > 0.0
+    assert command.vz == pytest.approx(-0.2 * config.climb_gain) and speed(command) > 0.0
 
 
 def test_altitude_parameters_are_checked():

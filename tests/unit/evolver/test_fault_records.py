@@ -62,6 +62,33 @@ def test_a_trace_becomes_a_bag_of_the_workers_topics(episode, tmp_path):
         run.trace.scans = scans
 
 
+def test_a_flyer_trace_bag_has_range_down_altitude_and_climb_commands(tmp_path):
+    environment = make_environment(load_example_map('drone').cells, 'drone', 'example')
+    with InProcessEvaluator('drone', time_limit=2.0) as evaluator:
+        run = evaluator.run_environment(environment, 1, keep_scans=True)
+    bag = write_trace_bag(tmp_path / 'bag', environment, run.trace, {})
+    ticks = run.metrics['ticks']
+    counts = {topic.topic: topic.message_count for topic in read_bag_topics(bag)}
+    assert counts['/range_down'] == counts['/scan'] == ticks + 1
+    store = jazzy_typestore()
+    ranges = [store.deserialize_cdr(m.data, m.msgtype)
+              for m in iter_bag_messages(bag, ['/range_down'])]
+    assert ranges[0].header.frame_id == 'base_range_down'
+    odom = [store.deserialize_cdr(m.data, m.msgtype) for m in iter_bag_messages(bag, ['/odom'])]
+    altitudes = np.array([o.pose.pose.position.z for o in odom])
+    # It takes off: the altitude rises from the ground and the ranger reads it over free ground.
+    assert altitudes[0] == 0.0 and altitudes[-1] > 0.5
+    assert np.allclose(altitudes, run.trace.vertical[:, 0])
+    assert np.allclose([r.range for r in ranges], run.trace.range_down, atol=1e-6)
+    commands = [store.deserialize_cdr(m.data, m.msgtype)
+                for m in iter_bag_messages(bag, ['/cmd_vel'])]
+    assert commands[0].linear.z > 0.0
+    static = store.deserialize_cdr(next(iter_bag_messages(bag, ['/tf_static'])).data,
+                                   'tf2_msgs/msg/TFMessage')
+    assert [t.child_frame_id for t in static.transforms] == ['base_link', 'base_scan',
+                                                            'base_range_down']
+
+
 def test_pictures_from_a_run_and_from_its_bag(episode, tmp_path):
     environment, run = episode
     route = certified_route(environment)

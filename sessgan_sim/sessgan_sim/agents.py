@@ -6,10 +6,10 @@ joined by a 4-connected shortest path (sessgan_gen.navigation), at a constant
 speed. Agents are kinematic: static pybullet bodies moved every physics step,
 which the robot under test can hit (a contact counts as a collision) but cannot
 push. They move in the robot's plane (ground agents for ground robots, flyers at the
-flyer's traffic altitude) and are seen by its lidar when its scan plane cuts them. No agent starts within
-``min_start_distance`` of the robot's start, and no patrol begins or ends inside the
-``keep_clear`` discs the episode names (around the goal and on the certified route's narrow
-passages, so an agent never parks where the robot must pass).
+flyer's traffic altitude) and are seen by its lidar when its scan plane cuts them. No
+agent starts within ``min_start_distance`` of the robot's start, and no patrol begins or
+ends inside the ``keep_clear`` discs the episode names (around the goal and on the certified
+route's narrow passages, so an agent never parks where the robot must pass).
 
 Two behaviours (``AgentConfig.behaviour``): ``blind`` agents (the default, the paper's) keep
 moving whatever is in their way; ``cautious`` agents behave like factory AGVs with a safety

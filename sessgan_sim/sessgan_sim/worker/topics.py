@@ -149,8 +149,9 @@ class RobotTopics:
         self.publish('clock', cdr.clock(stamp), stamp_ns, recording)
         pose = observation.pose
         altitude = observation.altitude
+        twist = observation.twist
         odom = cdr.odometry(stamp, rm.ODOM_FRAME, rm.BASE_FOOTPRINT, pose.x, pose.y, pose.yaw,
-                            *observation.twist, z=altitude, vz=observation.climb_rate)
+                            twist.vx, twist.vy, twist.wz, z=altitude, vz=observation.climb_rate)
         self.publish('odom', odom, stamp_ns, recording)
         if recording is not None or self.readers('tf') > 0:
             # Building tf costs more than the check; most controllers under test use odom.

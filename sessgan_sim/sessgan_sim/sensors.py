@@ -1,4 +1,5 @@
-"""Sensors of the robot under test: a planar lidar, odometry, contact and clearance.
+"""Sensors of the robot under test: a planar lidar, odometry, contact, clearance, and the
+flyer's downward range sensor (:class:`RangeFinder`).
 
 The lidar casts its beams in the robot's body frame, from the body's centre at
 the robot's sensor height (frame ``base_scan`` sits on ``base_footprint``'s z

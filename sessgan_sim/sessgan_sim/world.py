@@ -4,8 +4,9 @@ Geometry (all static, z up, the map frame is pybullet's world frame):
 
 * BLOCKED cells (100) become **walls** (tall boxes) or, in scenarios that
   register it (the race track), **out-of-bounds barriers**: low boxes the car
-  physically hits. LOW_OBSTACLE cells (50) become short boxes that ground
-  robots hit and the flyer passes over at cruise altitude. The grid's outside
+  physically hits. LOW_OBSTACLE cells (50) become short boxes (0.3 m) that ground
+  robots hit, and the flyer too when it flies lower than their height; above them it
+  passes over. Walls (2 m) are taller than the flyer may climb. The grid's outside
   counts as blocked: a one-cell ring of the blocked kind closes the map.
 * Cells of one kind are merged greedily into maximal rectangles, one box per
   rectangle (the 32x32 factory map: 41 boxes for 400 wall cells), and
@@ -112,12 +113,14 @@ class WorldStyle:
     """Physical dimensions of the static world, in metres."""
 
     wall_height: float = 2.0
-    """Walls rise above every robot, the flyer's cruise altitude included."""
+    """Walls rise above every robot, the flyer at its highest altitude included (an episode
+    refuses a flyer whose ``max_altitude + height`` reaches it)."""
     barrier_height: float = 0.3
     """Out-of-bounds barriers: a kerb-high wall just above the car's scan plane (0.2 m), so
     its lidar sees the track edge and its body hits the barrier."""
     low_obstacle_height: float = 0.3
-    """Seen and hit by ground robots (scan plane 0.2 m), flown over by the flyer (1.0 m)."""
+    """Seen and hit by ground robots (scan plane 0.2 m) and by the flyer below this altitude;
+    flown over above it."""
     merge_obstacles: bool = True
     """Merge cells into maximal rectangles, several per body; False builds one box body per
     cell (the benchmark's baseline)."""

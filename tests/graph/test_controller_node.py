@@ -143,6 +143,8 @@ def test_stamped_commands(harness, controller):
     run = harness(controller, [Parameter('use_stamped_cmd_vel', value=True)])
     odom = odom_msg()
     odom.header.stamp.sec = 42  # the odometry of the scan's tick
+    if controller == 'velocity_projection':
+        odom.pose.pose.position.z = 0.9  # airborne, a little below its cruise altitude
     run.odom.publish(odom)
     run.goal.publish(goal_msg(0.0, 5.0))
     run.spin_until(lambda: run.node._goal is not None and run.node._state is not None)
@@ -153,6 +155,8 @@ def test_stamped_commands(harness, controller):
     assert command.header.stamp.sec == 42
     assert command.header.frame_id == 'base_footprint'
     assert command.twist.angular.z > 0.0  # the goal is to the left
+    if controller == 'velocity_projection':  # and it climbs back to its cruise altitude
+        assert command.twist.linear.z == pytest.approx(0.05)
 
 
 def test_scan_waits_for_the_odometry_of_its_tick(harness):

@@ -593,3 +593,27 @@ def test_only_the_flyer_has_a_range_sensor(episode):
     assert observation.range_down is None and observation.range_finder is None
     with pytest.raises(InvalidConfigError, match='max_range'):
         RangeFinderConfig(min_range=1.0, max_range=0.5).validate()
+
+
+@pytest.mark.parametrize('altitude, near', [(0.95, False), (0.35, True)])
+def test_proximity_over_a_low_obstacle_uses_the_3d_distance(episode, altitude, near):
+    rows = ['############', '#..........#', '#....OO....#', '#..........#', '############']
+    env = environment(rows, (1.25, 1.25, 0.0), scenario='drone', goal=(5.0, 1.25))
+    episode.reset(env, config(robot='flyer', clearance_range=1.0))
+    robot = episode.robot
+    for _ in range(200):  # climb in place to the altitude, then fly over the band
+        error = altitude - robot.altitude
+        episode.step(VelocityCommand(0.0, 0.0, 0.0, max(-1.0, min(1.0, 3.0 * error))))
+    assert robot.altitude == pytest.approx(altitude, abs=0.01)
+    before = episode.metrics().proximity_time
+    assert before == 0.0  # 0.85 m from the band's side: not near it at any altitude
+    for _ in range(80):
+        observation = episode.step(VelocityCommand(0.8, 0.0, 0.0,
+                                                   3.0 * (altitude - robot.altitude))).observation
+    assert observation.pose.x > 3.5  # past the band (x 2.5 to 3.5)
+    metrics = episode.metrics()
+    assert metrics.collisions == 0
+    assert (metrics.proximity_time > 0.5) is near
+    # Right over the band the clearance is the vertical gap to its 0.3 m top (the side
+    # walls are 0.55 m from the body).
+    assert metrics.min_clearance == pytest.approx(min(altitude - 0.3, 0.55), abs=0.02)

@@ -197,8 +197,9 @@ def time_lidars(scenario: str, clock_name: str, repeats: int, poses: int = 100
             for index, lidar in enumerate(lidars):
                 spent = 0.0
                 for (x, y), yaw in zip(points.tolist(), yaws.tolist(), strict=True):
+                    # The flyer at its traffic altitude (ground robots: their ride height).
                     p.resetBasePositionAndOrientation(
-                        robot.body_id, [x, y, robot.ride_height],
+                        robot.body_id, [x, y, robot.traffic_height],
                         p.getQuaternionFromEuler([0.0, 0.0, yaw]), physicsClientId=robot.client)
                     robot.sync()
                     started = clock()

@@ -27,6 +27,7 @@ from sessgan_controllers.types import (  # noqa: E402
     observed,
 )
 from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
+from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
 from sessgan_gen.navigation import make_environment  # noqa: E402
 from sessgan_gen.route_certificate import certify, map_clearance, required_clearances  # noqa: E402,E501
 from sessgan_gen.scenarios import get_scenario  # noqa: E402
@@ -185,3 +186,19 @@ def test_the_race_car_does_not_brake_for_a_sharp_turn_it_has_not_reached(angle, 
     else:
         assert metrics.outcome is Outcome.GOAL_REACHED and metrics.fault_collisions == 0, \
             metrics
+
+
+def test_the_flyer_with_altitude_still_flies_into_an_agent_outside_its_view():
+    """The paper's drone fault stays reachable now that the flyer takes off and cruises: on
+    generated drone map 1000061 (tests/benchmarks/bench_controllers.py lists it among the
+    velocity-projection failures) the flyer, at the agents' altitude, moves into an agent its
+    60-degree view missed; with a full field of view it reaches the goal untouched."""
+    environment = EnvironmentSampler().sample([1000061], scenario='drone')[0]
+    assert environment.feasible
+    config = EpisodeConfig(seed=int(environment.seed))
+    spec = get_controller('velocity_projection')
+    narrow = run_episode(environment, spec.make(), config)
+    assert narrow.robot_into_agent_collisions >= 1, narrow.contacts
+    assert is_controller_failure(narrow)
+    full_view = run_episode(environment, spec.make(field_of_view=2.0 * math.pi), config)
+    assert full_view.outcome is Outcome.GOAL_REACHED and full_view.collisions == 0

@@ -1,10 +1,11 @@
 """The tick loops of one episode: lockstep and clocked.
 
-Lockstep publishes a tick's clock, odom, tf and scan, waits for the controller's cmd_vel and
-only then advances the simulation by one control period. Clocked advances the simulation at
-``real_time_factor`` times the wall clock and applies the latest command received. Either way
-a silent controller ends the episode as controller_unresponsive after a wall-clock timeout,
-an evaluate client's cancel or a shutdown ends it as cancelled, and nothing waits forever.
+Lockstep publishes a tick's clock, odom, tf, scan (and the flyer's range_down), waits for the
+controller's cmd_vel and only then advances the simulation by one control period. Clocked
+advances the simulation at ``real_time_factor`` times the wall clock and applies the latest
+command received. Either way a silent controller ends the episode as controller_unresponsive
+after a wall-clock timeout, an evaluate client's cancel or a shutdown ends it as cancelled,
+and nothing waits forever.
 """
 
 from __future__ import annotations

@@ -81,11 +81,12 @@ class CampaignConfig:
     before an episode is retried elsewhere."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
-    seed_schedule: str = 'fixed'
-    """[fixed] Map and simulator seeds: 'fixed' uses the same K seeds in every generation (so a
-    member's fitness is comparable across generations and an elite keeps its score);
-    'per-generation' draws new shared seeds each generation (fitness then also varies with
-    the maps drawn); 'rotating' takes K consecutive seeds of a pool of --seed-pool in turn,
+    seed_schedule: str = 'per-generation'
+    """[per-generation] Map and simulator seeds: 'per-generation' draws new shared seeds each
+    generation (fitness then also varies with the maps drawn; on fresh seeds its generators
+    fail at least as often as the others', see README); 'fixed' uses the same K seeds in every
+    generation (a member's fitness is comparable across generations, but the search learns
+    those K maps: the worst on fresh seeds); 'rotating' takes K consecutive seeds of a pool of --seed-pool in turn,
     and a member evaluated in earlier generations (an unchanged elite) is selected on the
     mean fitness of all its evaluations, so one lucky draw does not keep it."""
     seed_pool: int = 0

@@ -91,8 +91,8 @@ class CompareConfig:
     """[1000] Seed of the fresh seed pairs."""
     checkpoint: str = ''
     """[scenario's shipped] Pre-trained generator (SESS-GAN's start, random's and latent's)."""
-    seed_schedule: str = 'fixed'
-    """[fixed] SESS-GAN's seed schedule."""
+    seed_schedule: str = 'per-generation'
+    """[per-generation] SESS-GAN's seed schedule."""
     population: int = 12
     """[12] SESS-GAN's members and the GAs' individuals per generation."""
     maps_per_member: int = 3

@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--confirm-limit', type=int, default=0)
     parser.add_argument('--time-limit', type=float, default=0.0)
-    parser.add_argument('--seed-schedule', default='fixed')
+    parser.add_argument('--seed-schedule', default='per-generation')
     parser.add_argument('--population', type=int, default=12)
     parser.add_argument('--maps-per-member', type=int, default=3)
     parser.add_argument('--output', type=Path, default=Path('runs/bench-fault-finding'))

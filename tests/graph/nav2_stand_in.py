@@ -14,7 +14,8 @@ installed on this project's machines):
   ``--reset-delay S`` makes them answer after S wall seconds.
 
 It logs what a test checks: every goal with the sim time it arrived at, every costmap reset,
-and a line for each backward jump of sim time (tf2 clears its buffer on one). Policy: turn
+a line for each backward jump of sim time (tf2 clears its buffer on one) and the number of
+commands sent by a sim time every 20 commands. Policy: turn
 toward the goal, drive when facing it, slow down near obstacles ahead.
 
 Like Nav2's nodes it reads ``/clock`` (through use_sim_time) and ``/tf``, absolute names: under
@@ -32,16 +33,21 @@ import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.clock import ClockChange, JumpThreshold
+from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.task import Future
 from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
 
 CONTROL_PERIOD = 0.05
 """Sim seconds between commands: controller_server's default controller_frequency, 20 Hz."""
+COMMAND_LOG_EVERY = 20
+"""A log line every this many commands: how a test sees the loop's rate on sim time."""
+NAVIGATION_PERIOD = 0.05
+"""Wall seconds between checks of a navigate_to_pose goal."""
 GOAL_TOLERANCE = 0.25
 """Metres: Nav2's default xy_goal_tolerance."""
 
@@ -63,12 +69,12 @@ class Nav2StandIn(Node):
     def __init__(self, options) -> None:
         super().__init__('nav2_stand_in')
         self.options = options
-        self.group = ReentrantCallbackGroup()
         self.scan: LaserScan | None = None
         self.odom: Odometry | None = None
         self.transforms: dict[tuple[str, str], tuple[float, float, float]] = {}
         self.goal: tuple[float, float] | None = None
         self.goal_handle = None
+        self.navigation_done = Future()
         self.commands_sent = 0
         command_type = TwistStamped if options.stamped else Twist
         self.cmd_publisher = self.create_publisher(command_type, 'cmd_vel', 10)
@@ -77,7 +83,9 @@ class Nav2StandIn(Node):
         # Absolute like tf2_ros' listener; a namespaced stack remaps it (-r /tf:=tf).
         self.create_subscription(TFMessage, '/tf', self.on_tf, 10)
         self.create_subscription(PoseStamped, 'goal_pose', self.on_goal_pose, 10)
-        self.create_timer(CONTROL_PERIOD, self.control, callback_group=self.group)
+        self.create_timer(CONTROL_PERIOD, self.control)
+        self.create_timer(NAVIGATION_PERIOD, self.update_navigation,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.jump_handle = self.get_clock().create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
                           on_clock_change=True), post_callback=self.on_jump)
@@ -87,7 +95,7 @@ class Nav2StandIn(Node):
             self.action_server = ActionServer(
                 self, NavigateToPose, 'navigate_to_pose', execute_callback=self.navigate,
                 goal_callback=self.on_navigate_goal,
-                cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=self.group)
+                cancel_callback=lambda _: CancelResponse.ACCEPT)
         if options.costmaps:
             from nav2_msgs.srv import ClearEntireCostmap
 
@@ -95,7 +103,7 @@ class Nav2StandIn(Node):
                 self.create_service(
                     ClearEntireCostmap, f'{costmap}_costmap/clear_entirely_{costmap}_costmap',
                     lambda request, response, costmap=costmap: self.clear(costmap, response),
-                    callback_group=self.group)
+                    )
         self.get_logger().info('stand-in ready')
 
     # ---- inputs ------------------------------------------------------------------------------
@@ -171,6 +179,9 @@ class Nav2StandIn(Node):
         twist.angular.z = angular
         self.cmd_publisher.publish(command)
         self.commands_sent += 1
+        if self.commands_sent % COMMAND_LOG_EVERY == 0:
+            now = self.get_clock().now().nanoseconds / 1e9
+            self.get_logger().info(f'{self.commands_sent} commands sent by sim time {now:.3f}')
 
     # ---- Nav2's servers ----------------------------------------------------------------------
 
@@ -186,40 +197,48 @@ class Nav2StandIn(Node):
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def navigate(self, goal_handle):
+    async def navigate(self, goal_handle):
+        """Runs until the 20 Hz control loop ends the goal (reached, cancelled, preempted):
+        awaiting keeps the single-threaded executor free for the loop."""
         from nav2_msgs.action import NavigateToPose
 
-        previous = self.goal_handle
-        self.goal_handle = goal_handle
+        previous, self.goal_handle = self.goal_handle, goal_handle
         if previous is not None and previous.is_active and not previous.is_cancel_requested:
             previous.abort()  # preempted, as bt_navigator does
+            self.navigation_done.set_result(None)
+        self.navigation_done = Future()
         self.set_goal(goal_handle.request.pose, 'navigate_to_pose')
-        result = NavigateToPose.Result()
-        while rclpy.ok(context=self.context):
-            if goal_handle.is_cancel_requested:
-                if self.goal_handle is goal_handle:  # not replaced by a newer goal
-                    self.goal = None
-                goal_handle.canceled()
-                self.get_logger().info('navigate_to_pose goal canceled')
-                return result
-            if not goal_handle.is_active:
-                return result  # preempted by a newer goal
-            pose = self.pose()
-            if pose is not None and self.goal is not None and math.hypot(
-                    self.goal[0] - pose[0], self.goal[1] - pose[1]) <= GOAL_TOLERANCE:
-                goal_handle.succeed()
-                self.get_logger().info('navigate_to_pose goal succeeded')
-                return result
+        await self.navigation_done
+        return NavigateToPose.Result()
+
+    def update_navigation(self) -> None:
+        """On a wall-clock timer, like bt_navigator's tree (it answers a cancel also when sim
+        time stands still): end the navigate_to_pose goal or send its feedback."""
+        from nav2_msgs.action import NavigateToPose
+
+        pose = self.pose()
+        goal_handle = self.goal_handle
+        if goal_handle is None or not goal_handle.is_active or self.navigation_done.done():
+            return
+        if goal_handle.is_cancel_requested:
+            self.goal = None
+            goal_handle.canceled()
+            self.get_logger().info('navigate_to_pose goal canceled')
+        elif pose is not None and self.goal is not None and math.hypot(
+                self.goal[0] - pose[0], self.goal[1] - pose[1]) <= GOAL_TOLERANCE:
+            goal_handle.succeed()
+            self.get_logger().info('navigate_to_pose goal succeeded')
+        else:
             feedback = NavigateToPose.Feedback()
-            if pose is not None:
+            if pose is not None and self.goal is not None:
                 feedback.current_pose.header.frame_id = 'map'
                 feedback.current_pose.pose.position.x, feedback.current_pose.pose.position.y = (
                     pose[0], pose[1])
                 feedback.distance_remaining = float(math.hypot(self.goal[0] - pose[0],
                                                                self.goal[1] - pose[1]))
             goal_handle.publish_feedback(feedback)
-            time.sleep(0.05)
-        return result
+            return
+        self.navigation_done.set_result(None)
 
 
 def main() -> None:
@@ -236,10 +255,14 @@ def main() -> None:
     options = parser.parse_args(args)
     rclpy.init(args=sys.argv)
     node = Nav2StandIn(options)
-    executor = MultiThreadedExecutor(num_threads=3)
+    # One thread with rclpy's events executor, as the built-in controllers spin: at 80 ticks
+    # per wall second (clocked mode, real-time factor 4) the multi-threaded executor fell
+    # behind on a 2-core machine and handled seconds-old clock, tf and scan messages.
+    executor = EventsExecutor(context=node.context)
     executor.add_node(node)
     try:
-        executor.spin()
+        while rclpy.ok(context=node.context):
+            executor.spin_once(timeout_sec=0.5)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -29,7 +29,7 @@ torch.set_num_threads(1)
 @pytest.fixture(scope='module')
 def run_dir(tmp_path_factory):
     base = CampaignConfig(population=3, maps_per_member=1, seed=9, time_limit=1.0,
-                          record_failures=False)
+                          record_failures=False, seed_schedule='fixed')
     with InProcessEvaluator('factory', time_limit=1.0) as evaluator:
         return run_sessgan_search(base, evaluator, 6, tmp_path_factory.mktemp('runs'),
                                   'tiny').run_dir

@@ -1,8 +1,9 @@
 """A failure bag of an in-process episode: the messages the simulator node would have recorded.
 
 An :class:`~sessgan_evolver.episode_runner.EpisodeTrace` kept with its scans holds everything a
-lockstep worker publishes: ``map``, ``tf_static`` and ``goal_pose`` at the start, then per
-tick ``clock``, ``odom``, ``tf`` and ``scan``, and the controller's ``cmd_vel`` answer. They
+lockstep worker publishes: ``map``, ``tf_static``, ``waypoints`` and ``goal_pose`` at the
+start (a mission's next ``goal_pose`` before the tick it went out at), then per tick
+``clock``, ``odom``, ``tf`` and ``scan``, and the controller's ``cmd_vel`` answer. They
 are serialized without ROS (clock, odom and scan with sessgan_sim.cdr, the same bytes the node
 publishes; the others with rosbags' Jazzy typestore) and written with
 ``sessgan_sim.bag_recording.write_episode_bag``, so the bag replays and re-simulates like a
@@ -82,10 +83,17 @@ class _Messages:
         return self.serialize(self.types['nav_msgs/msg/OccupancyGrid'](
             header=self.header(seconds, MAP_FRAME), info=info, data=occupancy.reshape(-1)))
 
-    def goal(self, environment: Environment, seconds: float) -> bytes:
-        goal = environment.goal
+    def goal(self, x: float, y: float, yaw: float, seconds: float) -> bytes:
         return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
-            header=self.header(seconds, MAP_FRAME), pose=self.pose(goal.x, goal.y, goal.yaw)))
+            header=self.header(seconds, MAP_FRAME), pose=self.pose(x, y, yaw)))
+
+    def waypoints(self, environment: Environment, seconds: float) -> bytes:
+        """nav_msgs/Path of the mission's waypoints (the goal alone in a plain episode)."""
+        header = self.header(seconds, MAP_FRAME)
+        stamped = self.types['geometry_msgs/msg/PoseStamped']
+        return self.serialize(self.types['nav_msgs/msg/Path'](header=header, poses=[
+            stamped(header=header, pose=self.pose(pose.x, pose.y, pose.yaw))
+            for pose in environment.waypoints]))
 
     def twist(self, vx: float, vy: float, wz: float) -> bytes:
         vector = self.types['geometry_msgs/msg/Vector3']
@@ -115,11 +123,18 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
         messages.transform(start, BASE_FOOTPRINT, BASE_LINK, z=trace.base_height),
         messages.transform(start, BASE_LINK, SCAN_FRAME,
                            z=trace.sensor_height - trace.base_height)]))
-    yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped', start_ns,
-                    messages.goal(environment, start))
+    yield BagRecord(f'{prefix}/waypoints', 'nav_msgs/msg/Path', start_ns,
+                    messages.waypoints(environment, start))
+    goal = environment.goal
+    goals = {row: (x, y, yaw) for row, x, y, yaw in trace.goals} or {
+        0: (goal.x, goal.y, goal.yaw)}
     for tick in range(ticks):
         seconds = float(trace.times[tick])
         stamp, stamp_ns = cdr.stamp(seconds), _nanoseconds(seconds)
+        if tick in goals:
+            yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped',
+                            start_ns if tick == 0 else stamp_ns,
+                            messages.goal(*goals[tick], start if tick == 0 else seconds))
         x, y, yaw = (float(v) for v in trace.poses[tick])
         vx, vy, wz = (float(v) for v in trace.twists[tick])
         yield BagRecord(f'{prefix}/clock', 'rosgraph_msgs/msg/Clock', stamp_ns,
@@ -153,6 +168,8 @@ def write_trace_bag(directory: str | Path, environment: Environment, trace: Epis
     facts.setdefault('feasible', environment.feasible)
     facts.setdefault('route_length', environment.route_length)
     facts.setdefault('route_min_clearance', environment.route_min_clearance)
+    facts.setdefault('stations', [[pose.x, pose.y, pose.yaw] for pose in environment.stations])
+    facts.setdefault('dwell_time', environment.dwell_time)
     facts.setdefault('namespace', '')
     facts['trace'] = trace.summary()
     return write_episode_bag(directory, trace_records(environment, trace), facts,

@@ -108,6 +108,9 @@ class EpisodeTrace:
     """m, the robot body's centre above the ground (base_link)."""
     sensor_height: float = 0.0
     """m, the scan plane above the ground (base_scan)."""
+    goals: list[tuple[int, float, float, float]] = field(default_factory=list)
+    """(row, x, y, yaw) of every goal that went out, the first at row 0: a mission's next
+    waypoint goes out before row i's tick is published."""
 
     def summary(self, max_points: int = 400) -> dict[str, Any]:
         """Plain data for episode.json: the trajectory and agent paths thinned to at most
@@ -237,12 +240,17 @@ class EpisodeRunner:
         episode = self._episode
         assert episode is not None
         controller = self.make_controller(environment)
-        goal = Goal(environment.goal.x, environment.goal.y)
         started = self._clock()
         observation = episode.reset(environment, self.episode_config(seed))
+        goal = Goal(observation.goal.x, observation.goal.y)
         recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
         goal_reached = False
         while not episode.done:
+            if (observation.goal.x, observation.goal.y) != (goal.x, goal.y):
+                # A mission's next waypoint: as the controller node takes a new goal_pose.
+                goal = Goal(observation.goal.x, observation.goal.y)
+                goal_reached = False
+                controller.reset()
             scan, state = node_inputs(observation)
             # As the controller node: STOP from the first tick the controller says the goal
             # is reached, and for a non-finite command.
@@ -283,10 +291,14 @@ class _TraceRecorder:
         except EpisodeError:  # an episode that could not start has no robot
             self.robot_radius = self.base_height = self.sensor_height = 0.0
         self.agent_radius = float(episode.agents.config.radius)
+        self.goals: list[tuple[int, float, float, float]] = []
         self._observe(observation)
 
     def _observe(self, observation: Observation) -> None:
         pose, twist = observation.pose, observation.twist
+        goal = observation.goal
+        if not self.goals or self.goals[-1][1:] != (goal.x, goal.y, goal.yaw):
+            self.goals.append((len(self.times), float(goal.x), float(goal.y), float(goal.yaw)))
         self.times.append(float(observation.time))
         self.poses.append((float(pose.x), float(pose.y), float(pose.yaw)))
         self.twists.append((float(twist.vx), float(twist.vy), float(twist.wz)))
@@ -315,4 +327,4 @@ class _TraceRecorder:
                    'range_min': float(lidar.range_min), 'range_max': float(lidar.range_max),
                    'scan_time': float(lidar.scan_time)},
             robot_radius=self.robot_radius, agent_radius=self.agent_radius,
-            base_height=self.base_height, sensor_height=self.sensor_height)
+            base_height=self.base_height, sensor_height=self.sensor_height, goals=self.goals)

@@ -13,7 +13,10 @@ publishes each :class:`Observation` and feeds every received command to
         print(episode.metrics())
 
 An episode ends on goal reached, collision limit, time limit, no progress toward
-the goal (stuck) or :meth:`Episode.abort` (e.g. a silent controller). An
+the goal (stuck) or :meth:`Episode.abort` (e.g. a silent controller). An Environment with
+mission stations is driven leg by leg (sessgan_sim.mission): the goal of the observation is
+the waypoint in force, the next one once the robot has dwelt at a station, and the goal is
+reached when the last waypoint (home) is. An
 environment that cannot be simulated (invalid grid, unknown scenario or robot,
 start footprint overlapping an obstacle) ends the episode at reset with outcome
 ``invalid_environment`` and a detail saying why. A command with a NaN or
@@ -51,6 +54,7 @@ from sessgan_sim.metrics import (
     MetricsRecorder,
     Outcome,
 )
+from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
 from sessgan_sim.robots import STOP, Robot, VelocityCommand, create_robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
@@ -190,6 +194,7 @@ class Observation:
     twist: Twist2D
     """Body-frame velocity."""
     goal: Pose2D
+    """The waypoint in force (the goal of a plain episode)."""
     in_contact: bool
 
 
@@ -236,6 +241,8 @@ class _Record:
     detail: str = ''
     ticks: int = 0
     touching: bool = False
+    mission: MissionTracker | None = None
+    """The legs so far (None until the environment was found valid)."""
 
 
 class ProgressField(NamedTuple):
@@ -262,6 +269,9 @@ class _Live:
     lidar: Lidar
     clearance: ClearanceSensor
     progress: ProgressField
+    """The current leg's."""
+    leg_progress: list[ProgressField]
+    """Every leg's, in order."""
     time_limit: float
     proximity_distance: float
     goal_tolerance: float
@@ -378,6 +388,8 @@ class Episode:
             robot = create_robot(str(config.robot), config.robot_params)
             if scenario_limit and environment.route_length > 0:
                 route_time = ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
+                # A mission also leaves time for every dwell.
+                route_time += len(environment.stations) * environment.dwell_time
                 config = dataclasses.replace(
                     config, time_limit=max(float(config.time_limit or 0.0), route_time))
             record.config = config
@@ -400,22 +412,28 @@ class Episode:
         grid = map_clearance(environment.occupancy, environment.resolution,
                              environment.origin, spec)
         route_need = required_clearances(spec)[1]
-        progress = self._progress_field(grid, environment, robot, route_need)
+        waypoints = environment.waypoints
+        leg_progress = [
+            self._progress_field(grid, leg_start, leg_goal, environment.feasible, robot,
+                                 route_need)
+            for leg_start, leg_goal in zip((environment.start, *waypoints), waypoints)]
+        keep_clear = [disc for leg_goal, progress in zip(waypoints, leg_progress)
+                      for disc in self._agent_keep_clear(leg_goal, robot, config, progress,
+                                                         route_need)]
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
-                           np.random.default_rng(agent_seed),
-                           keep_clear=self._agent_keep_clear(environment, robot, config,
-                                                             progress, route_need))
+                           np.random.default_rng(agent_seed), keep_clear=keep_clear)
         lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
         lidar.attach(client, robot, layout, self._agents)
         live = _Live(
             robot=robot, lidar=lidar,
             clearance=ClearanceSensor(client, robot, layout, clearance_range),
-            progress=progress,
+            progress=leg_progress[0], leg_progress=leg_progress,
             time_limit=float(config.time_limit or 0.0),
             proximity_distance=float(config.proximity_distance or 0.0),
             goal_tolerance=float(config.goal_tolerance or 0.0),
             next_scan_time=record.lidar_info.scan_time)
         self._live = live
+        record.mission = MissionTracker(waypoints, environment.dwell_time, live.goal_tolerance)
         live.best_progress = self._progress_distance(record, live)
         record.scan = lidar.scan()
         return self._observation(record, live, scan_updated=True)
@@ -435,7 +453,7 @@ class Episode:
         client = self._world.client
         body = robot.body_id
         dt = config.physics_timestep
-        goal = record.environment.goal
+        goal = self._goal(record)
         tolerance = live.goal_tolerance
         reached = touching = False
         clock = self._clock
@@ -484,7 +502,7 @@ class Episode:
 
         recorder.record_tick(config.control_period, clearance, touching,
                              live.proximity_distance)
-        self._check_end(record, live, reached, now)
+        self._check_end(record, live, reached, now, hypot(x - goal.x, y - goal.y))
         observation = self._observation(record, live, scan_updated)
         finished = clock()
         profile = self.profile
@@ -512,10 +530,27 @@ class Episode:
             note = (f'{invalid} command(s) with NaN or infinite components were replaced by '
                     f'a stop')
             detail = f'{detail}; {note}' if detail else note
-        return record.recorder.snapshot(
+        snapshot = record.recorder.snapshot(
             simulation_time=self.time, feasible=bool(record.environment.feasible),
             distance_to_goal=self._distance_to_goal(record), outcome=record.outcome,
             detail=detail)
+        mission = record.mission
+        if mission is None:
+            return snapshot
+        failed = failed_leg(mission, record.outcome,
+                            (event.time for event in snapshot.contacts if event.fault))
+        if failed >= 0 and mission.legs > 1:
+            note = f'failed on {mission.describe_leg(failed)}'
+            detail = f'{snapshot.detail}; {note}' if snapshot.detail else note
+        return dataclasses.replace(
+            snapshot, detail=detail, legs=mission.legs, legs_completed=mission.legs_completed,
+            leg_times=mission.leg_times, failed_leg=failed)
+
+    @property
+    def leg(self) -> int:
+        """0-based leg of the mission in progress (0 before reset and in a plain episode)."""
+        record = self._record
+        return record.mission.leg if record is not None and record.mission is not None else 0
 
     # --- internals ------------------------------------------------------------------------
 
@@ -534,19 +569,42 @@ class Episode:
         record.outcome = outcome
         record.detail = detail
 
-    def _check_end(self, record: _Record, live: _Live, reached: bool, now: float) -> None:
+    def _goal(self, record: _Record) -> Pose2D:
+        """The waypoint in force: the environment's goal in a plain episode."""
+        return record.mission.goal if record.mission is not None else record.environment.goal
+
+    def _check_end(self, record: _Record, live: _Live, reached: bool, now: float,
+                   distance: float) -> None:
         config = record.config
         recorder = record.recorder
+        mission = record.mission
         if config.collision_limit and recorder.collisions >= config.collision_limit:
             self._end(Outcome.COLLISION_LIMIT,
                       f'{recorder.collisions} collisions reached the limit of '
                       f'{config.collision_limit} at {now:.2f} s')
-        elif reached:
-            self._end(Outcome.GOAL_REACHED,
-                      f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
-        elif now >= live.time_limit - 1e-9:
+            return
+        event = MissionEvent.COMPLETE if mission is None and reached else (
+            mission.update(now, reached, distance, math.hypot(*live.velocity),
+                           config.control_period) if mission is not None else MissionEvent.NONE)
+        if event is MissionEvent.COMPLETE:
+            if mission is not None and mission.legs > 1:
+                self._end(Outcome.GOAL_REACHED,
+                          f'completed the mission: reached home, the last of {mission.legs} '
+                          f'waypoints, within {live.goal_tolerance:.2f} m at {now:.2f} s')
+            else:
+                self._end(Outcome.GOAL_REACHED,
+                          f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
+            return
+        if event is MissionEvent.NEXT_LEG and mission is not None:
+            live.progress = live.leg_progress[mission.leg]
+            live.best_progress = self._progress_distance(record, live)
+        if event is not MissionEvent.NONE:
+            live.last_progress_time = now  # arriving and setting off are progress
+        if now >= live.time_limit - 1e-9:
             self._end(Outcome.TIMEOUT, f'time limit of {live.time_limit:.2f} s reached, '
                                        f'{self._distance_to_goal(record):.2f} m from the goal')
+        elif mission is not None and mission.dwelling and distance <= live.goal_tolerance:
+            live.last_progress_time = now  # dwelling at a station is not being stuck
         elif config.stuck_timeout > 0:
             progress = self._progress_distance(record, live)
             if progress < live.best_progress:
@@ -596,14 +654,15 @@ class Episode:
                 recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
 
     @staticmethod
-    def _progress_field(grid: CertificateGrid, environment: Environment, robot: Robot,
-                        route_need: float) -> ProgressField:
-        goal = grid.cell_of(environment.goal.x, environment.goal.y)
-        start = grid.cell_of(environment.start.x, environment.start.y)
+    def _progress_field(grid: CertificateGrid, leg_start: Pose2D, leg_goal: Pose2D,
+                        feasible: bool, robot: Robot, route_need: float) -> ProgressField:
+        """The ProgressField of one leg (a plain episode's one leg: start to goal)."""
+        goal = grid.cell_of(leg_goal.x, leg_goal.y)
+        start = grid.cell_of(leg_start.x, leg_start.y)
         clearance = grid.clearance
         # Diagonal steps: a diagonal gap the robot passes must not look like a detour.
         steps = distance_field(clearance >= route_need - 1e-9, goal, diagonal=True)
-        route = descend(steps, start) if environment.feasible else []
+        route = descend(steps, start) if feasible else []
         if not route:
             return ProgressField(grid, distance_field(
                 clearance >= robot.footprint_radius * 0.75, goal, diagonal=True), [])
@@ -616,14 +675,13 @@ class Episode:
         return ProgressField(grid, steps, route)
 
     @staticmethod
-    def _agent_keep_clear(environment: Environment, robot: Robot, config: EpisodeConfig,
+    def _agent_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig,
                           progress: ProgressField, route_need: float
                           ) -> list[tuple[float, float, float]]:
         """Discs (x, y, radius) where agents may neither start nor end a patrol leg: around
-        the goal, and on the certified route's narrow passages (where the robot could not
+        a leg's goal, and on its certified route's narrow passages (where the robot could not
         pass an agent standing there)."""
         agents = config.agents
-        goal = environment.goal
         discs = [(goal.x, goal.y, agents.min_start_distance)]
         # Narrow: the robot on the route could not pass an agent standing beside it.
         narrow_below = agents.radius + route_need
@@ -659,7 +717,7 @@ class Episode:
 
     def _distance_to_goal(self, record: _Record) -> float:
         environment = record.environment
-        goal = environment.goal
+        goal = self._goal(record)
         if self._live is not None:
             x, y = self._live.robot.position
         else:
@@ -695,7 +753,7 @@ class Episode:
         return Observation(
             time=self.time, scan=record.scan, scan_updated=scan_updated,
             lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
-            goal=record.environment.goal, in_contact=record.touching)
+            goal=self._goal(record), in_contact=record.touching)
 
     def _blank_observation(self) -> Observation:
         """The observation of an episode that could not start: no returns, at the start."""

@@ -1,0 +1,74 @@
+"""Mission episodes with the reference navigator in process: per-leg metrics, the failed leg,
+and the trace bag's goals."""
+
+import pytest
+
+from sessgan_evolver.bag_export import write_trace_bag
+from sessgan_evolver.bag_reading import iter_bag_messages, read_bag_topics
+from sessgan_evolver.episode_runner import EpisodeRunner
+from sessgan_gen.missions import MissionSpec
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.token_map import load_example_map
+from sessgan_sim.bag_recording import jazzy_typestore
+
+pytestmark = pytest.mark.unit
+
+DWELL = 2.0
+
+
+@pytest.fixture(scope='module')
+def runner():
+    with EpisodeRunner('factory', 'reference_navigator') as runner:
+        yield runner
+
+
+@pytest.fixture(scope='module')
+def mission():
+    return make_environment(load_example_map('factory').cells, 'factory', 'factory-mission',
+                            seed=0, mission=MissionSpec(1, DWELL))
+
+
+def test_a_completed_mission_has_every_leg(runner, mission):
+    run = runner.run(mission, seed=1, trace=True)
+    metrics = run.metrics
+    assert metrics['outcome'] == 'goal_reached', metrics['detail']
+    assert metrics['detail'].startswith('completed the mission: reached home, the last of 2')
+    assert (metrics['legs'], metrics['legs_completed'], metrics['failed_leg']) == (2, 2, -1)
+    first, second = metrics['leg_times']
+    # The goal changed once: when the robot had stood at the station for the dwell time.
+    rows = [row for row, *_ in run.trace.goals]
+    assert len(rows) == 2 and rows[0] == 0
+    assert run.trace.goals[0][1:3] == (mission.stations[0].x, mission.stations[0].y)
+    assert run.trace.goals[1][1:3] == (mission.goal.x, mission.goal.y)
+    sent = run.trace.times[rows[1]]
+    assert sent >= first + DWELL - 1e-6
+    assert sent + second == pytest.approx(metrics['simulation_time'])
+    # Standing at the station for the whole dwell.
+    before = (run.trace.times > sent - DWELL + 1e-6) & (run.trace.times <= sent)
+    assert abs(run.trace.twists[before, 0]).max() <= 0.05
+
+
+def test_a_mission_that_runs_out_of_time_names_the_leg(runner, mission, tmp_path):
+    plain = make_environment(load_example_map('factory').cells, 'factory', 'factory-plain',
+                             seed=0)
+    first_leg = runner.run(plain, seed=1).metrics
+    assert first_leg['outcome'] == 'goal_reached'
+    limited = EpisodeRunner('factory', 'reference_navigator',
+                            time_limit=first_leg['simulation_time'] + DWELL + 4.0)
+    with limited:
+        run = limited.run(mission, seed=1, trace=True, keep_scans=True)
+    metrics = run.metrics
+    assert metrics['outcome'] == 'timeout'
+    assert (metrics['legs'], metrics['legs_completed'], metrics['failed_leg']) == (2, 1, 1)
+    (first,) = metrics['leg_times']
+    assert 0 < first < metrics['simulation_time'] - DWELL
+    assert metrics['detail'].endswith('failed on leg 2 of 2 (home)')
+
+    bag = write_trace_bag(tmp_path / 'bag', mission, run.trace, {'controller': 'nav'})
+    counts = {topic.topic: topic.message_count for topic in read_bag_topics(bag)}
+    assert counts['/goal_pose'] == 2 and counts['/waypoints'] == 1
+    store = jazzy_typestore()
+    path = store.deserialize_cdr(next(iter_bag_messages(bag, ['/waypoints'])).data,
+                                 'nav_msgs/msg/Path')
+    assert [(p.pose.position.x, p.pose.position.y) for p in path.poses] == \
+        [(mission.stations[0].x, mission.stations[0].y), (mission.goal.x, mission.goal.y)]

@@ -1,9 +1,8 @@
 """A failure bag of an in-process episode: the messages the simulator node would have recorded.
 
 An :class:`~sessgan_evolver.episode_runner.EpisodeTrace` kept with its scans holds everything a
-lockstep worker publishes: ``map``, ``tf_static``, ``waypoints`` and ``goal_pose`` at the
-start (a mission's next ``goal_pose`` before the tick it went out at), then per tick
-``clock``, ``odom``, ``tf`` and ``scan``, and the controller's ``cmd_vel`` answer. They
+lockstep worker publishes: ``map``, ``tf_static`` and ``goal_pose`` at the start, then per
+tick ``clock``, ``odom``, ``tf`` and ``scan``, and the controller's ``cmd_vel`` answer. They
 are serialized without ROS (clock, odom and scan with sessgan_sim.cdr, the same bytes the node
 publishes; the others with rosbags' Jazzy typestore) and written with
 ``sessgan_sim.bag_recording.write_episode_bag``, so the bag replays and re-simulates like a
@@ -83,7 +82,13 @@ class _Messages:
         return self.serialize(self.types['nav_msgs/msg/OccupancyGrid'](
             header=self.header(seconds, MAP_FRAME), info=info, data=occupancy.reshape(-1)))
 
-    def goal(self, x: float, y: float, yaw: float, seconds: float) -> bytes:
+    def goal(self, environment: Environment, seconds: float) -> bytes:
+        goal = environment.goal
+        return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
+            header=self.header(seconds, MAP_FRAME), pose=self.pose(goal.x, goal.y, goal.yaw)))
+
+    def goal_at(self, x: float, y: float, yaw: float, seconds: float) -> bytes:
+        """A mission's later goal (the first is :meth:`goal`)."""
         return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
             header=self.header(seconds, MAP_FRAME), pose=self.pose(x, y, yaw)))
 
@@ -104,7 +109,9 @@ class _Messages:
 
 def trace_records(environment: Environment, trace: EpisodeTrace,
                   namespace: str = '') -> Iterator[BagRecord]:
-    """The bag records of an episode, in publishing order (module docstring)."""
+    """The bag records of an episode, in publishing order (module docstring); with the
+    mission's ``waypoints`` after the first goal, and each later ``goal_pose`` of a mission
+    (``trace.goals``) before the tick it went out at."""
     if trace.scans is None:
         raise BagExportError('the trace has no scans: run the episode with keep_scans=True')
     ticks = len(trace.times)
@@ -123,18 +130,17 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
         messages.transform(start, BASE_FOOTPRINT, BASE_LINK, z=trace.base_height),
         messages.transform(start, BASE_LINK, SCAN_FRAME,
                            z=trace.sensor_height - trace.base_height)]))
+    yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped', start_ns,
+                    messages.goal(environment, start))
     yield BagRecord(f'{prefix}/waypoints', 'nav_msgs/msg/Path', start_ns,
                     messages.waypoints(environment, start))
-    goal = environment.goal
-    goals = {row: (x, y, yaw) for row, x, y, yaw in trace.goals} or {
-        0: (goal.x, goal.y, goal.yaw)}
+    later_goals = {row: (x, y, yaw) for row, x, y, yaw in trace.goals if row > 0}
     for tick in range(ticks):
         seconds = float(trace.times[tick])
         stamp, stamp_ns = cdr.stamp(seconds), _nanoseconds(seconds)
-        if tick in goals:
-            yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped',
-                            start_ns if tick == 0 else stamp_ns,
-                            messages.goal(*goals[tick], start if tick == 0 else seconds))
+        if tick in later_goals:
+            yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped', stamp_ns,
+                            messages.goal_at(*later_goals[tick], seconds))
         x, y, yaw = (float(v) for v in trace.poses[tick])
         vx, vy, wz = (float(v) for v in trace.twists[tick])
         yield BagRecord(f'{prefix}/clock', 'rosgraph_msgs/msg/Clock', stamp_ns,

@@ -267,8 +267,10 @@ class EpisodeRunner:
         metrics = result.to_dict()
         metrics['wall_time'] = wall_time
         metrics['bag_path'] = ''
-        return EpisodeRun(metrics, recorder.finish(list(result.contacts)) if recorder else None,
-                          wall_time)
+        episode_trace = recorder.finish(list(result.contacts)) if recorder else None
+        if recorder is not None and episode_trace is not None:
+            episode_trace.goals = recorder.goals
+        return EpisodeRun(metrics, episode_trace, wall_time)
 
 
 class _TraceRecorder:
@@ -327,4 +329,4 @@ class _TraceRecorder:
                    'range_min': float(lidar.range_min), 'range_max': float(lidar.range_max),
                    'scan_time': float(lidar.scan_time)},
             robot_radius=self.robot_radius, agent_radius=self.agent_radius,
-            base_height=self.base_height, sensor_height=self.sensor_height, goals=self.goals)
+            base_height=self.base_height, sensor_height=self.sensor_height)

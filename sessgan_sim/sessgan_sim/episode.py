@@ -270,8 +270,6 @@ class _Live:
     clearance: ClearanceSensor
     progress: ProgressField
     """The current leg's."""
-    leg_progress: list[ProgressField]
-    """Every leg's, in order."""
     time_limit: float
     proximity_distance: float
     goal_tolerance: float
@@ -280,6 +278,8 @@ class _Live:
     next_scan_time: float = 0.0
     velocity: tuple[float, float] = (0.0, 0.0)
     """m/s, map-frame velocity of the robot's centre over the last physics step."""
+    leg_progress: list[ProgressField] = field(default_factory=list)
+    """Every leg's ProgressField, in order (a plain episode's one)."""
 
 
 class Episode:
@@ -420,6 +420,7 @@ class Episode:
         keep_clear = [disc for leg_goal, progress in zip(waypoints, leg_progress)
                       for disc in self._agent_keep_clear(leg_goal, robot, config, progress,
                                                          route_need)]
+        progress = leg_progress[0]
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
                            np.random.default_rng(agent_seed), keep_clear=keep_clear)
         lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
@@ -427,12 +428,13 @@ class Episode:
         live = _Live(
             robot=robot, lidar=lidar,
             clearance=ClearanceSensor(client, robot, layout, clearance_range),
-            progress=leg_progress[0], leg_progress=leg_progress,
+            progress=progress,
             time_limit=float(config.time_limit or 0.0),
             proximity_distance=float(config.proximity_distance or 0.0),
             goal_tolerance=float(config.goal_tolerance or 0.0),
             next_scan_time=record.lidar_info.scan_time)
         self._live = live
+        live.leg_progress = leg_progress
         record.mission = MissionTracker(waypoints, environment.dwell_time, live.goal_tolerance)
         live.best_progress = self._progress_distance(record, live)
         record.scan = lidar.scan()

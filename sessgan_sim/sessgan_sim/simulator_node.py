@@ -166,7 +166,8 @@ class SimulatorNode(Node):
             occupancy, _, _ = occupancy_from_grid_msg(grid)
             cells = occupancy_to_tokens(occupancy, get_scenario(scenario))
             environment = make_environment(cells, scenario, f'free-{self.free_seed}',
-                                           seed=self.free_seed)
+                                           seed=self.free_seed,
+                                           mission=self.settings.mission())
         except (SessganGenError, ValueError) as err:
             self.get_logger().error(f'ignoring the map on environment: {err}')
             return

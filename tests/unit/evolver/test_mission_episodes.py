@@ -72,3 +72,24 @@ def test_a_mission_that_runs_out_of_time_names_the_leg(runner, mission, tmp_path
                                  'nav_msgs/msg/Path')
     assert [(p.pose.position.x, p.pose.position.y) for p in path.poses] == \
         [(mission.stations[0].x, mission.stations[0].y), (mission.goal.x, mission.goal.y)]
+
+
+def test_campaigns_ask_for_missions_through_one_validated_spec():
+    from sessgan_evolver.campaign import CampaignConfig
+    from sessgan_evolver.errors import CampaignError
+    from sessgan_evolver.in_process import InProcessEvaluator
+
+    with pytest.raises(CampaignError, match='mission_stations'):
+        CampaignConfig(mission_stations=-1).validate()
+    with pytest.raises(CampaignError, match='station_dwell_time'):
+        CampaignConfig(mission_stations=1, station_dwell_time=-2.0).validate()
+    config = CampaignConfig(mission_stations=2, station_dwell_time=1.0)
+    config.validate()
+    # Every leg and dwell gets a plain episode's wall time.
+    plain = CampaignConfig().episode_timeout_for(1024)
+    assert config.episode_timeout_for(1024) > 2.5 * plain
+    with InProcessEvaluator('factory', mission=config.mission()) as evaluator:
+        environments = evaluator.sample(b'', [11, 12], generation=0, member=0)
+    assert all(len(e.stations) == 2 and e.dwell_time == 1.0 for e in environments
+               if e.feasible)
+    assert any(e.feasible for e in environments)

@@ -174,6 +174,8 @@ class EpisodeRunner:
                                      f'ask for {self.settings.mode!r}')
         self.time_limit = float(time_limit) or float(self.settings.time_limit) \
             or spec.time_limit
+        self.time_limit_given = bool(float(time_limit) or float(self.settings.time_limit))
+        """False: the scenario's limit, which a mission gets per leg (mission_time_limit)."""
         config = self.episode_config(0)
         config.validate()
         self.robot = str(config.robot)
@@ -204,11 +206,23 @@ class EpisodeRunner:
 
     # --- episodes ---------------------------------------------------------------------------
 
-    def episode_config(self, seed: int) -> EpisodeConfig:
+    def episode_config(self, seed: int, environment: Environment | None = None
+                       ) -> EpisodeConfig:
         """The config of an episode with simulator seed ``seed`` (as a worker builds it for an
-        evaluate goal with this runner's time limit), scenario defaults filled in."""
-        return self.settings.episode_config(time_limit=self.time_limit, seed=int(seed)) \
+        evaluate goal with this runner's time limit), scenario defaults filled in; the time
+        limit of ``environment``'s mission (:meth:`mission_time_limit`) when given."""
+        time_limit = self.mission_time_limit(environment) if environment else self.time_limit
+        return self.settings.episode_config(time_limit=time_limit, seed=int(seed)) \
             .resolved(get_scenario(self.scenario))
+
+    def mission_time_limit(self, environment: Environment) -> float:
+        """Sim seconds for ``environment``: the runner's time limit; for a mission with the
+        scenario's limit, that limit per leg plus every dwell (as a worker gives it,
+        sessgan_sim.episode)."""
+        if self.time_limit_given or not environment.stations:
+            return self.time_limit
+        return (self.time_limit * environment.legs
+                + len(environment.stations) * environment.dwell_time)
 
     def make_controller(self, environment: Environment) -> Controller:
         """A fresh controller for an episode in ``environment``, set up as its node would be:
@@ -241,7 +255,7 @@ class EpisodeRunner:
         assert episode is not None
         controller = self.make_controller(environment)
         started = self._clock()
-        observation = episode.reset(environment, self.episode_config(seed))
+        observation = episode.reset(environment, self.episode_config(seed, environment))
         goal = Goal(observation.goal.x, observation.goal.y)
         recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
         goal_reached = False

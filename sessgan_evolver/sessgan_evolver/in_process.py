@@ -125,15 +125,15 @@ class InProcessEvaluator:
         """The episode's failure bag (``run`` must have been traced with its scans)."""
         assert run.trace is not None
         return write_trace_bag(directory, environment, run.trace, {
-            **self.episode_facts(seed), 'controller': self.controller,
+            **self.episode_facts(seed, environment), 'controller': self.controller,
             'metrics': {k: v for k, v in run.metrics.items() if k != 'bag_path'},
             'origin': origin,
         }, storage=self.bag_storage)
 
-    def episode_facts(self, seed: int) -> dict:
+    def episode_facts(self, seed: int, environment: Environment | None = None) -> dict:
         """What a worker's failure bag says about its simulator (sessgan_sim.worker
         .failure_bags), so ``replay --resimulate`` rebuilds the same one."""
-        config = self.runner.episode_config(seed)
+        config = self.runner.episode_config(seed, environment)
         return {'episode_seed': int(seed), 'robot': config.robot,
                 'time_limit': config.time_limit, 'mode': 'lockstep', 'sim_time_origin': 0.0,
                 'sim_time_origin_ns': 0, 'simulator': self.runner.settings.to_dict(),

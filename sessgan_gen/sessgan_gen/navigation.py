@@ -25,8 +25,8 @@ from typing import NamedTuple
 import numpy as np
 
 from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.missions import MissionSpec, certify_legs, place_mission
 from sessgan_gen.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
+from sessgan_gen.missions import MissionSpec, certify_legs, place_mission
 from sessgan_gen.route_certificate import (
     RouteCertificate,
     certify,

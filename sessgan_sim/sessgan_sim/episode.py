@@ -386,10 +386,14 @@ class Episode:
             scenario_limit = config.time_limit is None
             config = record.config = config.resolved(get_scenario(environment.scenario))
             robot = create_robot(str(config.robot), config.robot_params)
+            dwells = len(environment.stations) * environment.dwell_time
+            if scenario_limit and environment.stations:
+                # A mission gets the scenario's limit per leg, and time for every dwell.
+                config = dataclasses.replace(config, time_limit=float(
+                    config.time_limit or 0.0) * environment.legs + dwells)
             if scenario_limit and environment.route_length > 0:
-                route_time = ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
-                # A mission also leaves time for every dwell.
-                route_time += len(environment.stations) * environment.dwell_time
+                route_time = (ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
+                              + dwells)
                 config = dataclasses.replace(
                     config, time_limit=max(float(config.time_limit or 0.0), route_time))
             record.config = config

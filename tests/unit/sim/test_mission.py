@@ -95,3 +95,30 @@ def test_a_mission_needs_a_waypoint_and_a_sane_dwell():
         MissionTracker([], dwell_time=1.0, tolerance=0.5)
     with pytest.raises(EpisodeError):
         MissionTracker([HOME], dwell_time=-1.0, tolerance=0.5)
+
+
+def test_a_mission_gets_the_scenario_time_limit_per_leg_and_its_dwells():
+    from sessgan_gen.missions import MissionSpec
+    from sessgan_gen.navigation import make_environment
+    from sessgan_gen.scenarios import get_scenario
+    from sessgan_gen.token_map import load_example_map
+    from sessgan_sim.episode import ROUTE_TIME_FACTOR, Episode, EpisodeConfig
+
+    cells = load_example_map('factory').cells
+    plain = make_environment(cells, 'factory', 'plain', seed=2)
+    mission = make_environment(cells, 'factory', 'mission', seed=2,
+                               mission=MissionSpec(2, 3.0))
+    scenario_limit = get_scenario('factory').time_limit
+    with Episode() as episode:
+        episode.reset(plain, EpisodeConfig(dummy_agents=0))
+        top_speed = episode.robot.top_speed
+        assert episode.config.time_limit == pytest.approx(max(
+            scenario_limit, ROUTE_TIME_FACTOR * plain.route_length / top_speed))
+        episode.reset(mission, EpisodeConfig(dummy_agents=0))
+        assert episode.config.time_limit == pytest.approx(max(
+            3 * scenario_limit + 2 * 3.0,
+            ROUTE_TIME_FACTOR * mission.route_length / top_speed + 2 * 3.0))
+        observation = episode.reset(mission, EpisodeConfig(dummy_agents=0, time_limit=50.0))
+        assert episode.config.time_limit == 50.0  # a given limit is the whole mission's
+        assert observation.goal == mission.stations[0]
+        assert episode.metrics().legs == 3 and episode.metrics().failed_leg == -1

@@ -124,3 +124,27 @@ def test_mission_failure_bag_replays_and_resimulates(node_processes, ros_node, t
         assert recorded == again, (row, run.stdout)
     assert rows['legs completed'][0] == '1/2'
     assert math.isclose(float(rows['sim time'][0]), 25.0, abs_tol=0.06)
+
+
+def test_a_nav2_stack_gets_each_waypoint_as_a_navigate_to_pose_goal(node_processes, ros_node):
+    from sessgan_gen.missions import MissionSpec
+    from sessgan_gen.navigation import make_environment
+    from sessgan_gen.ros_conversion import environment_to_msg
+    from tests.graph.test_clocked_mode import start_stand_in
+    from tests.graph.test_simulator_graph import room
+
+    environment = make_environment(room(12), 'factory', 'room-mission', seed=4,
+                                   mission=MissionSpec(1, 1.0))
+    assert environment.feasible and len(environment.stations) == 1
+    namespace = '/mission_ntp'
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
+                    'real_time_factor:=3.0', 'goal_interface:=navigate_to_pose')
+    stand_in = start_stand_in(node_processes, namespace, '--action')
+    metrics, _ = evaluate(ros_node, namespace, environment_to_msg(environment),
+                          time_limit=60.0)
+    assert metrics.outcome == 'goal_reached', metrics.detail
+    assert (metrics.legs, metrics.legs_completed) == (2, 2)
+    output = stand_in.output()
+    # The station's goal ended (the stack reached it and stood for the dwell), then home's.
+    assert output.count('goal from navigate_to_pose') == 2, output
+    assert 'goal from goal_pose' not in output

@@ -6,6 +6,7 @@ import pytest
 from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.bag_reading import iter_bag_messages, read_bag_topics
 from sessgan_evolver.episode_runner import EpisodeRunner
+from sessgan_evolver.fault_picture import scene_from_bag, scene_from_run, write_scene_png
 from sessgan_gen.missions import MissionSpec
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
@@ -64,7 +65,8 @@ def test_a_mission_that_runs_out_of_time_names_the_leg(runner, mission, tmp_path
     assert 0 < first < metrics['simulation_time'] - DWELL
     assert metrics['detail'].endswith('failed on leg 2 of 2 (home)')
 
-    bag = write_trace_bag(tmp_path / 'bag', mission, run.trace, {'controller': 'nav'})
+    bag = write_trace_bag(tmp_path / 'bag', mission, run.trace, {
+        'controller': 'nav', 'metrics': {k: v for k, v in metrics.items() if k != 'bag_path'}})
     counts = {topic.topic: topic.message_count for topic in read_bag_topics(bag)}
     assert counts['/goal_pose'] == 2 and counts['/waypoints'] == 1
     store = jazzy_typestore()
@@ -72,6 +74,15 @@ def test_a_mission_that_runs_out_of_time_names_the_leg(runner, mission, tmp_path
                                  'nav_msgs/msg/Path')
     assert [(p.pose.position.x, p.pose.position.y) for p in path.poses] == \
         [(mission.stations[0].x, mission.stations[0].y), (mission.goal.x, mission.goal.y)]
+
+    # The fault picture shows the stations and the route through every leg, from the run and
+    # from the bag alike.
+    for scene in (scene_from_run(mission, run.trace, metrics), scene_from_bag(bag)):
+        assert scene.stations == [(mission.stations[0].x, mission.stations[0].y)]
+        station_cell = mission.cell_of(*scene.stations[0])
+        assert any(mission.cell_of(*corner) == station_cell for corner in scene.route)
+        assert tuple(scene.route[-1]) == pytest.approx((mission.goal.x, mission.goal.y))
+    assert write_scene_png(scene, tmp_path / 'fault.png').stat().st_size > 0
 
 
 def test_campaigns_ask_for_missions_through_one_validated_spec():

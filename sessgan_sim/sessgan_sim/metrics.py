@@ -111,7 +111,8 @@ class EpisodeMetrics:
     distance_travelled: float
     """m, path length of the robot's centre."""
     final_distance_to_goal: float
-    """m, straight-line distance from the robot's centre to the goal at the end."""
+    """m, straight-line distance from the robot's centre to the goal at the end (a mission's
+    waypoint in force)."""
     ticks: int
     """Control ticks simulated."""
     outcome: Outcome | None

@@ -552,12 +552,6 @@ class Episode:
             snapshot, detail=detail, legs=mission.legs, legs_completed=mission.legs_completed,
             leg_times=mission.leg_times, failed_leg=failed)
 
-    @property
-    def leg(self) -> int:
-        """0-based leg of the mission in progress (0 before reset and in a plain episode)."""
-        record = self._record
-        return record.mission.leg if record is not None and record.mission is not None else 0
-
     # --- internals ------------------------------------------------------------------------
 
     def _require_record(self) -> _Record:
@@ -584,16 +578,17 @@ class Episode:
         config = record.config
         recorder = record.recorder
         mission = record.mission
+        if mission is None:  # reset() sets it whenever it builds a simulation
+            raise EpisodeError('no mission: reset() has not built a valid episode')
         if config.collision_limit and recorder.collisions >= config.collision_limit:
             self._end(Outcome.COLLISION_LIMIT,
                       f'{recorder.collisions} collisions reached the limit of '
                       f'{config.collision_limit} at {now:.2f} s')
             return
-        event = MissionEvent.COMPLETE if mission is None and reached else (
-            mission.update(now, reached, distance, math.hypot(*live.velocity),
-                           config.control_period) if mission is not None else MissionEvent.NONE)
+        event = mission.update(now, reached, distance, math.hypot(*live.velocity),
+                               config.control_period)
         if event is MissionEvent.COMPLETE:
-            if mission is not None and mission.legs > 1:
+            if mission.legs > 1:
                 self._end(Outcome.GOAL_REACHED,
                           f'completed the mission: reached home, the last of {mission.legs} '
                           f'waypoints, within {live.goal_tolerance:.2f} m at {now:.2f} s')
@@ -601,7 +596,7 @@ class Episode:
                 self._end(Outcome.GOAL_REACHED,
                           f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
             return
-        if event is MissionEvent.NEXT_LEG and mission is not None:
+        if event is MissionEvent.NEXT_LEG:
             live.progress = live.leg_progress[mission.leg]
             live.best_progress = self._progress_distance(record, live)
         if event is not MissionEvent.NONE:
@@ -609,7 +604,7 @@ class Episode:
         if now >= live.time_limit - 1e-9:
             self._end(Outcome.TIMEOUT, f'time limit of {live.time_limit:.2f} s reached, '
                                        f'{self._distance_to_goal(record):.2f} m from the goal')
-        elif mission is not None and mission.dwelling and distance <= live.goal_tolerance:
+        elif mission.dwelling and distance <= live.goal_tolerance:
             live.last_progress_time = now  # dwelling at a station is not being stuck
         elif config.stuck_timeout > 0:
             progress = self._progress_distance(record, live)

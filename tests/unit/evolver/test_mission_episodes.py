@@ -104,3 +104,15 @@ def test_campaigns_ask_for_missions_through_one_validated_spec():
     assert all(len(e.stations) == 2 and e.dwell_time == 1.0 for e in environments
                if e.feasible)
     assert any(e.feasible for e in environments)
+
+
+def test_compare_refuses_a_bad_mission_and_passes_a_good_one_to_its_campaigns():
+    from sessgan_evolver.comparison import CompareConfig
+    from sessgan_evolver.errors import CompareError
+
+    with pytest.raises(CompareError, match='mission_stations'):
+        CompareConfig(mission_stations=99).validate()
+    config = CompareConfig(mission_stations=1, station_dwell_time=0.5)
+    config.validate()
+    campaign = config.campaign_config(seed=3)
+    assert (campaign.mission_stations, campaign.station_dwell_time) == (1, 0.5)

@@ -82,11 +82,6 @@ class _Messages:
         return self.serialize(self.types['nav_msgs/msg/OccupancyGrid'](
             header=self.header(seconds, MAP_FRAME), info=info, data=occupancy.reshape(-1)))
 
-    def goal(self, environment: Environment, seconds: float) -> bytes:
-        goal = environment.goal
-        return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
-            header=self.header(seconds, MAP_FRAME), pose=self.pose(goal.x, goal.y, goal.yaw)))
-
     def goal_at(self, x: float, y: float, yaw: float, seconds: float) -> bytes:
         """A mission's later goal (the first is :meth:`goal`)."""
         return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
@@ -99,6 +94,11 @@ class _Messages:
         return self.serialize(self.types['nav_msgs/msg/Path'](header=header, poses=[
             stamped(header=header, pose=self.pose(pose.x, pose.y, pose.yaw))
             for pose in environment.waypoints]))
+
+    def goal(self, environment: Environment, seconds: float) -> bytes:
+        goal = environment.goal
+        return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
+            header=self.header(seconds, MAP_FRAME), pose=self.pose(goal.x, goal.y, goal.yaw)))
 
     def twist(self, vx: float, vy: float, wz: float) -> bytes:
         vector = self.types['geometry_msgs/msg/Vector3']

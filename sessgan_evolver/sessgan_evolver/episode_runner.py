@@ -100,6 +100,9 @@ class EpisodeTrace:
     """(n, beams) float32 ranges in metres when kept (bags), else None."""
     lidar: dict[str, float] = field(default_factory=dict)
     """angle_min, angle_increment, range_min, range_max, scan_time of the scans."""
+    goals: list[tuple[int, float, float, float]] = field(default_factory=list)
+    """(row, x, y, yaw) of every goal that went out, the first at row 0: a mission's next
+    waypoint goes out before row i's tick is published."""
     robot_radius: float = 0.0
     """m, the robot's footprint circle."""
     agent_radius: float = 0.0
@@ -108,9 +111,6 @@ class EpisodeTrace:
     """m, the robot body's centre above the ground (base_link)."""
     sensor_height: float = 0.0
     """m, the scan plane above the ground (base_scan)."""
-    goals: list[tuple[int, float, float, float]] = field(default_factory=list)
-    """(row, x, y, yaw) of every goal that went out, the first at row 0: a mission's next
-    waypoint goes out before row i's tick is published."""
 
     def summary(self, max_points: int = 400) -> dict[str, Any]:
         """Plain data for episode.json: the trajectory and agent paths thinned to at most

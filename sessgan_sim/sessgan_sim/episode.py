@@ -386,16 +386,17 @@ class Episode:
             scenario_limit = config.time_limit is None
             config = record.config = config.resolved(get_scenario(environment.scenario))
             robot = create_robot(str(config.robot), config.robot_params)
-            dwells = len(environment.stations) * environment.dwell_time
-            if scenario_limit and environment.stations:
-                # A mission gets the scenario's limit per leg, and time for every dwell.
-                config = dataclasses.replace(config, time_limit=float(
-                    config.time_limit or 0.0) * environment.legs + dwells)
             if scenario_limit and environment.route_length > 0:
-                route_time = (ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
-                              + dwells)
+                route_time = ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
                 config = dataclasses.replace(
                     config, time_limit=max(float(config.time_limit or 0.0), route_time))
+            if scenario_limit and environment.stations:
+                # A mission gets the scenario's limit per leg (at least the route's time, as
+                # above), and time for every dwell.
+                per_leg = get_scenario(environment.scenario).time_limit * environment.legs
+                config = dataclasses.replace(config, time_limit=max(
+                    per_leg, float(config.time_limit or 0.0))
+                    + len(environment.stations) * environment.dwell_time)
             record.config = config
         except (SessganGenError, UnknownRobotError) as err:
             self._end(Outcome.INVALID_ENVIRONMENT, str(err))

@@ -85,6 +85,19 @@ class _Messages:
         return self.serialize(self.types['nav_msgs/msg/OccupancyGrid'](
             header=self.header(seconds, MAP_FRAME), info=info, data=occupancy.reshape(-1)))
 
+    def goal_at(self, x: float, y: float, yaw: float, seconds: float) -> bytes:
+        """A mission's later goal (the first is :meth:`goal`)."""
+        return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
+            header=self.header(seconds, MAP_FRAME), pose=self.pose(x, y, yaw)))
+
+    def waypoints(self, environment: Environment, seconds: float) -> bytes:
+        """nav_msgs/Path of the mission's waypoints (the goal alone in a plain episode)."""
+        header = self.header(seconds, MAP_FRAME)
+        stamped = self.types['geometry_msgs/msg/PoseStamped']
+        return self.serialize(self.types['nav_msgs/msg/Path'](header=header, poses=[
+            stamped(header=header, pose=self.pose(pose.x, pose.y, pose.yaw))
+            for pose in environment.waypoints]))
+
     def goal(self, environment: Environment, seconds: float) -> bytes:
         goal = environment.goal
         return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
@@ -99,7 +112,9 @@ class _Messages:
 
 def trace_records(environment: Environment, trace: EpisodeTrace,
                   namespace: str = '') -> Iterator[BagRecord]:
-    """The bag records of an episode, in publishing order (module docstring)."""
+    """The bag records of an episode, in publishing order (module docstring); with the
+    mission's ``waypoints`` after the first goal, and each later ``goal_pose`` of a mission
+    (``trace.goals``) before the tick it went out at."""
     if trace.scans is None:
         raise BagExportError('the trace has no scans: run the episode with keep_scans=True')
     ticks = len(trace.times)
@@ -125,9 +140,15 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
                     messages.tf(static))
     yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped', start_ns,
                     messages.goal(environment, start))
+    yield BagRecord(f'{prefix}/waypoints', 'nav_msgs/msg/Path', start_ns,
+                    messages.waypoints(environment, start))
+    later_goals = {row: (x, y, yaw) for row, x, y, yaw in trace.goals if row > 0}
     for tick in range(ticks):
         seconds = float(trace.times[tick])
         stamp, stamp_ns = cdr.stamp(seconds), _nanoseconds(seconds)
+        if tick in later_goals:
+            yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped', stamp_ns,
+                            messages.goal_at(*later_goals[tick], seconds))
         x, y, yaw = (float(v) for v in trace.poses[tick])
         vx, vy, wz = (float(v) for v in trace.twists[tick])
         z, vz = ((float(v) for v in trace.vertical[tick]) if trace.vertical is not None
@@ -169,6 +190,8 @@ def write_trace_bag(directory: str | Path, environment: Environment, trace: Epis
     facts.setdefault('feasible', environment.feasible)
     facts.setdefault('route_length', environment.route_length)
     facts.setdefault('route_min_clearance', environment.route_min_clearance)
+    facts.setdefault('stations', [[pose.x, pose.y, pose.yaw] for pose in environment.stations])
+    facts.setdefault('dwell_time', environment.dwell_time)
     facts.setdefault('namespace', '')
     facts['trace'] = trace.summary()
     return write_episode_bag(directory, trace_records(environment, trace), facts,

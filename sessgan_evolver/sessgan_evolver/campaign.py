@@ -38,6 +38,8 @@ from sessgan_evolver.seeding import SeedStream, shared_seeds
 from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
+from sessgan_gen.errors import InvalidMissionError
+from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
@@ -111,10 +113,19 @@ class CampaignConfig:
     """[0.02] Gaussian mutation sigma relative to each tensor's spread."""
     mutation_probability: float = 0.5
     """[0.5] Probability that a tensor is mutated."""
+    mission_stations: int = 0
+    """[0] Pick-up -> place missions: stations drawn before home on every map, each leg
+    certified (0..16); 0: plain start -> goal episodes."""
+    station_dwell_time: float = DEFAULT_DWELL_TIME
+    """[2.0] Sim seconds the robot stands still at each mission station (loading)."""
     fitness: FitnessConfig = field(default_factory=FitnessConfig)
 
     def validate(self) -> None:
         get_scenario(self.scenario)
+        try:
+            self.mission()
+        except InvalidMissionError as err:
+            raise CampaignError(str(err)) from err
         for name in ('generations', 'population', 'maps_per_member', 'workers'):
             if getattr(self, name) < 1:
                 raise CampaignError(f'{name} must be >= 1, got {getattr(self, name)}')
@@ -161,6 +172,10 @@ class CampaignConfig:
         return (shared_seeds(self.seed, seed_generation, count),
                 shared_seeds(self.seed, seed_generation, count, SeedStream.SIMULATION))
 
+    def mission(self) -> MissionSpec:
+        """The mission every map gets (validated: InvalidMissionError names the option)."""
+        return MissionSpec(self.mission_stations, self.station_dwell_time).validate()
+
     def resolved_time_limit(self) -> float:
         return self.time_limit or get_scenario(self.scenario).time_limit
 
@@ -172,7 +187,9 @@ class CampaignConfig:
         :data:`EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND`)."""
         if self.episode_timeout:
             return self.episode_timeout
-        time_limit = self.resolved_time_limit()
+        # A mission's legs each take up to a plain episode's time, plus the dwells.
+        time_limit = (self.resolved_time_limit() * (self.mission_stations + 1)
+                      + self.mission_stations * self.station_dwell_time)
         per_cell = (EPISODE_TIMEOUT_SECONDS_PER_CELL
                     + EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND * time_limit)
         return max(30.0, 2.0 * time_limit) + per_cell * max(0, int(cells))

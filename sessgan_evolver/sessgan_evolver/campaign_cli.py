@@ -221,7 +221,16 @@ class RosEvaluator:
         response = future.result()
         if not response.success:
             raise CampaignError(f'the generator refused member {member}: {response.message}')
-        return [environment_from_msg(msg) for msg in response.environments]
+        environments = [environment_from_msg(msg) for msg in response.environments]
+        stations = self.config.mission_stations
+        for environment in environments:
+            if environment.feasible and len(environment.stations) != stations:
+                raise CampaignError(
+                    f'the generator drew {len(environment.stations)} mission stations on '
+                    f'{environment.id}, the campaign asks for {stations}: a generator already '
+                    f'running under {GENERATOR_NAMESPACE} has its own mission_stations '
+                    'parameter; stop it or start it with the same one')
+        return environments
 
     def generator_died(self, attempt: int) -> bool:
         """True (and the generator restarted) if the generator this campaign started died;
@@ -398,6 +407,9 @@ def metrics_dict(msg) -> dict:
         'distance_travelled': float(msg.distance_travelled),
         'final_distance_to_goal': float(msg.final_distance_to_goal), 'ticks': int(msg.ticks),
         'wall_time': float(msg.wall_time), 'bag_path': msg.bag_path,
+        'legs': int(msg.legs), 'legs_completed': int(msg.legs_completed),
+        'leg_times': [float(value) for value in msg.leg_times],
+        'failed_leg': int(msg.failed_leg),
     }
 
 
@@ -414,7 +426,8 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
         generator = supervisor.start('generator', [
             'ros2', 'run', 'sessgan_gen', 'generator', '--ros-args',
             '-r', f'__ns:={GENERATOR_NAMESPACE}', '-p', f'scenario:={config.scenario}',
-            '-p', 'rate:=0.0'])
+            '-p', 'rate:=0.0', '-p', f'mission_stations:={config.mission_stations}',
+            '-p', f'station_dwell_time:={float(config.station_dwell_time)}'])
     if config.external:
         return generator
     from sessgan_controllers.registry import CONTROLLERS
@@ -516,7 +529,7 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
         with InProcessEvaluator(
                 config.scenario, controller, config.time_limit,
                 record_directory=campaign.bags_dir if config.record_failures else None,
-                bag_storage=config.bag_storage) as evaluator:
+                bag_storage=config.bag_storage, mission=config.mission()) as evaluator:
             result = campaign.run(evaluator, resume=resume)
     except KeyboardInterrupt:
         log(f'interrupted (continue later with --resume --run {run_name} --in-process)')

@@ -58,6 +58,8 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
+from sessgan_gen.errors import InvalidMissionError
+from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 
@@ -101,9 +103,18 @@ class CompareConfig:
     """[4] Fault rule: coarse cell side, map cells."""
     context_cells: int = 2
     """[2] Fault rule: context around the coarse cell, map cells."""
+    mission_stations: int = 0
+    """[0] Pick-up -> place missions: stations drawn before home on every map of every method,
+    each leg certified (0..16); 0: plain start -> goal episodes."""
+    station_dwell_time: float = DEFAULT_DWELL_TIME
+    """[2.0] Sim seconds the robot stands still at each mission station."""
 
     def validate(self) -> None:
         get_scenario(self.scenario)
+        try:
+            self.mission()
+        except InvalidMissionError as err:
+            raise CompareError(str(err)) from err
         unknown = [m for m in self.methods if m not in METHODS]
         if unknown or not self.methods:
             raise CompareError(f'unknown or no methods {unknown}; known: {", ".join(METHODS)}')
@@ -126,12 +137,17 @@ class CompareConfig:
     def rule(self) -> FaultRule:
         return FaultRule(self.coarse_cells, self.context_cells)
 
+    def mission(self) -> MissionSpec:
+        """The mission every map gets (validated: InvalidMissionError names the option)."""
+        return MissionSpec(self.mission_stations, self.station_dwell_time).validate()
+
     def campaign_config(self, seed: int) -> CampaignConfig:
         return CampaignConfig(
             scenario=self.scenario, population=self.population,
             maps_per_member=self.maps_per_member, seed=seed, checkpoint=self.checkpoint,
             controller=self.controller, time_limit=self.time_limit,
             seed_schedule=self.seed_schedule, record_failures=False,
+            mission_stations=self.mission_stations, station_dwell_time=self.station_dwell_time,
             fitness=FitnessConfig())
 
     def ga_config(self) -> GAConfig:
@@ -211,7 +227,8 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     episode_log = EpisodeLog(rule)
     label = f'{method}-seed{seed}'
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, observer=episode_log) as evaluator:
+                            simulate_invalid=False, observer=episode_log,
+                            mission=config.mission()) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
         if method == 'sessgan':
@@ -280,7 +297,7 @@ def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Pat
     plan = fresh_seed_plan(config.evaluation_seed, config.fresh_episodes, used_maps, used_sims)
     summaries: dict[str, FreshSeedSummary] = {}
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False) as evaluator:
+                            simulate_invalid=False, mission=config.mission()) as evaluator:
         for run in runs:
             if run.source is None or run.source_key in summaries:
                 continue
@@ -408,7 +425,7 @@ def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method:
     with a trace for the picture."""
     rows = []
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False) as evaluator:
+                            simulate_invalid=False, mission=config.mission()) as evaluator:
         for method in config.methods:
             method_runs = [r for r in runs if r.figures.method == method]
             if not method_runs:

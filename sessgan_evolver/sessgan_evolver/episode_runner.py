@@ -101,6 +101,9 @@ class EpisodeTrace:
     """(n, beams) float32 ranges in metres when kept (bags), else None."""
     lidar: dict[str, float] = field(default_factory=dict)
     """angle_min, angle_increment, range_min, range_max, scan_time of the scans."""
+    goals: list[tuple[int, float, float, float]] = field(default_factory=list)
+    """(row, x, y, yaw) of every goal that went out, the first at row 0: a mission's next
+    waypoint goes out before row i's tick is published."""
     robot_radius: float = 0.0
     """m, the robot's footprint circle."""
     agent_radius: float = 0.0
@@ -178,6 +181,8 @@ class EpisodeRunner:
                                      f'ask for {self.settings.mode!r}')
         self.time_limit = float(time_limit) or float(self.settings.time_limit) \
             or spec.time_limit
+        self.time_limit_given = bool(float(time_limit) or float(self.settings.time_limit))
+        """False: the scenario's limit, which a mission gets per leg (mission_time_limit)."""
         config = self.episode_config(0)
         config.validate()
         self.robot = str(config.robot)
@@ -208,11 +213,23 @@ class EpisodeRunner:
 
     # --- episodes ---------------------------------------------------------------------------
 
-    def episode_config(self, seed: int) -> EpisodeConfig:
+    def episode_config(self, seed: int, environment: Environment | None = None
+                       ) -> EpisodeConfig:
         """The config of an episode with simulator seed ``seed`` (as a worker builds it for an
-        evaluate goal with this runner's time limit), scenario defaults filled in."""
-        return self.settings.episode_config(time_limit=self.time_limit, seed=int(seed)) \
+        evaluate goal with this runner's time limit), scenario defaults filled in; the time
+        limit of ``environment``'s mission (:meth:`mission_time_limit`) when given."""
+        time_limit = self.mission_time_limit(environment) if environment else self.time_limit
+        return self.settings.episode_config(time_limit=time_limit, seed=int(seed)) \
             .resolved(get_scenario(self.scenario))
+
+    def mission_time_limit(self, environment: Environment) -> float:
+        """Sim seconds for ``environment``: the runner's time limit; for a mission with the
+        scenario's limit, that limit per leg plus every dwell (as a worker gives it,
+        sessgan_sim.episode)."""
+        if self.time_limit_given or not environment.stations:
+            return self.time_limit
+        return (self.time_limit * environment.legs
+                + len(environment.stations) * environment.dwell_time)
 
     def make_controller(self, environment: Environment) -> Controller:
         """A fresh controller for an episode in ``environment``, set up as its node would be:
@@ -244,12 +261,17 @@ class EpisodeRunner:
         episode = self._episode
         assert episode is not None
         controller = self.make_controller(environment)
-        goal = Goal(environment.goal.x, environment.goal.y)
         started = self._clock()
-        observation = episode.reset(environment, self.episode_config(seed))
+        observation = episode.reset(environment, self.episode_config(seed, environment))
+        goal = Goal(observation.goal.x, observation.goal.y)
         recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
         goal_reached = False
         while not episode.done:
+            if (observation.goal.x, observation.goal.y) != (goal.x, goal.y):
+                # A mission's next waypoint: as the controller node takes a new goal_pose.
+                goal = Goal(observation.goal.x, observation.goal.y)
+                goal_reached = False
+                controller.reset()
             scan, state = node_inputs(observation)
             # As the controller node: STOP from the first tick the controller says the goal
             # is reached, and for a non-finite command.
@@ -266,8 +288,10 @@ class EpisodeRunner:
         metrics = result.to_dict()
         metrics['wall_time'] = wall_time
         metrics['bag_path'] = ''
-        return EpisodeRun(metrics, recorder.finish(list(result.contacts)) if recorder else None,
-                          wall_time)
+        episode_trace = recorder.finish(list(result.contacts)) if recorder else None
+        if recorder is not None and episode_trace is not None:
+            episode_trace.goals = recorder.goals
+        return EpisodeRun(metrics, episode_trace, wall_time)
 
 
 class _TraceRecorder:
@@ -293,10 +317,14 @@ class _TraceRecorder:
         except EpisodeError:  # an episode that could not start has no robot
             self.robot_radius = self.base_height = self.sensor_height = 0.0
         self.agent_radius = float(episode.agents.config.radius)
+        self.goals: list[tuple[int, float, float, float]] = []
         self._observe(observation)
 
     def _observe(self, observation: Observation) -> None:
         pose, twist = observation.pose, observation.twist
+        goal = observation.goal
+        if not self.goals or self.goals[-1][1:] != (goal.x, goal.y, goal.yaw):
+            self.goals.append((len(self.times), float(goal.x), float(goal.y), float(goal.yaw)))
         self.times.append(float(observation.time))
         self.poses.append((float(pose.x), float(pose.y), float(pose.yaw)))
         self.twists.append((float(twist.vx), float(twist.vy), float(twist.wz)))

@@ -41,6 +41,7 @@ from sessgan_evolver.fresh_seed import (
 )
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter
 from sessgan_gen.scenarios import get_scenario
 
@@ -71,6 +72,13 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         help="built-in controller (default: the scenario's)")
     parser.add_argument('--time-limit', type=float, default=0.0,
                         help="episode time limit, sim s (default: the scenario's)")
+    parser.add_argument('--mission-stations', type=int, default=0,
+                        help='pick-up -> place missions: stations drawn before home on every '
+                             'fresh map, each leg certified (0..16; default 0: plain start -> '
+                             'goal episodes)')
+    parser.add_argument('--station-dwell-time', type=float, default=DEFAULT_DWELL_TIME,
+                        help='sim seconds the robot stands still at each mission station '
+                             f'(default {DEFAULT_DWELL_TIME})')
     parser.add_argument('--simulate-invalid', action='store_true',
                         help='also simulate maps without a certified route')
     parser.add_argument('--fault-records', type=int, default=0,
@@ -117,6 +125,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             scenario = run_scenario
         scenario = scenario or 'factory'
         get_scenario(scenario)
+        mission = MissionSpec(args.mission_stations, args.station_dwell_time).validate()
         runs = list(args.run) + list(args.exclude_run)
         map_seeds, sim_seeds = used_seeds(runs)
         plan = fresh_seed_plan(args.seed, args.episodes, map_seeds, sim_seeds)
@@ -135,7 +144,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     progress = ProgressPrinter()
     try:
         with InProcessEvaluator(scenario, args.controller, args.time_limit,
-                                simulate_invalid=args.simulate_invalid) as evaluator:
+                                simulate_invalid=args.simulate_invalid,
+                                mission=mission) as evaluator:
             for source in sources:
                 progress.start(source.label, len(plan.pairs))
                 result = evaluate_source(source, plan, evaluator, rule,

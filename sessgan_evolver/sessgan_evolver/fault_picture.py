@@ -31,7 +31,7 @@ from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json  # 
 from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
 from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
 from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
-from sessgan_gen.navigation import certify_environment  # noqa: E402
+from sessgan_gen.navigation import certify_environment, certify_mission  # noqa: E402
 from sessgan_sim.bag_recording import jazzy_typestore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -64,15 +64,20 @@ class FaultScene:
     """The first fault event's position (a contact, or where the robot ended)."""
     caption: str = ''
     """A short title for small pictures (default: the fault's kind)."""
+    stations: list[tuple[float, float]] = field(default_factory=list)
+    """A mission's stations, in visiting order (``goal`` is then home)."""
 
 
 def certified_route(environment: Environment) -> np.ndarray:
     """Corners (n, 2) of the taut certified route of an environment's own start and goal
-    (sessgan_gen.navigation.certify_environment); empty when there is none."""
-    certificate = certify_environment(environment)
-    if certificate is None:
+    (sessgan_gen.navigation.certify_environment), through every leg of a mission; empty when
+    there is none (or a leg has none)."""
+    legs = (certify_mission(environment) if environment.stations
+            else [certify_environment(environment)])
+    if not legs or any(leg is None for leg in legs):
         return np.zeros((0, 2))
-    return np.asarray(certificate.points, dtype=float).reshape(-1, 2)
+    return np.concatenate([np.asarray(leg.points, dtype=float).reshape(-1, 2)
+                           for leg in legs if leg is not None])
 
 
 def fault_place(contacts: Sequence[dict[str, Any]], trajectory: np.ndarray
@@ -98,7 +103,8 @@ def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[
         environment.scenario, np.asarray(environment.occupancy), environment.resolution,
         environment.origin, start, goal, trajectory, np.asarray(trace.agents), contacts,
         certified_route(environment), fault, rule or FaultRule(),
-        title or default_title(metrics, fault), fault_place(contacts, trajectory))
+        title or default_title(metrics, fault), fault_place(contacts, trajectory),
+        stations=[(pose.x, pose.y) for pose in environment.stations])
 
 
 def default_title(metrics: dict[str, Any], fault: FaultKey | None,
@@ -139,7 +145,8 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
     goal = tuple(episode.get('goal') or (0.0, 0.0, 0.0))
     environment = Environment(str(episode.get('environment_id', bag.name)), scenario,
                               occupancy, resolution, Pose2D(*start[:3]), Pose2D(*goal[:3]),
-                              origin)
+                              origin, stations=tuple(Pose2D(*station[:3])
+                                                     for station in episode.get('stations', ())))
     trace = episode.get('trace') or {}
     if not trajectory and trace.get('robot'):
         trajectory = [tuple(row[:2]) for row in trace['robot']]
@@ -156,7 +163,7 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
         np.asarray(trace.get('agents') or np.zeros((0, 0, 2)), dtype=float), contacts,
         certified_route(environment), fault, rule,
         default_title(metrics, fault, str(episode.get('controller', ''))),
-        fault_place(contacts, path))
+        fault_place(contacts, path), stations=[(pose.x, pose.y) for pose in environment.stations])
 
 
 def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool = False
@@ -184,7 +191,12 @@ def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool 
     axis.plot(*scene.start, 'o', color='#2ca02c', markersize=8, markeredgecolor='black',
               label='start')
     axis.plot(*scene.goal, '*', color='#2ca02c', markersize=13, markeredgecolor='black',
-              label='goal')
+              label='home' if scene.stations else 'goal')
+    for number, station in enumerate(scene.stations, 1):
+        axis.plot(*station, 'D', color='#17becf', markersize=8, markeredgecolor='black',
+                  label='stations' if number == 1 else None)
+        axis.annotate(str(number), station, textcoords='offset points', xytext=(5, 5),
+                      fontsize=8)
     caused = [(c['x'], c['y']) for c in scene.contacts if c.get('fault', True)]
     suffered = [(c['x'], c['y']) for c in scene.contacts if not c.get('fault', True)]
     if caused:

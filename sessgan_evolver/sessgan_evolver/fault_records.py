@@ -64,7 +64,8 @@ def write_fault_record(directory: Path, record: EpisodeRecord, run: Any,
                        metadata: Mapping[str, Any] | None = None) -> Path:
     """The fault's bag (from ``run``, traced with scans) and its picture."""
     facts = {
-        **evaluator.episode_facts(record.sim_seed), 'controller': evaluator.controller,
+        **evaluator.episode_facts(record.sim_seed, record.environment),
+        'controller': evaluator.controller,
         'metrics': {k: v for k, v in run.metrics.items() if k != 'bag_path'},
         'origin': record.origin,
         'fault': record.fault.to_dict() if record.fault else None,

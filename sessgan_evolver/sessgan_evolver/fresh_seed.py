@@ -266,7 +266,8 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
         maps = source.maps([map_seed for map_seed, _ in plan.pairs])
         for index, ((map_seed, sim_seed), cells) in enumerate(zip(plan.pairs, maps)):
             environment = make_environment(cells, evaluator.scenario,
-                                           f'fresh-{index:04d}-s{map_seed}', seed=map_seed)
+                                           f'fresh-{index:04d}-s{map_seed}', seed=map_seed,
+                                           mission=evaluator.mission)
             evaluator.run_environment(environment, sim_seed, source.label)
             if progress is not None:
                 progress(index + 1, len(plan.pairs))

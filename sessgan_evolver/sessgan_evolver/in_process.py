@@ -24,6 +24,7 @@ from sessgan_evolver.episode_runner import EpisodeRun, EpisodeRunner
 from sessgan_evolver.faults import is_valid_failure
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.missions import MissionSpec
 from sessgan_sim.bag_recording import episode_bag_directory
 from sessgan_sim.metrics import EpisodeMetrics, Outcome
 from sessgan_sim.simulator_settings import SimulatorSettings, episode_config_record
@@ -55,8 +56,11 @@ class InProcessEvaluator:
     def __init__(self, scenario: str, controller: str = '', time_limit: float = 0.0,
                  record_directory: str | Path | None = None, bag_storage: str = 'mcap',
                  simulate_invalid: bool = True, settings: SimulatorSettings | None = None,
-                 observer: EpisodeObserver | None = None) -> None:
+                 observer: EpisodeObserver | None = None,
+                 mission: MissionSpec | None = None) -> None:
+        """``mission``: the stations every sampled map gets (None: plain episodes)."""
         self.scenario = scenario
+        self.mission = (mission or MissionSpec()).validate()
         self.runner = EpisodeRunner(scenario, controller, time_limit, settings)
         self.sampler = EnvironmentSampler()
         self.record_directory = Path(record_directory) if record_directory else None
@@ -84,7 +88,7 @@ class InProcessEvaluator:
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
         return self.sampler.sample(seeds, weights, self.scenario, generation=generation,
-                                   member=member)
+                                   member=member, mission=self.mission)
 
     def evaluate(self, jobs: Sequence[EpisodeJob],
                  on_result: Callable[[EpisodeJob, dict], None]) -> None:
@@ -121,15 +125,15 @@ class InProcessEvaluator:
         """The episode's failure bag (``run`` must have been traced with its scans)."""
         assert run.trace is not None
         return write_trace_bag(directory, environment, run.trace, {
-            **self.episode_facts(seed), 'controller': self.controller,
+            **self.episode_facts(seed, environment), 'controller': self.controller,
             'metrics': {k: v for k, v in run.metrics.items() if k != 'bag_path'},
             'origin': origin,
         }, storage=self.bag_storage)
 
-    def episode_facts(self, seed: int) -> dict:
+    def episode_facts(self, seed: int, environment: Environment | None = None) -> dict:
         """What a worker's failure bag says about its simulator (sessgan_sim.worker
         .failure_bags), so ``replay --resimulate`` rebuilds the same one."""
-        config = self.runner.episode_config(seed)
+        config = self.runner.episode_config(seed, environment)
         return {'episode_seed': int(seed), 'robot': config.robot,
                 'time_limit': config.time_limit, 'mode': 'lockstep', 'sim_time_origin': 0.0,
                 'sim_time_origin_ns': 0, 'simulator': self.runner.settings.to_dict(),

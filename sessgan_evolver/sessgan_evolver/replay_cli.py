@@ -132,7 +132,9 @@ def bag_environment(bag: Path, episode: dict):
         generation=int(episode.get('generation', -1)), member=int(episode.get('member', -1)),
         feasible=bool(episode.get('feasible', True)),
         route_length=float(episode.get('route_length', 0.0)),
-        route_min_clearance=float(episode.get('route_min_clearance', 0.0)))
+        route_min_clearance=float(episode.get('route_min_clearance', 0.0)),
+        stations=tuple(Pose2D(*pose) for pose in episode.get('stations', ())),
+        dwell_time=float(episode.get('dwell_time', 0.0)))
 
 
 def resimulate(args, episode: dict) -> int:
@@ -228,7 +230,10 @@ def resimulate(args, episode: dict) -> int:
             ('sim time', f'{recorded["simulation_time"]:.2f}', f'{new.simulation_time:.2f}'),
             ('travelled m', f'{recorded["distance_travelled"]:.3f}',
              f'{new.distance_travelled:.3f}'),
-            ('ticks', recorded['ticks'], new.ticks)):
+            ('ticks', recorded['ticks'], new.ticks),
+            ('legs completed', f'{recorded.get("legs_completed", "-")}/'
+                               f'{recorded.get("legs", 1)}',
+             f'{new.legs_completed}/{new.legs}')):
         print(f'{label:16}{str(old):>18}{str(now):>18}')
     same = (new.outcome == recorded['outcome']
             and int(new.collisions) == int(recorded['collisions']))

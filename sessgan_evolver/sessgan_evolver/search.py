@@ -90,7 +90,7 @@ def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
         for proposal in batch:
             environment = make_environment(
                 proposal.cells, evaluator.scenario, f'{label}-e{done:05d}',
-                seed=proposal.resolved_environment_seed)
+                seed=proposal.resolved_environment_seed, mission=evaluator.mission)
             run = evaluator.run_environment(environment, proposal.sim_seed, proposal.origin)
             results.append(Evaluated(proposal, environment, run.metrics))
             done += 1

@@ -1,4 +1,4 @@
-"""The Environment: one test map with a start and a goal, independent of ROS.
+"""The Environment: one test map with a start and a goal (or a mission), independent of ROS.
 
 Grids are stored in nav_msgs/OccupancyGrid order: ``occupancy[row, col]`` with
 row 0 at the map origin (lowest y) and col 0 at the lowest x. Cell (row, col)
@@ -25,6 +25,9 @@ grow with the cells. Measured on a 2-core host, a 1024 x 1024 map with 10 % wall
 and 1.3 GB to build and 5.6 wall s per sim second (a 4096 x 4096 map, which the old limit
 allowed, took 262 s and 3.3 GB to build); generating a 1024 x 1024 map took 6.4 s and
 0.7 GB."""
+
+MAX_STATIONS = 16
+"""Most mission stations an Environment may hold (sessgan_gen.missions.MAX_MISSION_STATIONS)."""
 
 MAX_ENVIRONMENT_ID_LENGTH = 128
 ENVIRONMENT_ID_PATTERN = re.compile(r'[A-Za-z0-9][A-Za-z0-9._-]{0,127}')
@@ -99,6 +102,21 @@ class Environment:
     route_min_clearance: float = 0.0
     """m, bottleneck clearance of the route: the tightest passage between start and goal."""
     extra: dict = field(default_factory=dict)
+    stations: tuple[Pose2D, ...] = ()
+    """Mission stations (pick-up, place, ...) visited in order before ``goal``, which is then
+    home; () for a plain start -> goal episode (sessgan_gen.missions)."""
+    dwell_time: float = 0.0
+    """Sim seconds the robot stands still at each station before its next goal goes out."""
+
+    @property
+    def waypoints(self) -> tuple[Pose2D, ...]:
+        """Every goal of the episode in order: the stations, then ``goal``."""
+        return (*self.stations, self.goal)
+
+    @property
+    def legs(self) -> int:
+        """Legs of the episode's mission (1 for a plain start -> goal episode)."""
+        return len(self.stations) + 1
 
     @property
     def height(self) -> int:
@@ -145,7 +163,16 @@ class Environment:
             raise InvalidEnvironmentError(
                 f'environment {self.id!r}: cell ({row}, {col}) has occupancy {grid[row, col]}; '
                 f'expected one of {OCCUPANCY_VALUES}')
-        for label, pose in (('start', self.start), ('goal', self.goal)):
+        if len(self.stations) > MAX_STATIONS:
+            raise InvalidEnvironmentError(
+                f'environment {self.id!r}: {len(self.stations)} mission stations; at most '
+                f'{MAX_STATIONS}')
+        if not (math.isfinite(self.dwell_time) and self.dwell_time >= 0):
+            raise InvalidEnvironmentError(
+                f'environment {self.id!r}: dwell time must be a finite number of seconds '
+                f'>= 0, got {self.dwell_time}')
+        stations = [(f'station {index + 1}', pose) for index, pose in enumerate(self.stations)]
+        for label, pose in (('start', self.start), ('goal', self.goal), *stations):
             if not all(math.isfinite(v) for v in (pose.x, pose.y, pose.yaw)):
                 raise InvalidEnvironmentError(
                     f'environment {self.id!r}: {label} {pose} is not finite')

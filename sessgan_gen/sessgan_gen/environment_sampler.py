@@ -18,6 +18,7 @@ from sessgan_gen.checkpoint import (
 )
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
 from sessgan_gen.errors import CheckpointError, SamplingRequestError
+from sessgan_gen.missions import MissionSpec
 from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
@@ -85,11 +86,15 @@ class EnvironmentSampler:
 
     def sample(self, seeds: Sequence[int], checkpoint: str | Path | bytes | None = None,
                scenario: str | None = None, size: tuple[int, int] | None = None,
-               generation: int = -1, member: int = -1) -> list[Environment]:
+               generation: int = -1, member: int = -1,
+               mission: MissionSpec | None = None) -> list[Environment]:
         """One Environment per seed; map i depends only on seeds[i] and the weights.
 
         ``size`` is (height, width) in cells; None or zeros mean the scenario's default.
+        ``mission``: stations before home drawn on each map (sessgan_gen.missions); None: plain
+        start -> goal episodes.
         """
+        mission = (mission or MissionSpec()).validate()
         if scenario:
             get_scenario(scenario)  # UnknownScenarioError names the known ones
         if len(seeds) > MAX_SEEDS_PER_REQUEST:
@@ -120,7 +125,8 @@ class EnvironmentSampler:
         maps = sample_token_maps(pyramid, [int(s) for s in seeds], size=(height, width))
         return [
             make_environment(cells, spec, environment_id(spec.name, generation, member, int(seed)),
-                             seed=int(seed), generation=generation, member=member)
+                             seed=int(seed), generation=generation, member=member,
+                             mission=mission)
             for cells, seed in zip(maps, seeds)
         ]
 

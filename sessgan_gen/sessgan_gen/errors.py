@@ -27,3 +27,8 @@ class CheckpointError(SessganGenError):
 class SamplingRequestError(SessganGenError, ValueError):
     """A request the sampler cannot serve: absurd size, too many seeds or cells, unknown
     scenario."""
+
+
+class InvalidMissionError(SessganGenError, ValueError):
+    """A mission request that cannot be served: a negative or absurd number of stations, a
+    negative or non-finite dwell time."""

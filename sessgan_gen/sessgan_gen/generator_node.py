@@ -5,18 +5,23 @@ Publishes (relative names, so namespaces work):
 * ``environment`` (nav_msgs/OccupancyGrid, reliable, transient local, depth 1): the latest map,
   for RViz, Nav2 map consumers and the simulator's free mode.
 Serves ``generate_environments`` (sessgan_interfaces/GenerateEnvironments).
+
+With ``mission_stations`` > 0 every environment is a pick-up -> place mission: that many
+stations drawn from the map seed before home, every leg certified (sessgan_gen.missions).
 """
 
 from __future__ import annotations
 
 import rclpy
 from nav_msgs.msg import OccupancyGrid
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.missions import DEFAULT_DWELL_TIME, MAX_MISSION_STATIONS, MissionSpec
 from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import environment_to_msg
 from sessgan_gen.ros_spin import exit_process, run_node
@@ -40,6 +45,14 @@ class GeneratorNode(Node):
         self.declare_parameter('device', 'cpu')
         # Most cells (seeds x height x width) one generate_environments request may ask for.
         self.declare_parameter('max_cells_per_request', DEFAULT_MAX_CELLS_PER_REQUEST)
+        self.declare_parameter('mission_stations', 0, ParameterDescriptor(
+            description=f'Mission stations (pick-up, place, ...) drawn before home on every map, '
+                        f'0..{MAX_MISSION_STATIONS}; 0: plain start -> goal episodes'))
+        self.declare_parameter('station_dwell_time', DEFAULT_DWELL_TIME, ParameterDescriptor(
+            description='Sim seconds the robot stands still at each station (loading)'))
+        self.mission = MissionSpec(
+            self.get_parameter('mission_stations').value,
+            self.get_parameter('station_dwell_time').value).validate()
         self.sampler = EnvironmentSampler(
             device=self.get_parameter('device').value,
             max_cells_per_request=int(self.get_parameter('max_cells_per_request').value))
@@ -62,7 +75,8 @@ class GeneratorNode(Node):
         size = (self.get_parameter('height').value, self.get_parameter('width').value)
         try:
             environment = self.sampler.sample(
-                [self.next_seed], self.get_parameter('checkpoint').value, scenario, size)[0]
+                [self.next_seed], self.get_parameter('checkpoint').value, scenario, size,
+                mission=self.mission)[0]
         except (SessganGenError, ValueError) as err:
             self.get_logger().error(f'cannot generate an environment: {err}')
             self.timer.cancel()
@@ -82,7 +96,7 @@ class GeneratorNode(Node):
         try:
             environments = self.sampler.sample(
                 list(request.seeds), checkpoint, scenario, (request.height, request.width),
-                generation=request.generation, member=request.member)
+                generation=request.generation, member=request.member, mission=self.mission)
         except (SessganGenError, ValueError, RuntimeError) as err:
             response.success = False
             response.message = str(err)

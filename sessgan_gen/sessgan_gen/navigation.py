@@ -26,11 +26,11 @@ import numpy as np
 
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
+from sessgan_gen.missions import MissionSpec, certify_legs, place_mission
 from sessgan_gen.route_certificate import (
     RouteCertificate,
     certify,
     map_clearance,
-    place_start_goal,
     required_clearances,
 )
 from sessgan_gen.scenarios import Scenario
@@ -173,9 +173,21 @@ def certify_environment(environment: Environment) -> RouteCertificate | None:
     return certify(grid, start, goal, required_clearances(spec)[1])
 
 
+def certify_mission(environment: Environment) -> list[RouteCertificate | None]:
+    """The certificate of every leg of an Environment's mission (start -> stations -> goal;
+    one leg for a plain episode), None for a leg without a certified route. Recomputed from
+    the grid like :func:`certify_environment`."""
+    points = [(pose.x, pose.y) for pose in (environment.start, *environment.waypoints)]
+    return certify_legs(environment.occupancy, environment.resolution, environment.origin,
+                        resolve_scenario(environment.scenario), points)
+
+
 def environment_is_feasible(environment: Environment) -> bool:
-    """Whether an Environment's start and goal are joined by a certified route."""
-    return certify_environment(environment) is not None
+    """Whether every leg of an Environment's mission (for a plain episode: start to goal) has
+    a certified route."""
+    if not environment.stations:
+        return certify_environment(environment) is not None
+    return all(leg is not None for leg in certify_mission(environment))
 
 
 def _box_sums(mask: np.ndarray, side: int) -> np.ndarray:
@@ -207,7 +219,8 @@ def most_open_cell(cells: np.ndarray, scenario: ScenarioLike) -> Cell:
 
 
 def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str,
-                     seed: int = 0, generation: int = -1, member: int = -1) -> Environment:
+                     seed: int = 0, generation: int = -1, member: int = -1,
+                     mission: MissionSpec | None = None) -> Environment:
     """Build the Environment of a token map: occupancy, start, goal and route certificate.
 
     Resolution is the scenario's cell size (metres per cell) and the origin (0, 0), so cell
@@ -216,26 +229,38 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
     True when they exist, with ``route_length`` and ``route_min_clearance`` (the bottleneck
     clearance) in metres. Otherwise start and goal both sit at :func:`most_open_cell`, yaw 0,
     and ``extra['rejection']`` says why. ``extra`` also holds the start and goal clearances.
+
+    ``mission`` (sessgan_gen.missions) asks for stations before home: they are drawn from
+    the seed too, every leg certified; ``route_length`` is then the legs' total, and
+    ``route_min_clearance`` the tightest leg's (``extra['leg_route_lengths']`` per leg). An
+    infeasible mission keeps no stations. Without stations the Environment is the plain
+    episode's, exactly.
     """
     spec: Scenario = resolve_scenario(scenario_name)
+    mission = (mission or MissionSpec()).validate()
     array = check_cells(cells, spec)
     occupancy = tokens_to_occupancy(array, spec)
     resolution = spec.cell_size
-    placement = place_start_goal(occupancy, resolution, (0.0, 0.0), spec, seed)
+    drawn = place_mission(occupancy, resolution, (0.0, 0.0), spec, seed, mission)
+    placement = drawn.placement
     extra: dict = {'start_clearance': placement.start_clearance,
                    'goal_clearance': placement.goal_clearance,
-                   'rejection': placement.rejection}
-    certificate = placement.certificate
-    if placement.start is None or placement.goal is None or certificate is None:
+                   'rejection': drawn.rejection}
+    stations: tuple[Pose2D, ...] = ()
+    if drawn.start is None or drawn.goal is None:
         row, col = most_open_cell(array, spec)
         start = goal = Pose2D((col + 0.5) * resolution, (row + 0.5) * resolution, 0.0)
         feasible, length, bottleneck = False, 0.0, 0.0
     else:
-        start, goal = Pose2D(*placement.start), Pose2D(*placement.goal)
+        start, goal = Pose2D(*drawn.start), Pose2D(*drawn.goal)
+        stations = tuple(Pose2D(*station) for station in drawn.stations)
         feasible = True
-        length, bottleneck = certificate.length, certificate.bottleneck_clearance
+        length, bottleneck = drawn.route_length, drawn.bottleneck_clearance
+        if stations:
+            extra['leg_route_lengths'] = [leg.length for leg in drawn.legs]
     return Environment(
         id=env_id, scenario=spec.name, occupancy=occupancy, resolution=resolution,
         start=start, goal=goal, origin=(0.0, 0.0), seed=seed, generation=generation,
         member=member, feasible=feasible, route_length=length,
-        route_min_clearance=bottleneck, extra=extra)
+        route_min_clearance=bottleneck, extra=extra, stations=stations,
+        dwell_time=float(mission.dwell_time) if stations else 0.0)

@@ -83,6 +83,8 @@ def environment_to_msg(environment: Environment, stamp=None) -> EnvironmentMsg:
     msg.feasible = bool(environment.feasible)
     msg.route_length = float(environment.route_length)
     msg.route_min_clearance = float(environment.route_min_clearance)
+    msg.stations = [pose_to_msg(station) for station in environment.stations]
+    msg.dwell_time = float(environment.dwell_time)
     return msg
 
 
@@ -94,6 +96,8 @@ def environment_from_msg(msg: EnvironmentMsg) -> Environment:
         origin=origin, start=pose_from_msg(msg.start), goal=pose_from_msg(msg.goal),
         seed=int(msg.seed), generation=int(msg.generation), member=int(msg.member),
         feasible=bool(msg.feasible), route_length=float(msg.route_length),
-        route_min_clearance=float(msg.route_min_clearance))
+        route_min_clearance=float(msg.route_min_clearance),
+        stations=tuple(pose_from_msg(station) for station in msg.stations),
+        dwell_time=float(msg.dwell_time))
     environment.validate()
     return environment

@@ -13,7 +13,10 @@ publishes each :class:`Observation` and feeds every received command to
         print(episode.metrics())
 
 An episode ends on goal reached, collision limit, time limit, no progress toward
-the goal (stuck) or :meth:`Episode.abort` (e.g. a silent controller). An
+the goal (stuck) or :meth:`Episode.abort` (e.g. a silent controller). An Environment with
+mission stations is driven leg by leg (sessgan_sim.mission): the goal of the observation is
+the waypoint in force, the next one once the robot has dwelt at a station, and the goal is
+reached when the last waypoint (home) is. An
 environment that cannot be simulated (invalid grid, unknown scenario or robot,
 start footprint overlapping an obstacle) ends the episode at reset with outcome
 ``invalid_environment`` and a detail saying why. A command with a NaN or
@@ -51,6 +54,7 @@ from sessgan_sim.metrics import (
     MetricsRecorder,
     Outcome,
 )
+from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
 from sessgan_sim.robots import STOP, FlyerRobot, Robot, VelocityCommand, create_robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
@@ -195,6 +199,7 @@ class Observation:
     twist: Twist2D
     """Body-frame velocity."""
     goal: Pose2D
+    """The waypoint in force (the goal of a plain episode)."""
     in_contact: bool
     altitude: float = 0.0
     """m, the body's underside above the ground (odometry's z; 0 for ground robots)."""
@@ -251,6 +256,8 @@ class _Record:
     detail: str = ''
     ticks: int = 0
     touching: bool = False
+    mission: MissionTracker | None = None
+    """The legs so far (None until the environment was found valid)."""
 
 
 class ProgressField(NamedTuple):
@@ -278,6 +285,7 @@ class _Live:
     clearance: ClearanceSensor
     range_finder: RangeFinder | None
     progress: ProgressField
+    """The current leg's."""
     time_limit: float
     proximity_distance: float
     goal_tolerance: float
@@ -286,6 +294,8 @@ class _Live:
     next_scan_time: float = 0.0
     velocity: tuple[float, float] = (0.0, 0.0)
     """m/s, map-frame velocity of the robot's centre over the last physics step."""
+    leg_progress: list[ProgressField] = field(default_factory=list)
+    """Every leg's ProgressField, in order (a plain episode's one)."""
 
 
 class Episode:
@@ -400,6 +410,13 @@ class Episode:
                 route_time = ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
                 config = dataclasses.replace(
                     config, time_limit=max(float(config.time_limit or 0.0), route_time))
+            if scenario_limit and environment.stations:
+                # A mission gets the scenario's limit per leg (at least the route's time, as
+                # above), and time for every dwell.
+                per_leg = get_scenario(environment.scenario).time_limit * environment.legs
+                config = dataclasses.replace(config, time_limit=max(
+                    per_leg, float(config.time_limit or 0.0))
+                    + len(environment.stations) * environment.dwell_time)
             record.config = config
         except (SessganGenError, UnknownRobotError) as err:
             self._end(Outcome.INVALID_ENVIRONMENT, str(err))
@@ -422,11 +439,17 @@ class Episode:
         grid = map_clearance(environment.occupancy, environment.resolution,
                              environment.origin, spec)
         route_need = required_clearances(spec)[1]
-        progress = self._progress_field(grid, environment, robot, route_need)
+        waypoints = environment.waypoints
+        leg_progress = [
+            self._progress_field(grid, leg_start, leg_goal, environment.feasible, robot,
+                                 route_need)
+            for leg_start, leg_goal in zip((environment.start, *waypoints), waypoints)]
+        keep_clear = [disc for leg_goal, progress in zip(waypoints, leg_progress)
+                      for disc in self._agent_keep_clear(leg_goal, robot, config, progress,
+                                                         route_need)]
+        progress = leg_progress[0]
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
-                           np.random.default_rng(agent_seed),
-                           keep_clear=self._agent_keep_clear(environment, robot, config,
-                                                             progress, route_need))
+                           np.random.default_rng(agent_seed), keep_clear=keep_clear)
         lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
         lidar.attach(client, robot, layout, self._agents)
         clearance = ClearanceSensor(client, robot, layout, clearance_range)
@@ -443,6 +466,8 @@ class Episode:
             goal_tolerance=float(config.goal_tolerance or 0.0),
             next_scan_time=record.lidar_info.scan_time)
         self._live = live
+        live.leg_progress = leg_progress
+        record.mission = MissionTracker(waypoints, environment.dwell_time, live.goal_tolerance)
         live.best_progress = self._progress_distance(record, live)
         record.scan = lidar.scan()
         return self._observation(record, live, scan_updated=True)
@@ -463,7 +488,7 @@ class Episode:
         client = self._world.client
         body = robot.body_id
         dt = config.physics_timestep
-        goal = record.environment.goal
+        goal = self._goal(record)
         tolerance = live.goal_tolerance
         reached = touching = False
         clock = self._clock
@@ -512,7 +537,7 @@ class Episode:
 
         recorder.record_tick(config.control_period, clearance, touching,
                              live.proximity_distance)
-        self._check_end(record, live, reached, now)
+        self._check_end(record, live, reached, now, hypot(x - goal.x, y - goal.y))
         observation = self._observation(record, live, scan_updated)
         finished = clock()
         profile = self.profile
@@ -540,10 +565,21 @@ class Episode:
             note = (f'{invalid} command(s) with NaN or infinite components were replaced by '
                     f'a stop')
             detail = f'{detail}; {note}' if detail else note
-        return record.recorder.snapshot(
+        snapshot = record.recorder.snapshot(
             simulation_time=self.time, feasible=bool(record.environment.feasible),
             distance_to_goal=self._distance_to_goal(record), outcome=record.outcome,
             detail=detail)
+        mission = record.mission
+        if mission is None:
+            return snapshot
+        failed = failed_leg(mission, record.outcome,
+                            (event.time for event in snapshot.contacts if event.fault))
+        if failed >= 0 and mission.legs > 1:
+            note = f'failed on {mission.describe_leg(failed)}'
+            detail = f'{snapshot.detail}; {note}' if snapshot.detail else note
+        return dataclasses.replace(
+            snapshot, detail=detail, legs=mission.legs, legs_completed=mission.legs_completed,
+            leg_times=mission.leg_times, failed_leg=failed)
 
     # --- internals ------------------------------------------------------------------------
 
@@ -562,19 +598,43 @@ class Episode:
         record.outcome = outcome
         record.detail = detail
 
-    def _check_end(self, record: _Record, live: _Live, reached: bool, now: float) -> None:
+    def _goal(self, record: _Record) -> Pose2D:
+        """The waypoint in force: the environment's goal in a plain episode."""
+        return record.mission.goal if record.mission is not None else record.environment.goal
+
+    def _check_end(self, record: _Record, live: _Live, reached: bool, now: float,
+                   distance: float) -> None:
         config = record.config
         recorder = record.recorder
+        mission = record.mission
+        if mission is None:  # reset() sets it whenever it builds a simulation
+            raise EpisodeError('no mission: reset() has not built a valid episode')
         if config.collision_limit and recorder.collisions >= config.collision_limit:
             self._end(Outcome.COLLISION_LIMIT,
                       f'{recorder.collisions} collisions reached the limit of '
                       f'{config.collision_limit} at {now:.2f} s')
-        elif reached:
-            self._end(Outcome.GOAL_REACHED,
-                      f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
-        elif now >= live.time_limit - 1e-9:
+            return
+        event = mission.update(now, reached, distance, math.hypot(*live.velocity),
+                               config.control_period)
+        if event is MissionEvent.COMPLETE:
+            if mission.legs > 1:
+                self._end(Outcome.GOAL_REACHED,
+                          f'completed the mission: reached home, the last of {mission.legs} '
+                          f'waypoints, within {live.goal_tolerance:.2f} m at {now:.2f} s')
+            else:
+                self._end(Outcome.GOAL_REACHED,
+                          f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
+            return
+        if event is MissionEvent.NEXT_LEG:
+            live.progress = live.leg_progress[mission.leg]
+            live.best_progress = self._progress_distance(record, live)
+        if event is not MissionEvent.NONE:
+            live.last_progress_time = now  # arriving and setting off are progress
+        if now >= live.time_limit - 1e-9:
             self._end(Outcome.TIMEOUT, f'time limit of {live.time_limit:.2f} s reached, '
                                        f'{self._distance_to_goal(record):.2f} m from the goal')
+        elif mission.dwelling and distance <= live.goal_tolerance:
+            live.last_progress_time = now  # dwelling at a station is not being stuck
         elif config.stuck_timeout > 0:
             progress = self._progress_distance(record, live)
             if progress < live.best_progress:
@@ -624,14 +684,15 @@ class Episode:
                 recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
 
     @staticmethod
-    def _progress_field(grid: CertificateGrid, environment: Environment, robot: Robot,
-                        route_need: float) -> ProgressField:
-        goal = grid.cell_of(environment.goal.x, environment.goal.y)
-        start = grid.cell_of(environment.start.x, environment.start.y)
+    def _progress_field(grid: CertificateGrid, leg_start: Pose2D, leg_goal: Pose2D,
+                        feasible: bool, robot: Robot, route_need: float) -> ProgressField:
+        """The ProgressField of one leg (a plain episode's one leg: start to goal)."""
+        goal = grid.cell_of(leg_goal.x, leg_goal.y)
+        start = grid.cell_of(leg_start.x, leg_start.y)
         clearance = grid.clearance
         # Diagonal steps: a diagonal gap the robot passes must not look like a detour.
         steps = distance_field(clearance >= route_need - 1e-9, goal, diagonal=True)
-        route = descend(steps, start) if environment.feasible else []
+        route = descend(steps, start) if feasible else []
         if not route:
             return ProgressField(grid, distance_field(
                 clearance >= robot.footprint_radius * 0.75, goal, diagonal=True), [])
@@ -644,14 +705,13 @@ class Episode:
         return ProgressField(grid, steps, route)
 
     @staticmethod
-    def _agent_keep_clear(environment: Environment, robot: Robot, config: EpisodeConfig,
+    def _agent_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig,
                           progress: ProgressField, route_need: float
                           ) -> list[tuple[float, float, float]]:
         """Discs (x, y, radius) where agents may neither start nor end a patrol leg: around
-        the goal, and on the certified route's narrow passages (where the robot could not
+        a leg's goal, and on its certified route's narrow passages (where the robot could not
         pass an agent standing there)."""
         agents = config.agents
-        goal = environment.goal
         discs = [(goal.x, goal.y, agents.min_start_distance)]
         # Narrow: the robot on the route could not pass an agent standing beside it.
         narrow_below = agents.radius + route_need
@@ -687,7 +747,7 @@ class Episode:
 
     def _distance_to_goal(self, record: _Record) -> float:
         environment = record.environment
-        goal = environment.goal
+        goal = self._goal(record)
         if self._live is not None:
             x, y = self._live.robot.position
         else:
@@ -726,11 +786,11 @@ class Episode:
             return Observation(
                 time=self.time, scan=record.scan, scan_updated=scan_updated,
                 lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
-                goal=record.environment.goal, in_contact=record.touching)
+                goal=self._goal(record), in_contact=record.touching)
         return Observation(
             time=self.time, scan=record.scan, scan_updated=scan_updated,
             lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
-            goal=record.environment.goal, in_contact=record.touching,
+            goal=self._goal(record), in_contact=record.touching,
             altitude=robot.altitude, climb_rate=robot.state.vz,
             range_down=range_finder.measure(), range_finder=range_finder.config)
 

@@ -111,7 +111,8 @@ class EpisodeMetrics:
     distance_travelled: float
     """m, path length of the robot's centre."""
     final_distance_to_goal: float
-    """m, straight-line distance from the robot's centre to the goal at the end."""
+    """m, straight-line distance from the robot's centre to the goal at the end (a mission's
+    waypoint in force)."""
     ticks: int
     """Control ticks simulated."""
     outcome: Outcome | None
@@ -130,12 +131,21 @@ class EpisodeMetrics:
     """fault_collisions x proximity_time / simulation_time."""
     contacts: tuple[ContactEvent, ...] = field(default=())
     """Every contact event, in order."""
+    legs: int = 1
+    """Legs of the episode's mission (1: a plain start -> goal episode)."""
+    legs_completed: int = 0
+    """Legs whose waypoint was reached (sessgan_sim.mission)."""
+    leg_times: tuple[float, ...] = ()
+    """s from each completed leg's start to reaching its waypoint, in order."""
+    failed_leg: int = -1
+    """0-based leg the episode failed on (sessgan_sim.mission.failed_leg); -1: none."""
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (outcome as its string value; infinities as None)."""
         data = asdict(self)
         data['outcome'] = self.outcome.value if self.outcome is not None else None
         data['contacts'] = [event.to_dict() for event in self.contacts]
+        data['leg_times'] = list(self.leg_times)
         for key, value in data.items():
             if isinstance(value, float) and not math.isfinite(value):
                 data[key] = None

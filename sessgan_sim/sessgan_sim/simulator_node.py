@@ -1,7 +1,9 @@
 """sessgan_sim simulator node: a pybullet robot that looks like a real one to its controller.
 
 Topics (relative, so ``-r __ns:=/w0`` namespaces a worker): publishes ``scan``, ``odom``, ``tf``,
-``tf_static``, ``clock``, ``map`` and ``goal_pose``; subscribes ``cmd_vel`` (Twist, or
+``tf_static``, ``clock``, ``map``, ``goal_pose`` and ``waypoints`` (a mission's waypoints at
+once; ``goal_pose`` carries the one in force, the next once the robot dwelt at a station);
+subscribes ``cmd_vel`` (Twist, or
 TwistStamped with ``use_stamped_cmd_vel``) and, in free mode, ``environment``
 (nav_msgs/OccupancyGrid). Serves the ``evaluate`` action (sessgan_interfaces/EvaluateEnvironment).
 
@@ -164,7 +166,8 @@ class SimulatorNode(Node):
             occupancy, _, _ = occupancy_from_grid_msg(grid)
             cells = occupancy_to_tokens(occupancy, get_scenario(scenario))
             environment = make_environment(cells, scenario, f'free-{self.free_seed}',
-                                           seed=self.free_seed)
+                                           seed=self.free_seed,
+                                           mission=self.settings.mission())
         except (SessganGenError, ValueError) as err:
             self.get_logger().error(f'ignoring the map on environment: {err}')
             return
@@ -223,11 +226,20 @@ class SimulatorNode(Node):
                     failure = self.stack.reset_costmaps(settings.stack_timeout)
                     if failure:
                         return failure
+                return send_goal(observation.goal, clock.stamp_ns(0.0), first=True)
+
+            def send_goal(goal, stamp_ns: int, first: bool = False) -> str | None:
+                """The waypoint in force on goal_pose and/or as a NavigateToPose goal (as
+                Nav2's waypoint follower sends each waypoint); the first with waypoints."""
                 if settings.goal_via.uses_topic:
-                    self.topics.publish_goal(environment.goal, clock.stamp_ns(0.0), recording)
+                    if first:
+                        self.topics.publish_waypoints(environment.waypoints, stamp_ns,
+                                                      recording)
+                    self.topics.publish_goal(goal, stamp_ns, recording)
                 if settings.goal_via.uses_action:
-                    return self.stack.send_goal(environment.goal, clock.stamp_ns(0.0),
-                                                settings.stack_timeout)
+                    if not first:
+                        self.stack.finish(settings.stack_timeout)
+                    return self.stack.send_goal(goal, stamp_ns, settings.stack_timeout)
                 return None
 
             def stop_after_navigation() -> tuple[float, float, float] | None:
@@ -238,7 +250,8 @@ class SimulatorNode(Node):
             loop_start = time.monotonic()
             metrics = self.stepper.run(
                 episode, observation, clock, settings, recording, goal_handle,
-                before_first_step=prepare_stack, command_override=stop_after_navigation)
+                before_first_step=prepare_stack, command_override=stop_after_navigation,
+                new_goal=send_goal)
             note = self.stack.finish(settings.stack_timeout)
             if note:
                 metrics = dataclasses.replace(
@@ -315,6 +328,10 @@ def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetric
     msg.agent_into_robot_collisions = int(metrics.agent_into_robot_collisions)
     msg.fault_risk_score = float(metrics.fault_risk_score)
     msg.invalid_commands = int(metrics.invalid_commands)
+    msg.legs = int(metrics.legs)
+    msg.legs_completed = int(metrics.legs_completed)
+    msg.leg_times = [float(value) for value in metrics.leg_times]
+    msg.failed_leg = int(metrics.failed_leg)
     return msg
 
 
@@ -323,6 +340,8 @@ def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
     msg.environment_id = environment_id
     msg.outcome = EpisodeMetricsMsg.OUTCOME_INVALID_ENVIRONMENT
     msg.detail = detail
+    msg.legs = 1
+    msg.failed_leg = -1
     return msg
 
 

@@ -19,8 +19,9 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, get_type_hints
 
-from sessgan_gen.errors import SessganGenError
+from sessgan_gen.errors import InvalidMissionError, SessganGenError
 from sessgan_gen.json_data import to_json_data
+from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
 from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
 from sessgan_sim.bag_recording import BagStorage
@@ -140,6 +141,11 @@ class SimulatorSettings:
     """Run an episode for every map on the environment topic (fixed at start-up)."""
     seed: int = 0
     """Seed of the first free-mode episode (each later one uses the next)."""
+    mission_stations: int = 0
+    """Free mode: mission stations (pick-up, place, ...) drawn before home on every map;
+    0: plain start -> goal episodes. The evaluate action's environments bring their own."""
+    station_dwell_time: float = DEFAULT_DWELL_TIME
+    """Free mode: sim seconds the robot stands still at each station (loading)."""
     record_directory: str = ''
     """Free mode: directory for failure bags; empty: none."""
     bag_storage: str = BagStorage.MCAP.value
@@ -193,6 +199,10 @@ class SimulatorSettings:
             raise InvalidConfigError(f"parameter 'agent_behaviour' must be one of "
                                      f"{', '.join(AGENT_BEHAVIOURS)}; got "
                                      f'{self.agent_behaviour!r}')
+        try:
+            self.mission()
+        except InvalidMissionError as err:
+            raise InvalidConfigError(f'parameter {err}') from err
         if self.dummy_agents < -1:
             raise InvalidConfigError(f"parameter 'dummy_agents' must be >= 0, or -1 for the "
                                      f"scenario's, got {self.dummy_agents}")
@@ -246,6 +256,10 @@ class SimulatorSettings:
         return values
 
     # ---- use --------------------------------------------------------------------------------
+
+    def mission(self) -> MissionSpec:
+        """The free-mode mission, validated (InvalidMissionError names the parameter)."""
+        return MissionSpec(self.mission_stations, self.station_dwell_time).validate()
 
     @property
     def step_mode(self) -> StepMode:

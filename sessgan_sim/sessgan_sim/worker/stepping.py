@@ -86,13 +86,16 @@ class EpisodeStepper:
     def run(self, episode, observation, clock: EpisodeClock, settings: SimulatorSettings,
             recording: Recording | None, goal_handle=None,
             before_first_step: Callable[[], str | None] | None = None,
-            command_override: Callable[[], tuple[float, float, float] | None] | None = None):
+            command_override: Callable[[], tuple[float, float, float] | None] | None = None,
+            new_goal: Callable[[object, int], str | None] | None = None):
         """Step ``episode`` from ``observation`` until it ends; returns its metrics.
 
         ``before_first_step`` runs once before time advances (costmap resets and the goal);
         a string it returns ends the episode as controller_unresponsive with that detail.
         ``command_override`` may replace the received command (a stack that finished its
-        navigation goal is stopped).
+        navigation goal is stopped). ``new_goal(goal, stamp_ns)`` sends a mission's next
+        waypoint (the observation's goal changed) before the tick that follows is published;
+        a string it returns ends the episode like ``before_first_step``'s.
         """
         lockstep = settings.step_mode is StepMode.LOCKSTEP
         timeout = settings.controller_timeout
@@ -165,8 +168,14 @@ class EpisodeStepper:
                 values = overridden
             if recording is not None and command is not None:
                 recording.add(topics.names['cmd_vel'], self.command_msgtype, stamp_ns, command)
+            goal = observation.goal
             observation = episode.step(values).observation
             ticks += 1
+            if new_goal is not None and observation.goal != goal and not episode.done:
+                failure = new_goal(observation.goal, clock.stamp_ns(observation.time))
+                if failure:
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
+                    break
             if goal_handle is not None and ticks % feedback_every == 0:
                 self.publish_feedback(goal_handle, episode, observation)
         if not lockstep:

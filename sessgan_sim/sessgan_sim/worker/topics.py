@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
-from nav_msgs.msg import OccupancyGrid, Odometry
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
@@ -32,6 +32,7 @@ SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 GOAL_ACK_TIMEOUT = Duration(seconds=1.0)
 
 MESSAGE_TYPES = {
+    'waypoints': 'nav_msgs/msg/Path',
     'scan': 'sensor_msgs/msg/LaserScan', 'odom': 'nav_msgs/msg/Odometry',
     'tf': 'tf2_msgs/msg/TFMessage', 'tf_static': 'tf2_msgs/msg/TFMessage',
     'clock': 'rosgraph_msgs/msg/Clock', 'map': 'nav_msgs/msg/OccupancyGrid',
@@ -69,6 +70,8 @@ class RobotTopics:
 
     def __init__(self, node) -> None:
         self.publishers = {
+            # Missions: every waypoint at once, latched like goal_pose.
+            'waypoints': node.create_publisher(Path, 'waypoints', LATCHED_QOS),
             'scan': node.create_publisher(LaserScan, 'scan', SENSOR_QOS),
             'odom': node.create_publisher(Odometry, 'odom', SENSOR_QOS),
             'tf': node.create_publisher(TFMessage, 'tf', SENSOR_QOS),
@@ -124,6 +127,16 @@ class RobotTopics:
     def forget_goal(self) -> None:
         """A new episode: nothing to resend until its goal is sent on goal_pose."""
         self._goal = None
+
+    def publish_waypoints(self, waypoints, stamp_ns: int, recording: Recording | None) -> None:
+        """Every waypoint of the episode's mission (stations, then home; a plain episode's
+        goal alone) as a nav_msgs/Path in frame map, latched."""
+        stamp = time_of(stamp_ns)
+        path = Path()
+        path.header.stamp = stamp
+        path.header.frame_id = rm.MAP_FRAME
+        path.poses = [rm.goal_msg(stamp, pose.x, pose.y, pose.yaw) for pose in waypoints]
+        self.publish('waypoints', path, stamp_ns, recording)
 
     def republish_goal(self, force: bool = False) -> bool:
         """Send the episode's goal_pose again (not recorded) when a reader matched since it

@@ -40,7 +40,8 @@ def test_a_trace_becomes_a_bag_of_the_workers_topics(episode, tmp_path):
     bag = write_trace_bag(tmp_path / 'bag', environment, run.trace, {'controller': 'nd'})
     counts = {topic.topic: topic.message_count for topic in read_bag_topics(bag)}
     ticks = run.metrics['ticks']
-    assert counts == {'/map': 1, '/tf_static': 1, '/goal_pose': 1, '/clock': ticks + 1,
+    assert counts == {'/map': 1, '/tf_static': 1, '/waypoints': 1, '/goal_pose': 1,
+                      '/clock': ticks + 1,
                       '/odom': ticks + 1, '/tf': ticks + 1, '/scan': ticks + 1,
                       '/cmd_vel': ticks}
     store = jazzy_typestore()

@@ -32,6 +32,9 @@ def test_defaults_are_valid_and_build_the_reference_episode():
 @pytest.mark.parametrize('values, named', [
     ({'mode': 'clockd'}, "'mode' must be one of lockstep, clocked; got 'clockd'"),
     ({'goal_interface': 'nav2'}, "'goal_interface' must be one of goal_pose"),
+    ({'mission_stations': -1}, 'mission_stations must be an integer in 0..16'),
+    ({'mission_stations': 17}, 'mission_stations must be an integer in 0..16'),
+    ({'station_dwell_time': -1.0}, 'station_dwell_time must be a finite number'),
     ({'bag_storage': 'rosbag'}, "'bag_storage' must be one of mcap, sqlite3"),
     ({'real_time_factor': 0.0}, "'real_time_factor' must be > 0"),
     ({'lidar_beams': 0}, "'lidar_beams' must be in 1..16384"),

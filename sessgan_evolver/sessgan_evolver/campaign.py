@@ -88,9 +88,10 @@ class CampaignConfig:
     generation (fitness then also varies with the maps drawn; on fresh seeds its generators
     fail at least as often as the others', see README); 'fixed' uses the same K seeds in every
     generation (a member's fitness is comparable across generations, but the search learns
-    those K maps: the worst on fresh seeds); 'rotating' takes K consecutive seeds of a pool of --seed-pool in turn,
-    and a member evaluated in earlier generations (an unchanged elite) is selected on the
-    mean fitness of all its evaluations, so one lucky draw does not keep it."""
+    those K maps: the worst on fresh seeds); 'rotating' takes K consecutive seeds of a pool
+    of --seed-pool in turn, and a member evaluated in earlier generations (an unchanged
+    elite) is selected on the mean fitness of all its evaluations, so one lucky draw does not
+    keep it."""
     seed_pool: int = 0
     """[0: 4 x maps per member] Rotating schedule: the number of seeds in the pool."""
     record_failures: bool = True

@@ -186,7 +186,7 @@ def resimulate(args, episode: dict) -> int:
         node = rclpy.create_node('sessgan_resimulate')
         try:
             if not args.worker:
-                if args.external and action_present(node, action_name, wait=2.0):
+                if args.external and action_present(node, action_name, wait=DISCOVERY_WAIT):
                     print(f'error: a simulator already serves {action_name}: stop it (the '
                           're-simulation starts one with the recorded settings there) or pass '
                           f'--worker {namespace} to use it as it is', file=sys.stderr)
@@ -241,6 +241,11 @@ def resimulate(args, episode: dict) -> int:
     ok = same if args.expect == 'same' else not failed
     print('as expected' if ok else f'NOT as expected (--expect {args.expect})')
     return EXIT_AS_EXPECTED if ok else EXIT_DIFFERENT
+
+
+DISCOVERY_WAIT = 5.0
+"""Seconds to look for a simulator already serving the recorded namespace: discovery of a
+running one took over 2 s on this 2-core machine with both cores busy."""
 
 
 def action_present(node, name: str, wait: float) -> bool:

@@ -247,16 +247,23 @@ def _disc_hits(centres: np.ndarray, radii: np.ndarray, points: np.ndarray) -> np
     return hits
 
 
-def _covered(centres: np.ndarray, radii: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Bool per cell centre: inside at least one of the discs."""
-    covered = np.zeros(len(cells), dtype=bool)
-    if not len(centres) or not len(cells):
-        return covered
-    chunk = max(1, _CHUNK_ELEMENTS // len(centres))
-    for first in range(0, len(cells), chunk):
-        block = cells[first:first + chunk]
-        squared = ((block[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2)
-        covered[first:first + chunk] = (squared <= (radii[None, :] + 1e-9) ** 2).any(axis=1)
+def paint_discs(shape: tuple[int, ...], rows: np.ndarray, cols: np.ndarray,
+                 radii: np.ndarray) -> np.ndarray:
+    """Bool mask of the cells whose centres lie in at least one disc (centre = a cell centre,
+    radius in cells); discs of one radius are painted together by shifted ORs."""
+    covered = np.zeros(shape, dtype=bool)
+    height, width = shape
+    keys = np.round(radii, 6)
+    for radius in np.unique(keys):
+        chosen = keys == radius
+        reach = int(math.floor(radius + 1e-9))
+        seeds = np.zeros((height + 2 * reach, width + 2 * reach), dtype=bool)
+        seeds[rows[chosen] + reach, cols[chosen] + reach] = True
+        for d_row in range(-reach, reach + 1):
+            for d_col in range(-reach, reach + 1):
+                if d_row * d_row + d_col * d_col <= radius * radius + 1e-9:
+                    covered |= seeds[reach - d_row:reach - d_row + height,
+                                     reach - d_col:reach - d_col + width]
     return covered
 
 
@@ -265,6 +272,8 @@ class _Discs:
 
     def __init__(self, track: np.ndarray, clearance: np.ndarray) -> None:
         rows, cols = np.nonzero(track)
+        self.shape = track.shape
+        self.rows, self.cols = rows, cols
         self.centres = np.column_stack([cols + 0.5, rows + 0.5]).astype(np.float64)
         self.radii = clearance[rows, cols].astype(np.float64)
 
@@ -272,7 +281,9 @@ class _Discs:
         """Bool per track cell (row-major order): on the union of the discs that contain one
         of ``points`` (cells)."""
         touching = _disc_hits(self.centres, self.radii, points).any(axis=1)
-        return _covered(self.centres[touching], self.radii[touching], self.centres)
+        covered = paint_discs(self.shape, self.rows[touching], self.cols[touching],
+                               self.radii[touching])
+        return covered[self.rows, self.cols]
 
     def widths(self, points: np.ndarray) -> np.ndarray:
         """Diameter in cells of the largest disc containing each point (0 if none)."""

@@ -19,11 +19,11 @@ Definitions (lengths in cells inside, metres in the results):
   road the route drives along, never across a barrier. ``route_corridor_fraction`` is the
   share of all track cells on it.
 * **Lap**: a return route from the goal back to the start that avoids the corridor of the
-  route's middle (beyond one local width of either end), through cells with at least the
-  route's clearance. When one exists the track is a circuit through start and goal;
-  ``lap_corridor_fraction`` is the share of track cells on the corridor of the route or of
-  the return (equal to the route's share when there is no return). A closed ring measures
-  about 1, a ring with a long spur less.
+  route's middle (beyond one local width of either end), through the route certificate's
+  free space (sub-cells with the route's clearance). When one exists the track is a
+  circuit through start and goal; ``lap_corridor_fraction`` is the share of track cells on
+  the corridor of the route or of the return (equal to the route's share when there is no
+  return). A closed ring measures about 1, a ring with a long spur less.
 * **Dead ends**: end points of the track's skeleton (Zhang-Suen thinning) after pruning
   every skeleton branch that ends within ``spur_length`` skeleton steps (default: the
   median local width of the track): a dead end is a spur longer than the road is wide, so
@@ -294,13 +294,15 @@ class _Discs:
 def measure_track(track: np.ndarray, route_points: np.ndarray | None, cell_size: float = 1.0,
                   route_clearance: float = 0.0, spur_length: int | None = None,
                   curvature_step_m: float = DEFAULT_CURVATURE_STEP_M,
-                  smoothing_m: float = DEFAULT_SMOOTHING_M) -> TrackRealism:
+                  smoothing_m: float = DEFAULT_SMOOTHING_M,
+                  route_free: np.ndarray | None = None) -> TrackRealism:
     """The track-realism measures of a bool track mask (row 0 = lowest y).
 
     ``route_points``: (n, 2) map-frame (x, y) corners of the start-to-goal route in cells
     from the grid's corner (cell (row, col) spans x in [col, col + 1)), or None when the map
-    has no route. ``cell_size``: metres per cell. ``route_clearance``: cells, the clearance
-    a return route for the lap keeps (the certificate's route clearance).
+    has no route. ``cell_size``: metres per cell. Where the lap's return route may run:
+    ``route_free``, a bool mask of k x k sub-cells per cell (the route certificate's free
+    space), or else the track cells whose clearance is at least ``route_clearance`` cells.
     """
     mask = np.asarray(track, dtype=bool)
     clearance = track_clearance(mask)
@@ -313,6 +315,14 @@ def measure_track(track: np.ndarray, route_points: np.ndarray | None, cell_size:
     if route is None or len(route) == 0 or track_cells == 0:
         return TrackRealism(track_cells, fragments, 0.0, 0.0, 0.0, False, dead_ends, empty,
                             empty)
+    if route_free is None:
+        route_free = mask & (clearance >= route_clearance - 1e-9)
+    route_free = np.asarray(route_free, dtype=bool)
+    subdivision = route_free.shape[0] // mask.shape[0]
+    if subdivision < 1 or route_free.shape != (mask.shape[0] * subdivision,
+                                               mask.shape[1] * subdivision):
+        raise ValueError(f'route_free of shape {route_free.shape} does not split the '
+                         f'{mask.shape} track into equal sub-cells')
     discs = _Discs(mask, clearance)
     dense = resample_polyline(route, 0.5)
     on_route = discs.corridor(dense)
@@ -324,7 +334,7 @@ def measure_track(track: np.ndarray, route_points: np.ndarray | None, cell_size:
     widths = discs.widths(per_cell)
     lap = on_route
     closed = False
-    back = _return_route(mask, clearance, discs, dense, widths, route_clearance)
+    back = _return_route(discs, dense, widths, route_free, subdivision)
     if back is not None:
         closed = True
         lap = on_route | discs.corridor(back)
@@ -335,33 +345,35 @@ def measure_track(track: np.ndarray, route_points: np.ndarray | None, cell_size:
         widths * cell_size, curvatures)
 
 
-def _cell_of(point: np.ndarray, shape: tuple[int, ...]) -> tuple[int, int]:
-    row = min(max(int(math.floor(point[1])), 0), shape[0] - 1)
-    col = min(max(int(math.floor(point[0])), 0), shape[1] - 1)
+def _cell_of(point: np.ndarray, shape: tuple[int, ...], scale: int = 1) -> tuple[int, int]:
+    row = min(max(int(math.floor(point[1] * scale)), 0), shape[0] - 1)
+    col = min(max(int(math.floor(point[0] * scale)), 0), shape[1] - 1)
     return row, col
 
 
-def _return_route(mask: np.ndarray, clearance: np.ndarray, discs: _Discs, dense: np.ndarray,
-                  widths: np.ndarray, route_clearance: float) -> np.ndarray | None:
-    """Cell centres (x, y) of a route from the goal back to the start that avoids the
-    corridor of the route's middle, or None."""
+def _return_route(discs: _Discs, dense: np.ndarray, widths: np.ndarray, free: np.ndarray,
+                  subdivision: int) -> np.ndarray | None:
+    """Points (x, y) in cells of a route from the goal back to the start through ``free``
+    sub-cells that avoids the corridor of the route's middle (the discs touching the route
+    farther than one local width from either end, less those touching its ends), or None."""
     if len(dense) < 3:
         return None
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(dense, axis=0).T))])
     end_width = float(max(widths[0], widths[-1], 1.0)) if len(widths) else 1.0
-    middle = dense[(along > end_width) & (along < along[-1] - end_width)]
-    if not len(middle):
+    in_middle = (along > end_width) & (along < along[-1] - end_width)
+    if not in_middle.any():
         return None
-    blocked = np.zeros(mask.shape, dtype=bool)
-    on_middle = discs.corridor(middle)
-    rows, cols = np.nonzero(mask)
-    blocked[rows[on_middle], cols[on_middle]] = True
-    free = mask & ~blocked & (clearance >= route_clearance - 1e-9)
-    path = shortest_path_in_free(free, _cell_of(dense[-1], mask.shape),
-                                 _cell_of(dense[0], mask.shape))
+    barrier = discs.corridor(dense[in_middle]) & ~discs.corridor(dense[~in_middle])
+    blocked = np.zeros(discs.shape, dtype=bool)
+    blocked[discs.rows[barrier], discs.cols[barrier]] = True
+    if subdivision > 1:
+        blocked = np.repeat(np.repeat(blocked, subdivision, axis=0), subdivision, axis=1)
+    path = shortest_path_in_free(free & ~blocked, _cell_of(dense[-1], free.shape, subdivision),
+                                 _cell_of(dense[0], free.shape, subdivision))
     if not path:
         return None
-    return np.array([(col + 0.5, row + 0.5) for row, col in path], dtype=np.float64)
+    return np.array([((col + 0.5) / subdivision, (row + 0.5) / subdivision)
+                     for row, col in path], dtype=np.float64)
 
 
 def measure_environment(environment: Environment, spur_length: int | None = None,
@@ -374,10 +386,11 @@ def measure_environment(environment: Environment, spur_length: int | None = None
     track = occupancy_passable_mask(environment.occupancy, spec)
     certificate = certify_environment(environment) if environment.feasible else None
     route = None
-    route_clearance = 0.0
+    route_free = None
     if certificate is not None:
         origin = np.asarray(environment.origin, dtype=np.float64)
         route = (certificate.points - origin) / environment.resolution
-        route_clearance = certificate.required_clearance / environment.resolution
-    return measure_track(track, route, environment.resolution, route_clearance, spur_length,
-                         curvature_step_m, smoothing_m)
+        route_free = (certificate.grid.clearance
+                      >= certificate.required_clearance - 1e-9)
+    return measure_track(track, route, environment.resolution, 0.0, spur_length,
+                         curvature_step_m, smoothing_m, route_free)

@@ -4,15 +4,18 @@ Not a test (pytest does not collect it); run it and read the figures::
 
     python tests/benchmarks/bench_track_realism.py                      # 200 seeds
     python tests/benchmarks/bench_track_realism.py --seeds 20 --png tracks.png
+    python tests/benchmarks/bench_track_realism.py --no-post-process   # the raw generator
 
-It samples race tracks from the shipped generator with fresh seeds (800000 on, never used
-by training or tests), places start and goal on the example map with the same seeds, and
-prints the measures of :mod:`sessgan_gen.track_realism` as mean / median / percentiles,
-generated against the example: the share of track cells on the route's corridor and on the
-lap's (route plus a way back beside it), how often a lap exists, the share of track cells in
-the route's connected piece, fragments and dead ends per map, the local track width along
-the route and the route's curvature, plus the valid-map fraction. With ``--png`` it draws
-sample generated tracks next to the example, with their certified routes.
+It samples race tracks from the shipped generator (through the sampler, so with the
+racetrack scenario's structural post-process unless ``--no-post-process``) with fresh seeds
+(800000 on, never used by training or tests), places start and goal on the example map with
+the same seeds, and prints the measures of :mod:`sessgan_gen.track_realism` as mean / median
+/ percentiles, generated against the example: the share of track cells on the route's
+corridor and on the lap's (route plus a way back beside it), how often a lap exists, the
+share of track cells in the route's connected piece, fragments and dead ends per map, the
+local track width along the route and the route's curvature, plus the valid-map fraction.
+With ``--png`` it draws sample generated tracks next to the example, with their certified
+routes.
 """
 
 from __future__ import annotations
@@ -38,13 +41,14 @@ BATCH = 20
 SCENARIO = 'racetrack'
 
 
-def generated_environments(seeds: list[int], progress: ProgressPrinter) -> list[Environment]:
+def generated_environments(seeds: list[int], progress: ProgressPrinter,
+                           post_process: bool) -> list[Environment]:
     sampler = EnvironmentSampler()
     environments: list[Environment] = []
     progress.start('generated tracks', len(seeds))
     for first in range(0, len(seeds), BATCH):
         batch = seeds[first:first + BATCH]
-        environments += sampler.sample(batch, scenario=SCENARIO)
+        environments += sampler.sample(batch, scenario=SCENARIO, post_process=post_process)
         progress.update(len(environments))
     return environments
 
@@ -147,11 +151,14 @@ def main() -> None:
                         help='write sample generated tracks next to the example here')
     parser.add_argument('--samples', type=int, default=8,
                         help='tracks in the picture, the example included [8]')
+    parser.add_argument('--no-post-process', action='store_true',
+                        help="the generator's raw maps, without the racetrack scenario's "
+                             'track_cleanup (sessgan_gen.track_cleanup)')
     args = parser.parse_args()
     progress = ProgressPrinter()
     started = time.perf_counter()
     seeds = list(range(FIRST_SEED, FIRST_SEED + args.seeds))
-    generated = generated_environments(seeds, progress)
+    generated = generated_environments(seeds, progress, not args.no_post_process)
     sample_seconds = time.perf_counter() - started
     example = example_environments(seeds[:max(1, args.example_placements)])
     columns = {
@@ -159,7 +166,9 @@ def main() -> None:
         'example': summary(example, measure_all(example, 'example', progress)),
     }
     print(f'racetrack, {args.seeds} generated maps (seeds {FIRST_SEED}..'
-          f'{FIRST_SEED + args.seeds - 1}), example map with '
+          f'{FIRST_SEED + args.seeds - 1}; '
+          f'{"raw generator output" if args.no_post_process else "with the track cleanup"}'
+          '), example map with '
           f'{len(example)} placements; sampling {1000 * sample_seconds / len(generated):.0f} '
           'ms a map')
     print('| measure | generated | example |')

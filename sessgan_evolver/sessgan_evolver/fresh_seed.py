@@ -43,6 +43,7 @@ from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.track_cleanup import clean_generated_maps
 
 
 class MapSource(Protocol):
@@ -61,11 +62,15 @@ class PyramidSource:
     def __init__(self, label: str, scenario: str, checkpoint: str | Path | bytes | None = None
                  ) -> None:
         self.label = label
+        self.scenario = scenario
         source = checkpoint or default_checkpoint_path(scenario)
         self.pyramid, self.metadata = load_checkpoint(source, scenario=scenario)
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
-        return sample_token_maps(self.pyramid, [int(s) for s in seeds])
+        """The maps the generator node would serve for ``seeds`` (the scenario's
+        track_cleanup applied, as the sampler does)."""
+        return clean_generated_maps(sample_token_maps(self.pyramid, [int(s) for s in seeds]),
+                                    self.scenario)
 
 
 class PopulationSource:

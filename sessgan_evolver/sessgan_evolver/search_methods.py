@@ -57,6 +57,7 @@ from sessgan_gen.sampling import (
 )
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.track_cleanup import clean_generated_maps
 
 SEED_BOUND = 2**32
 """Map and simulator seeds lie in [0, SEED_BOUND), like the campaign's."""
@@ -126,12 +127,15 @@ class RandomSampling:
     def __init__(self, scenario: str, seed: int, checkpoint: str | bytes | None = None,
                  batch: int = 12) -> None:
         self.pyramid = load_pyramid(scenario, checkpoint)
+        self.scenario = scenario
         self.rng = method_rng(seed, self.name)
         self.batch = batch
 
     def ask(self) -> list[Proposal]:
         seeds = self.rng.integers(0, SEED_BOUND, size=(self.batch, 2))
-        maps = sample_token_maps(self.pyramid, [int(s) for s in seeds[:, 0]])
+        # As the sampler serves them: the scenario's track_cleanup applied.
+        maps = clean_generated_maps(
+            sample_token_maps(self.pyramid, [int(s) for s in seeds[:, 0]]), self.scenario)
         return [Proposal(cells, int(sim), int(map_seed), 'random sample')
                 for cells, (map_seed, sim) in zip(maps, seeds)]
 
@@ -349,7 +353,8 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
         return crossover_noise(first, second, self.rng)
 
     def express(self, genotypes: list[NoiseMaps]) -> list[np.ndarray]:
-        return list(sample_token_maps_from_noise(self.pyramid, genotypes))
+        return list(clean_generated_maps(
+            sample_token_maps_from_noise(self.pyramid, genotypes), self.spec.name))
 
 
 BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None'], SearchMethod]

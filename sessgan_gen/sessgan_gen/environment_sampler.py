@@ -23,6 +23,7 @@ from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.track_cleanup import clean_token_map
 
 MAX_SEEDS_PER_REQUEST = 4096
 
@@ -87,12 +88,15 @@ class EnvironmentSampler:
     def sample(self, seeds: Sequence[int], checkpoint: str | Path | bytes | None = None,
                scenario: str | None = None, size: tuple[int, int] | None = None,
                generation: int = -1, member: int = -1,
-               mission: MissionSpec | None = None) -> list[Environment]:
+               mission: MissionSpec | None = None,
+               post_process: bool = True) -> list[Environment]:
         """One Environment per seed; map i depends only on seeds[i] and the weights.
 
         ``size`` is (height, width) in cells; None or zeros mean the scenario's default.
         ``mission``: stations before home drawn on each map (sessgan_gen.missions); None: plain
         start -> goal episodes.
+        ``post_process``: apply the scenario's ``track_cleanup`` (sessgan_gen.track_cleanup)
+        to every map, when it has one (the race track); False gives the generator's raw maps.
         """
         mission = (mission or MissionSpec()).validate()
         if scenario:
@@ -122,7 +126,9 @@ class EnvironmentSampler:
                 f'{len(seeds)} maps of {height}x{width} are {len(seeds) * height * width:,} '
                 f'cells, more than {self.max_cells_per_request:,} per request '
                 '(max_cells_per_request): ask for fewer or smaller maps at a time')
-        maps = sample_token_maps(pyramid, [int(s) for s in seeds], size=(height, width))
+        maps = list(sample_token_maps(pyramid, [int(s) for s in seeds], size=(height, width)))
+        if post_process and spec.track_cleanup is not None:
+            maps = [clean_token_map(cells, spec) for cells in maps]
         return [
             make_environment(cells, spec, environment_id(spec.name, generation, member, int(seed)),
                              seed=int(seed), generation=generation, member=member,

@@ -20,6 +20,30 @@ OCCUPANCY_VALUES = (FREE, LOW_OBSTACLE, BLOCKED)
 
 
 @dataclass(frozen=True)
+class TrackCleanup:
+    """A structural post-process of generated maps that keeps their learned geometry
+    (sessgan_gen.track_cleanup): it only deletes track pieces and fills small holes, never
+    draws new road. Applied by the sampler to every map of a scenario that sets it."""
+
+    track_token: str
+    """Token of the track (the cells a robot drives on)."""
+    off_track_token: str
+    """Token written where track is removed."""
+    max_island_cells: int = 0
+    """Fill holes of off-track cells (4-connected, not touching the map's edge) of at most this
+    many cells with track: specks inside the road. 0: off."""
+    bridge_gaps: bool = True
+    """Fill one-cell gaps between two different track pieces (an off-track cell with track of
+    two different 4-connected pieces on opposite sides, across or diagonally): the
+    generator's breaks in a road, never a barrier inside one piece."""
+    keep_main_piece: bool = True
+    """Remove every track piece (4-connected) but the largest."""
+    max_spur_cells: int = 0
+    """Remove dead-end spurs whose skeleton ends within this many cells of a junction (longer
+    dead ends stay whole). 0: off."""
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One use case of the paper.
 
@@ -60,6 +84,8 @@ class Scenario:
     route_margin: float = 0.1
     """m beyond the robot's radius that the certified route keeps from every obstacle (Nav2's
     inscribed radius plus an inflation margin); at most ``clearance_margin``."""
+    track_cleanup: TrackCleanup | None = None
+    """Structural post-process the sampler applies to generated maps (None: none)."""
 
     @property
     def num_tokens(self) -> int:
@@ -87,6 +113,12 @@ def register_scenario(scenario: Scenario) -> Scenario:
             f'scenario {scenario.name!r}: tokens, names and occupancy differ in length')
     if sorted(scenario.hierarchy) != list(range(len(scenario.tokens))):
         raise ValueError(f'scenario {scenario.name!r}: hierarchy must list every token once')
+    cleanup = scenario.track_cleanup
+    if cleanup is not None and not {cleanup.track_token, cleanup.off_track_token} <= set(
+            scenario.tokens):
+        raise ValueError(
+            f'scenario {scenario.name!r}: track_cleanup tokens {cleanup.track_token!r}, '
+            f'{cleanup.off_track_token!r} must be among its tokens {scenario.tokens}')
     if not 0 <= scenario.route_margin <= scenario.clearance_margin:
         raise ValueError(
             f'scenario {scenario.name!r}: margins must satisfy 0 <= route_margin '
@@ -142,6 +174,11 @@ register_scenario(Scenario(
     # track at least 3.2 m wide, and the route keeps a 1.8 m lane.
     clearance_margin=1.0,
     route_margin=0.3,
+    # The generator draws the example's road but as a maze of ~70 pieces with ~42 dead ends:
+    # join one-cell breaks, keep the main piece, drop specks and spurs up to four track
+    # widths (README, race-track realism; sessgan_gen.track_cleanup).
+    track_cleanup=TrackCleanup(track_token='T', off_track_token='O', max_island_cells=25,
+                               bridge_gaps=True, keep_main_piece=True, max_spur_cells=20),
 ))
 
 register_scenario(Scenario(

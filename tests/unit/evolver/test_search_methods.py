@@ -47,6 +47,20 @@ def test_random_sampling_is_seeded_and_samples_the_generator():
     assert np.array_equal(sample_token_maps(pyramid, [first[0].map_seed])[0], first[0].cells)
 
 
+def test_generator_methods_serve_race_tracks_as_the_sampler_does():
+    # The racetrack scenario's track_cleanup: random sampling and the shipped generator of a
+    # fresh-seed evaluation give the maps a campaign's generator node serves.
+    from sessgan_evolver.fresh_seed import PyramidSource
+    from sessgan_gen.environment_sampler import EnvironmentSampler
+    from sessgan_gen.token_map import tokens_to_occupancy
+
+    proposal = RandomSampling('racetrack', seed=3, batch=1).ask()[0]
+    served = EnvironmentSampler().sample([proposal.map_seed], scenario='racetrack')[0]
+    assert (tokens_to_occupancy(proposal.cells, 'racetrack') == served.occupancy).all()
+    fresh = PyramidSource('shipped', 'racetrack').maps([proposal.map_seed])[0]
+    assert (fresh == proposal.cells).all()
+
+
 @pytest.mark.parametrize('method', ['grid_ga', 'latent'])
 def test_genetic_algorithms_keep_their_elite_and_breed_the_rest(method):
     config = GAConfig(population=5, elite_count=1)

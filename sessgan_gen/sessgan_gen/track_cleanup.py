@@ -1,0 +1,155 @@
+"""A structural post-process of generated race tracks that keeps the learned geometry.
+
+The racetrack generator draws road of the example's width and bends, but as a maze: many
+detached pieces, specks of road and of barrier, and dead-end spurs. A car test needs one
+continuous road. :func:`clean_track` turns a generated map into one by deleting and filling
+only (it draws no new road beyond one-cell gaps between pieces, so widths and bends stay
+the generator's), in this order:
+
+1. fill holes of off-track cells up to ``max_island_cells`` (specks of barrier in the road);
+2. fill one-cell gaps between two different track pieces (``bridge_gaps``), then keep the
+   largest track piece (4-connected) and remove the rest;
+3. remove dead-end spurs: the track's skeleton loses every branch that ends within
+   ``max_spur_cells`` skeleton steps (:func:`sessgan_gen.track_realism.prune_spurs`), the
+   branches that stay regrow their tips through the pruned pixels, and track cells covered
+   only by the inscribed discs of removed skeleton cells (radius + 1 cell) are removed;
+4. steps 1 and 2 again (a spur's removal may leave a speck or a hole).
+
+Deterministic: a pure function of the map, so maps stay deterministic per seed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sessgan_gen.navigation import reachable_regions
+from sessgan_gen.scenarios import Scenario, TrackCleanup, get_scenario
+from sessgan_gen.track_realism import (
+    paint_discs,
+    prune_spurs,
+    skeleton,
+    skeleton_end_points,
+    track_clearance,
+)
+
+
+def fill_islands(track: np.ndarray, max_cells: int) -> np.ndarray:
+    """The track with every off-track hole (4-connected, not touching the map's edge) of at
+    most ``max_cells`` cells filled."""
+    mask = np.asarray(track, dtype=bool).copy()
+    if max_cells <= 0 or mask.all():
+        return mask
+    labels, sizes = reachable_regions(~mask)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    small = np.array([size <= max_cells for size in sizes], dtype=bool)
+    small[edge[edge >= 0]] = False
+    inside = labels >= 0
+    fill = np.zeros_like(mask)
+    fill[inside] = small[labels[inside]]
+    return mask | fill
+
+
+_OPPOSITE_PAIRS = (((1, 0), (-1, 0)), ((0, 1), (0, -1)), ((1, 1), (-1, -1)), ((1, -1), (-1, 1)))
+
+
+def bridge_gaps(track: np.ndarray) -> np.ndarray:
+    """The track with every off-track cell filled whose opposite neighbours (across or
+    diagonally) are track cells of two different 4-connected pieces."""
+    mask = np.asarray(track, dtype=bool)
+    labels, sizes = reachable_regions(mask)
+    if len(sizes) < 2:
+        return mask.copy()
+    padded = np.pad(labels, 1, constant_values=-1)
+    height, width = mask.shape
+    fill = np.zeros_like(mask)
+    for (row_a, col_a), (row_b, col_b) in _OPPOSITE_PAIRS:
+        first = padded[1 + row_a:1 + row_a + height, 1 + col_a:1 + col_a + width]
+        second = padded[1 + row_b:1 + row_b + height, 1 + col_b:1 + col_b + width]
+        fill |= (first >= 0) & (second >= 0) & (first != second)
+    return mask | (fill & ~mask)
+
+
+def largest_piece(track: np.ndarray) -> np.ndarray:
+    """The largest 4-connected piece of track (ties: the first in row-major order)."""
+    mask = np.asarray(track, dtype=bool)
+    labels, sizes = reachable_regions(mask)
+    if not sizes:
+        return mask.copy()
+    return labels == int(np.argmax(sizes))
+
+
+def _dilate8(mask: np.ndarray) -> np.ndarray:
+    padded = np.pad(mask, 1)
+    height, width = mask.shape
+    out = mask.copy()
+    for d_row in (-1, 0, 1):
+        for d_col in (-1, 0, 1):
+            out |= padded[1 + d_row:1 + d_row + height, 1 + d_col:1 + d_col + width]
+    return out
+
+
+def remove_spurs(track: np.ndarray, max_spur_cells: int) -> np.ndarray:
+    """The track without the dead-end spurs whose skeleton ends within ``max_spur_cells``
+    steps of the rest (see the module docstring)."""
+    mask = np.asarray(track, dtype=bool)
+    if max_spur_cells <= 0 or not mask.any():
+        return mask.copy()
+    thin = skeleton(mask)
+    kept = prune_spurs(thin, max_spur_cells)
+    # Long dead ends were shortened by max_spur_cells: grow their tips back through the
+    # pixels the pruning took (never back along what it kept, into a pruned side spur).
+    pruned = thin & ~kept
+    grown = skeleton_end_points(kept)
+    for _ in range(max_spur_cells):
+        grown = (_dilate8(grown) & pruned) | grown
+    kept |= grown
+    removed = thin & ~kept
+    if not removed.any():
+        return mask.copy()
+    clearance = track_clearance(mask)
+    rows, cols = np.nonzero(removed)
+    cut = paint_discs(mask.shape, rows, cols, clearance[rows, cols] + 1.0)
+    rows, cols = np.nonzero(kept)
+    keep = paint_discs(mask.shape, rows, cols, clearance[rows, cols] + 1.0)
+    return mask & ~(cut & ~keep)
+
+
+def clean_track(track: np.ndarray, cleanup: TrackCleanup) -> np.ndarray:
+    """The track mask after the post-process of the module docstring."""
+    mask = fill_islands(track, cleanup.max_island_cells)
+    if cleanup.bridge_gaps:
+        mask = bridge_gaps(mask)
+    if cleanup.keep_main_piece:
+        mask = largest_piece(mask)
+    if cleanup.max_spur_cells > 0:
+        mask = fill_islands(remove_spurs(mask, cleanup.max_spur_cells),
+                            cleanup.max_island_cells)
+        if cleanup.keep_main_piece:
+            mask = largest_piece(mask)
+    return mask
+
+
+def clean_token_map(cells: np.ndarray, spec: Scenario) -> np.ndarray:
+    """A token map after the scenario's ``track_cleanup`` (a copy; unchanged when it has
+    none): removed track becomes the off-track token, filled holes the track token."""
+    array = np.asarray(cells)
+    cleanup = spec.track_cleanup
+    if cleanup is None:
+        return array.copy()
+    track_id = spec.token_id(cleanup.track_token)
+    off_id = spec.token_id(cleanup.off_track_token)
+    track = array == track_id
+    cleaned = clean_track(track, cleanup)
+    out = array.copy()
+    out[track & ~cleaned] = off_id
+    out[cleaned & ~track] = track_id
+    return out
+
+
+def clean_generated_maps(maps: np.ndarray, scenario: str) -> np.ndarray:
+    """Generated token maps (n, height, width) after the scenario's ``track_cleanup``, as the
+    sampler serves them (the same array when the scenario has none)."""
+    spec = get_scenario(scenario)
+    if spec.track_cleanup is None or not len(maps):
+        return maps
+    return np.stack([clean_token_map(cells, spec) for cells in maps])

@@ -1,0 +1,396 @@
+"""Track realism: how much a race-track map looks like a track a driver could race on.
+
+A car test needs a continuous road of the example's width with turns, not a maze of
+fragments. These measures compare generated race tracks with the example map; they read
+only a bool mask of track cells and the certified start-to-goal route, so they hold for any
+scenario's map (the racetrack is the one they are made for).
+
+Definitions (lengths in cells inside, metres in the results):
+
+* **Clearance** of a track cell: distance from its centre to the nearest point of a
+  non-track cell square; the outside of the grid is non-track (as in
+  :mod:`sessgan_gen.route_certificate`). A straight of width w has clearance w / 2 on its
+  centre line.
+* **Inscribed discs**: every track cell q is the centre of a disc of radius clearance(q)
+  that lies inside the track. The **local width** at a route point is the diameter of the
+  largest inscribed disc that contains it (2 x the clearance of the centre line beside it),
+  so a route that hugs the inside of a bend still measures the whole road's width.
+* **Route corridor**: the union of the inscribed discs that contain a route point: the
+  road the route drives along, never across a barrier. ``route_corridor_fraction`` is the
+  share of all track cells on it.
+* **Lap**: a return route from the goal back to the start that avoids the corridor of the
+  route's middle (beyond one local width of either end), through the route certificate's
+  free space (sub-cells with the route's clearance). When one exists the track is a
+  circuit through start and goal; ``lap_corridor_fraction`` is the share of track cells on
+  the corridor of the route or of the return (equal to the route's share when there is no
+  return). A closed ring measures about 1, a ring with a long spur less.
+* **Dead ends**: end points of the track's skeleton (Zhang-Suen thinning) after pruning
+  every skeleton branch that ends within ``spur_length`` skeleton steps (default: the
+  median local width of the track): a dead end is a spur longer than the road is wide, so
+  bumps and the forks thinning leaves at square ends are not counted. A straight fragment
+  has two, a T junction's stub one, a closed ring none.
+* **Route curvature**: the route (pulled taut) resampled every ``curvature_step_m``,
+  smoothed by a moving average over ``smoothing_m``, heading change per metre between
+  consecutive samples (absolute, rad/m). The taut route is a polygon of chords on wide
+  bends, so its median curvature may be 0 on a round bend: compare means (total turn per
+  metre) and upper percentiles (the sharp turns).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sessgan_gen.environment import Environment
+from sessgan_gen.grid_search import flat_grid, label_regions
+from sessgan_gen.navigation import (
+    certify_environment,
+    occupancy_passable_mask,
+    shortest_path_in_free,
+)
+from sessgan_gen.token_map import resolve_scenario
+
+DEFAULT_CURVATURE_STEP_M = 0.5
+"""Spacing in metres of the resampled route whose heading changes give the curvature."""
+
+DEFAULT_SMOOTHING_M = 4.0
+"""Moving-average window in metres over the route before headings are taken: a car's path
+through a corner, not the taut route's kinks (about the example track's width)."""
+
+_CHUNK_ELEMENTS = 4_000_000
+"""Largest distance matrix built at once (float64 elements)."""
+
+
+@dataclass(frozen=True)
+class TrackRealism:
+    """The track-realism measures of one map (see the module docstring)."""
+
+    track_cells: int
+    """Number of track (passable) cells."""
+    fragments: int
+    """4-connected components of track cells."""
+    route_component_fraction: float
+    """Share of track cells in the component that holds the route (0 without a route)."""
+    route_corridor_fraction: float
+    """Share of track cells on the route's corridor (0 without a route)."""
+    lap_corridor_fraction: float
+    """Share of track cells on the corridor of the route or its return (see ``closed_lap``)."""
+    closed_lap: bool
+    """Whether a return route from goal to start exists beside the route (a circuit)."""
+    dead_ends: int
+    """End points of the pruned track skeleton."""
+    route_widths: np.ndarray
+    """m, local track width at route points spaced one cell apart (empty without a route)."""
+    route_curvatures: np.ndarray
+    """rad/m, absolute heading change per metre along the smoothed route (may be empty)."""
+
+
+def track_clearance(track: np.ndarray) -> np.ndarray:
+    """Clearance in cells of every cell centre to the nearest non-track cell square.
+
+    Exact Euclidean distance (separable: rows, then columns); the outside of the grid is
+    non-track; 0 on non-track cells.
+    """
+    mask = np.asarray(track, dtype=bool)
+    if mask.ndim != 2:
+        raise ValueError(f'track mask must be 2-D, got shape {mask.shape}')
+    blocked = np.pad(~mask, 1, constant_values=True)
+    height, width = blocked.shape
+    rows = np.arange(height, dtype=np.float64)[:, None]
+    # Row distance to the nearest blocked cell of the same column, above and below.
+    above = np.where(blocked, rows, -np.inf)
+    above = np.maximum.accumulate(above, axis=0)
+    below = np.where(blocked, rows, np.inf)
+    below = np.minimum.accumulate(below[::-1], axis=0)[::-1]
+    row_gap = np.minimum(rows - above, below - rows)
+    along_rows = np.maximum(row_gap - 0.5, 0.0) ** 2
+    columns = np.arange(width, dtype=np.float64)
+    across = np.maximum(np.abs(columns[:, None] - columns[None, :]) - 0.5, 0.0) ** 2
+    squared = np.empty((height, width))
+    chunk = max(1, _CHUNK_ELEMENTS // (width * width))
+    for first in range(0, height, chunk):
+        block = along_rows[first:first + chunk]
+        # squared[r, c] = min over c' of across[c, c'] + along_rows[r, c']
+        squared[first:first + chunk] = (block[:, None, :] + across[None, :, :]).min(axis=2)
+    clearance = np.sqrt(squared)[1:-1, 1:-1]
+    clearance[~mask] = 0.0
+    return clearance
+
+
+_NEIGHBOURS = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
+"""The 8 neighbours in circular order (P2..P9 of Zhang and Suen)."""
+
+
+def _neighbour_stack(image: np.ndarray) -> np.ndarray:
+    """(8, h, w) uint8: each pixel's 8 neighbours in circular order (outside = 0)."""
+    padded = np.pad(image, 1)
+    height, width = image.shape
+    return np.stack([padded[1 + d_row:1 + d_row + height, 1 + d_col:1 + d_col + width]
+                     for d_row, d_col in _NEIGHBOURS])
+
+
+def _transitions(neighbours: np.ndarray) -> np.ndarray:
+    """Number of 0 -> 1 transitions around each pixel's circular neighbourhood."""
+    rolled = np.roll(neighbours, -1, axis=0)
+    return ((neighbours == 0) & (rolled == 1)).sum(axis=0)
+
+
+def skeleton(track: np.ndarray) -> np.ndarray:
+    """Zhang-Suen thinning of a bool mask: an 8-connected one-cell-wide centre line."""
+    image = np.asarray(track, dtype=bool).astype(np.uint8)
+    while True:
+        changed = False
+        for sub_iteration in (0, 1):
+            p2, p3, p4, p5, p6, p7, p8, p9 = neighbours = _neighbour_stack(image)
+            count = neighbours.sum(axis=0)
+            if sub_iteration == 0:
+                keep_side = (p2 * p4 * p6 == 0) & (p4 * p6 * p8 == 0)
+            else:
+                keep_side = (p2 * p4 * p8 == 0) & (p2 * p6 * p8 == 0)
+            remove = ((image == 1) & (count >= 2) & (count <= 6)
+                      & (_transitions(neighbours) == 1) & keep_side)
+            if remove.any():
+                image[remove] = 0
+                changed = True
+        if not changed:
+            return image.astype(bool)
+
+
+def skeleton_end_points(skeleton_mask: np.ndarray) -> np.ndarray:
+    """Bool mask of skeleton pixels that end a branch: one neighbour, or two that touch each
+    other (a single run of neighbours around the pixel, at most two long), or none."""
+    image = np.asarray(skeleton_mask, dtype=bool).astype(np.uint8)
+    neighbours = _neighbour_stack(image)
+    count = neighbours.sum(axis=0)
+    single_run = _transitions(neighbours) <= 1
+    return (image == 1) & (count <= 2) & single_run
+
+
+def prune_spurs(skeleton_mask: np.ndarray, spur_length: int) -> np.ndarray:
+    """The skeleton with ``spur_length`` rounds of end-point removal: branches that end within
+    that many steps vanish, longer ones lose their last ``spur_length`` pixels; closed loops
+    stay whole."""
+    image = np.asarray(skeleton_mask, dtype=bool).copy()
+    for _ in range(max(0, int(spur_length))):
+        ends = skeleton_end_points(image)
+        if not ends.any():
+            break
+        image &= ~ends
+    return image
+
+
+def count_dead_ends(track: np.ndarray, spur_length: int | None = None,
+                    clearance: np.ndarray | None = None) -> int:
+    """Dead ends of a track mask: end points of its skeleton pruned by ``spur_length`` cells
+    (None: the median local width, 2 x clearance on the skeleton, at least 2)."""
+    thin = skeleton(track)
+    if spur_length is None:
+        if clearance is None:
+            clearance = track_clearance(track)
+        widths = 2.0 * clearance[thin]
+        spur_length = max(2, int(round(float(np.median(widths))))) if len(widths) else 2
+    return int(skeleton_end_points(prune_spurs(thin, spur_length)).sum())
+
+
+def resample_polyline(points: np.ndarray, step: float) -> np.ndarray:
+    """Points every ``step`` along a polyline (first and last included); (n, 2) in, (m, 2)
+    out."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(points) < 2:
+        return points.copy()
+    segment = np.hypot(*np.diff(points, axis=0).T)
+    along = np.concatenate([[0.0], np.cumsum(segment)])
+    total = float(along[-1])
+    if total <= 0.0:
+        return points[:1].copy()
+    count = max(2, int(math.ceil(total / step)) + 1)
+    at = np.linspace(0.0, total, count)
+    return np.column_stack([np.interp(at, along, points[:, 0]),
+                            np.interp(at, along, points[:, 1])])
+
+
+def route_curvatures(points_m: np.ndarray, step_m: float = DEFAULT_CURVATURE_STEP_M,
+                     smoothing_m: float = DEFAULT_SMOOTHING_M) -> np.ndarray:
+    """Absolute heading change per metre (rad/m) along a route given by its corners in
+    metres: resampled every ``step_m``, smoothed by a moving average over ``smoothing_m``."""
+    samples = resample_polyline(points_m, step_m)
+    window = max(1, int(round(smoothing_m / step_m)))
+    if len(samples) < window + 2:
+        return np.zeros(0)
+    if window > 1:
+        kernel = np.ones(window) / window
+        samples = np.column_stack([np.convolve(samples[:, 0], kernel, mode='valid'),
+                                   np.convolve(samples[:, 1], kernel, mode='valid')])
+    steps = np.diff(samples, axis=0)
+    lengths = np.hypot(steps[:, 0], steps[:, 1])
+    moving = lengths > 1e-9
+    steps, lengths = steps[moving], lengths[moving]
+    if len(steps) < 2:
+        return np.zeros(0)
+    headings = np.arctan2(steps[:, 1], steps[:, 0])
+    turn = np.angle(np.exp(1j * np.diff(headings)))
+    return np.abs(turn) / (0.5 * (lengths[1:] + lengths[:-1]))
+
+
+def _disc_hits(centres: np.ndarray, radii: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Bool (len(centres), len(points)): whether each point lies in each centre's disc."""
+    hits = np.zeros((len(centres), len(points)), dtype=bool)
+    if not len(centres) or not len(points):
+        return hits
+    chunk = max(1, _CHUNK_ELEMENTS // len(points))
+    for first in range(0, len(centres), chunk):
+        block = centres[first:first + chunk]
+        squared = ((block[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+        hits[first:first + chunk] = squared <= (radii[first:first + chunk, None] + 1e-9) ** 2
+    return hits
+
+
+def paint_discs(shape: tuple[int, ...], rows: np.ndarray, cols: np.ndarray,
+                 radii: np.ndarray) -> np.ndarray:
+    """Bool mask of the cells whose centres lie in at least one disc (centre = a cell centre,
+    radius in cells); discs of one radius are painted together by shifted ORs."""
+    covered = np.zeros(shape, dtype=bool)
+    height, width = shape
+    keys = np.round(radii, 6)
+    for radius in np.unique(keys):
+        chosen = keys == radius
+        reach = int(math.floor(radius + 1e-9))
+        seeds = np.zeros((height + 2 * reach, width + 2 * reach), dtype=bool)
+        seeds[rows[chosen] + reach, cols[chosen] + reach] = True
+        for d_row in range(-reach, reach + 1):
+            for d_col in range(-reach, reach + 1):
+                if d_row * d_row + d_col * d_col <= radius * radius + 1e-9:
+                    covered |= seeds[reach - d_row:reach - d_row + height,
+                                     reach - d_col:reach - d_col + width]
+    return covered
+
+
+class _Discs:
+    """The inscribed discs of a track: centres (x, y) in cells and radii in cells."""
+
+    def __init__(self, track: np.ndarray, clearance: np.ndarray) -> None:
+        rows, cols = np.nonzero(track)
+        self.shape = track.shape
+        self.rows, self.cols = rows, cols
+        self.centres = np.column_stack([cols + 0.5, rows + 0.5]).astype(np.float64)
+        self.radii = clearance[rows, cols].astype(np.float64)
+
+    def corridor(self, points: np.ndarray) -> np.ndarray:
+        """Bool per track cell (row-major order): on the union of the discs that contain one
+        of ``points`` (cells)."""
+        touching = _disc_hits(self.centres, self.radii, points).any(axis=1)
+        covered = paint_discs(self.shape, self.rows[touching], self.cols[touching],
+                               self.radii[touching])
+        return covered[self.rows, self.cols]
+
+    def widths(self, points: np.ndarray) -> np.ndarray:
+        """Diameter in cells of the largest disc containing each point (0 if none)."""
+        hits = _disc_hits(self.centres, self.radii, points)
+        return 2.0 * np.where(hits, self.radii[:, None], 0.0).max(axis=0, initial=0.0)
+
+
+def measure_track(track: np.ndarray, route_points: np.ndarray | None, cell_size: float = 1.0,
+                  route_clearance: float = 0.0, spur_length: int | None = None,
+                  curvature_step_m: float = DEFAULT_CURVATURE_STEP_M,
+                  smoothing_m: float = DEFAULT_SMOOTHING_M,
+                  route_free: np.ndarray | None = None) -> TrackRealism:
+    """The track-realism measures of a bool track mask (row 0 = lowest y).
+
+    ``route_points``: (n, 2) map-frame (x, y) corners of the start-to-goal route in cells
+    from the grid's corner (cell (row, col) spans x in [col, col + 1)), or None when the map
+    has no route. ``cell_size``: metres per cell. Where the lap's return route may run:
+    ``route_free``, a bool mask of k x k sub-cells per cell (the route certificate's free
+    space), or else the track cells whose clearance is at least ``route_clearance`` cells.
+    """
+    mask = np.asarray(track, dtype=bool)
+    clearance = track_clearance(mask)
+    track_cells = int(mask.sum())
+    dead_ends = count_dead_ends(mask, spur_length, clearance)
+    labels, orders, _ = label_regions(flat_grid(mask))
+    fragments = len(orders)
+    empty = np.zeros(0)
+    route = None if route_points is None else np.asarray(route_points, dtype=np.float64)
+    if route is None or len(route) == 0 or track_cells == 0:
+        return TrackRealism(track_cells, fragments, 0.0, 0.0, 0.0, False, dead_ends, empty,
+                            empty)
+    if route_free is None:
+        route_free = mask & (clearance >= route_clearance - 1e-9)
+    route_free = np.asarray(route_free, dtype=bool)
+    subdivision = route_free.shape[0] // mask.shape[0]
+    if subdivision < 1 or route_free.shape != (mask.shape[0] * subdivision,
+                                               mask.shape[1] * subdivision):
+        raise ValueError(f'route_free of shape {route_free.shape} does not split the '
+                         f'{mask.shape} track into equal sub-cells')
+    discs = _Discs(mask, clearance)
+    dense = resample_polyline(route, 0.5)
+    on_route = discs.corridor(dense)
+    stride = mask.shape[1] + 2
+    start_row, start_col = _cell_of(route[0], mask.shape)
+    component = labels[(start_row + 1) * stride + start_col + 1]
+    route_component = len(orders[component]) if component >= 0 else 0
+    per_cell = resample_polyline(route, 1.0)
+    widths = discs.widths(per_cell)
+    lap = on_route
+    closed = False
+    back = _return_route(discs, dense, widths, route_free, subdivision)
+    if back is not None:
+        closed = True
+        lap = on_route | discs.corridor(back)
+    curvatures = route_curvatures(route * cell_size, curvature_step_m, smoothing_m)
+    return TrackRealism(
+        track_cells, fragments, route_component / track_cells,
+        float(on_route.sum()) / track_cells, float(lap.sum()) / track_cells, closed, dead_ends,
+        widths * cell_size, curvatures)
+
+
+def _cell_of(point: np.ndarray, shape: tuple[int, ...], scale: int = 1) -> tuple[int, int]:
+    row = min(max(int(math.floor(point[1] * scale)), 0), shape[0] - 1)
+    col = min(max(int(math.floor(point[0] * scale)), 0), shape[1] - 1)
+    return row, col
+
+
+def _return_route(discs: _Discs, dense: np.ndarray, widths: np.ndarray, free: np.ndarray,
+                  subdivision: int) -> np.ndarray | None:
+    """Points (x, y) in cells of a route from the goal back to the start through ``free``
+    sub-cells that avoids the corridor of the route's middle (the discs touching the route
+    farther than one local width from either end, less those touching its ends), or None."""
+    if len(dense) < 3:
+        return None
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(dense, axis=0).T))])
+    end_width = float(max(widths[0], widths[-1], 1.0)) if len(widths) else 1.0
+    in_middle = (along > end_width) & (along < along[-1] - end_width)
+    if not in_middle.any():
+        return None
+    barrier = discs.corridor(dense[in_middle]) & ~discs.corridor(dense[~in_middle])
+    blocked = np.zeros(discs.shape, dtype=bool)
+    blocked[discs.rows[barrier], discs.cols[barrier]] = True
+    if subdivision > 1:
+        blocked = np.repeat(np.repeat(blocked, subdivision, axis=0), subdivision, axis=1)
+    path = shortest_path_in_free(free & ~blocked, _cell_of(dense[-1], free.shape, subdivision),
+                                 _cell_of(dense[0], free.shape, subdivision))
+    if not path:
+        return None
+    return np.array([((col + 0.5) / subdivision, (row + 0.5) / subdivision)
+                     for row, col in path], dtype=np.float64)
+
+
+def measure_environment(environment: Environment, spur_length: int | None = None,
+                        curvature_step_m: float = DEFAULT_CURVATURE_STEP_M,
+                        smoothing_m: float = DEFAULT_SMOOTHING_M) -> TrackRealism:
+    """The track-realism measures of an Environment, on its own certified start-to-goal
+    route (:func:`sessgan_gen.navigation.certify_environment`; no route measures when it is
+    not a valid test). Track = the cells its scenario's robot may occupy."""
+    spec = resolve_scenario(environment.scenario)
+    track = occupancy_passable_mask(environment.occupancy, spec)
+    certificate = certify_environment(environment) if environment.feasible else None
+    route = None
+    route_free = None
+    if certificate is not None:
+        origin = np.asarray(environment.origin, dtype=np.float64)
+        route = (certificate.points - origin) / environment.resolution
+        route_free = (certificate.grid.clearance
+                      >= certificate.required_clearance - 1e-9)
+    return measure_track(track, route, environment.resolution, 0.0, spur_length,
+                         curvature_step_m, smoothing_m, route_free)

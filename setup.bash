@@ -13,6 +13,8 @@ else
   source "$_sessgan_root/ros2_ws/install/setup.bash"
   # Keep DDS traffic on this machine unless the user opts in to a network (see README).
   export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+  # Services answer clients that are still being discovered (config/fastdds_profiles.xml).
+  export FASTRTPS_DEFAULT_PROFILES_FILE="${FASTRTPS_DEFAULT_PROFILES_FILE:-$_sessgan_root/config/fastdds_profiles.xml}"
   export SESSGAN_ROOT="$_sessgan_root"
 fi
 unset _sessgan_root

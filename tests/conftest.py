@@ -11,5 +11,9 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 if not os.environ.get('ROS_DOMAIN_ID'):
     os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randrange(10, 100))
 os.environ.setdefault('PYTHONUNBUFFERED', '1')
+# Servers wait for a client still being discovered before they answer (the profile's comment).
+os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(
+    os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config',
+    'fastdds_profiles.xml'))
 
 pytest_plugins = ['tests.ros_processes']

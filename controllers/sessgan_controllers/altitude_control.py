@@ -11,10 +11,14 @@ from odometry (``pose.pose.position.z``; :attr:`RobotState.z`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 from sessgan_controllers.errors import InvalidConfigError
+
+Decision = TypeVar('Decision')
 
 
 @dataclass(frozen=True)
@@ -51,3 +55,10 @@ class AltitudeHold:
     def airborne(self, altitude: float) -> bool:
         """Whether the flyer at ``altitude`` (m) is high enough to move sideways."""
         return altitude >= self.takeoff_altitude
+
+
+def with_climb(decision: Decision, climb: float) -> Decision:
+    """A controller's planar ``decision`` (a dataclass with a VelocityCommand ``command``)
+    with ``climb`` (m/s) as its command's climb rate."""
+    command = dataclasses.replace(decision.command, vz=climb)  # type: ignore[attr-defined]
+    return dataclasses.replace(decision, command=command)  # type: ignore[type-var]

@@ -65,7 +65,7 @@ from typing import Any
 
 import numpy as np
 
-from sessgan_controllers.altitude_control import AltitudeHold
+from sessgan_controllers.altitude_control import AltitudeHold, with_climb
 from sessgan_controllers.costmap import FREE, LOW_OBSTACLE, Costmap, CostmapConfig
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.path_following import (
@@ -415,8 +415,7 @@ class ReferenceNavigator:
             return NavigatorDecision(Mode.TAKEOFF, VelocityCommand(vz=climb), self.path, False,
                                      {}, f'taking off at {state.z:.2f} m')
         decision = self._decide_planar(scan, state, goal)
-        return dataclasses.replace(decision,
-                                   command=dataclasses.replace(decision.command, vz=climb))
+        return with_climb(decision, climb)
 
     def _decide_planar(self, scan: ScanData, state: RobotState,
                        goal: Goal) -> NavigatorDecision:

@@ -41,13 +41,12 @@ beside it when it gets there.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from sessgan_controllers.altitude_control import AltitudeHold
+from sessgan_controllers.altitude_control import AltitudeHold, with_climb
 from sessgan_controllers.costmap import FREE, LOW_OBSTACLE
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.route_guidance import (
@@ -183,8 +182,7 @@ class VelocityProjectionController(RouteGuidedController):
             reference = math.atan2(state.vy, state.vx) if state.speed > 0.0 else 0.0
             return ProjectionDecision(None, reference, 0, VelocityCommand(vz=climb))
         decision = self._decide_planar(scan, state, goal)
-        return dataclasses.replace(decision,
-                                   command=dataclasses.replace(decision.command, vz=climb))
+        return with_climb(decision, climb)
 
     def _decide_planar(self, scan: ScanData, state: RobotState,
                        goal: Goal) -> ProjectionDecision:

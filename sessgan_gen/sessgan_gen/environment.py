@@ -29,6 +29,9 @@ allowed, took 262 s and 3.3 GB to build); generating a 1024 x 1024 map took 6.4 
 MAX_STATIONS = 16
 """Most mission stations an Environment may hold (sessgan_gen.missions.MAX_MISSION_STATIONS)."""
 
+MAX_ROBOTS = 8
+"""Most robots under test in one fleet episode (each adds a controller and its topics)."""
+
 MAX_ENVIRONMENT_ID_LENGTH = 128
 ENVIRONMENT_ID_PATTERN = re.compile(r'[A-Za-z0-9][A-Za-z0-9._-]{0,127}')
 """Environment ids name failure bag directories and files, so they are safe file names: a
@@ -78,6 +81,17 @@ class Pose2D:
     yaw: float = 0.0
 
 
+@dataclass(frozen=True)
+class FleetRobot:
+    """The start and goal of one more robot under test in a fleet episode (robot ``r1``,
+    ``r2``, ...; robot ``r0`` drives the environment's own start and goal)."""
+
+    start: Pose2D
+    goal: Pose2D
+    route_length: float = 0.0
+    """m, length of its certified route (0 when not known)."""
+
+
 @dataclass
 class Environment:
     """One environment to evaluate; the core twin of sessgan_interfaces/Environment."""
@@ -107,6 +121,9 @@ class Environment:
     home; () for a plain start -> goal episode (sessgan_gen.missions)."""
     dwell_time: float = 0.0
     """Sim seconds the robot stands still at each station before its next goal goes out."""
+    fleet: tuple[FleetRobot, ...] = ()
+    """More robots under test in the same world, each with its own start and goal (a fleet
+    episode); () for one robot under test (sessgan_gen.fleet)."""
 
     @property
     def waypoints(self) -> tuple[Pose2D, ...]:
@@ -117,6 +134,11 @@ class Environment:
     def legs(self) -> int:
         """Legs of the episode's mission (1 for a plain start -> goal episode)."""
         return len(self.stations) + 1
+
+    @property
+    def robots(self) -> int:
+        """Robots under test: 1 plus the fleet's."""
+        return 1 + len(self.fleet)
 
     @property
     def height(self) -> int:
@@ -171,8 +193,19 @@ class Environment:
             raise InvalidEnvironmentError(
                 f'environment {self.id!r}: dwell time must be a finite number of seconds '
                 f'>= 0, got {self.dwell_time}')
+        if len(self.fleet) + 1 > MAX_ROBOTS:
+            raise InvalidEnvironmentError(
+                f'environment {self.id!r}: {len(self.fleet) + 1} robots under test; at most '
+                f'{MAX_ROBOTS}')
+        if self.fleet and self.stations:
+            raise InvalidEnvironmentError(
+                f'environment {self.id!r}: a fleet episode has no mission stations (each '
+                f'robot drives start -> goal)')
         stations = [(f'station {index + 1}', pose) for index, pose in enumerate(self.stations)]
-        for label, pose in (('start', self.start), ('goal', self.goal), *stations):
+        fleet = [(f'robot r{index + 1} {end}', pose)
+                 for index, robot in enumerate(self.fleet)
+                 for end, pose in (('start', robot.start), ('goal', robot.goal))]
+        for label, pose in (('start', self.start), ('goal', self.goal), *stations, *fleet):
             if not all(math.isfinite(v) for v in (pose.x, pose.y, pose.yaw)):
                 raise InvalidEnvironmentError(
                     f'environment {self.id!r}: {label} {pose} is not finite')

@@ -190,9 +190,11 @@ class DummyAgents:
         """Index of the agent whose pybullet body is ``body_id``; None for any other body."""
         return self._index_of_body.get(body_id)
 
-    def advance(self, dt: float, robot_position: tuple[float, float] | None = None) -> None:
+    def advance(self, dt: float,
+                robot_positions: Sequence[tuple[float, float]] = ()) -> None:
         """Move every agent ``dt`` seconds further along its patrol (a cautious agent waits
-        while the robot at ``robot_position`` or another agent is ahead of it)."""
+        while a robot under test at one of ``robot_positions`` or another agent is ahead of
+        it)."""
         if not self.body_ids:
             return
         step = self.config.speed * dt
@@ -201,7 +203,7 @@ class DummyAgents:
         positions = self.positions
         for index, (body, path) in enumerate(zip(self.body_ids, self.paths, strict=True)):
             x, y = path.position(travelled[index] + step)
-            if cautious and self._blocked(index, x, y, robot_position):
+            if cautious and self._blocked(index, x, y, robot_positions):
                 continue
             travelled[index] += step
             positions[index, 0] = x
@@ -210,7 +212,7 @@ class DummyAgents:
                                               physicsClientId=client)
 
     def _blocked(self, index: int, next_x: float, next_y: float,
-                 robot_position: tuple[float, float] | None) -> bool:
+                 robot_positions: Sequence[tuple[float, float]]) -> bool:
         """Whether something stands within the safety distance ahead of agent ``index``
         moving to (next_x, next_y): inside a corridor as wide as both bodies."""
         x, y = self.positions[index]
@@ -222,8 +224,7 @@ class DummyAgents:
         radius = self.config.radius
         others = [(float(ox), float(oy), radius) for other, (ox, oy)
                   in enumerate(self.positions) if other != index]
-        if robot_position is not None:
-            others.append((robot_position[0], robot_position[1], self._robot_radius))
+        others += [(robot_x, robot_y, self._robot_radius) for robot_x, robot_y in robot_positions]
         for ox, oy, other_radius in others:
             ahead = (ox - x) * dx + (oy - y) * dy
             beside = abs((ox - x) * dy - (oy - y) * dx)

@@ -16,7 +16,11 @@ An episode ends on goal reached, collision limit, time limit, no progress toward
 the goal (stuck) or :meth:`Episode.abort` (e.g. a silent controller). An Environment with
 mission stations is driven leg by leg (sessgan_sim.mission): the goal of the observation is
 the waypoint in force, the next one once the robot has dwelt at a station, and the goal is
-reached when the last waypoint (home) is. An
+reached when the last waypoint (home) is. An Environment with a fleet holds several robots
+under test, each driving its own start -> goal in the same world and seeing the others:
+:meth:`Episode.step_fleet` takes a command per robot and returns an observation per robot; a
+robot that ended (goal reached, stuck, ...) stands still while the others go on, and the
+episode is done when every robot is. An
 environment that cannot be simulated (invalid grid, unknown scenario or robot,
 start footprint overlapping an obstacle) ends the episode at reset with outcome
 ``invalid_environment`` and a detail saying why. A command with a NaN or
@@ -53,6 +57,7 @@ from sessgan_sim.metrics import (
     EpisodeMetrics,
     MetricsRecorder,
     Outcome,
+    fleet_metrics,
 )
 from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
 from sessgan_sim.robots import STOP, FlyerRobot, Robot, VelocityCommand, create_robot
@@ -63,6 +68,7 @@ from sessgan_sim.sensors import (
     LidarInfo,
     RangeFinder,
     RangeFinderConfig,
+    RayCaster,
     Twist2D,
     contact_partners,
     read_odometry,
@@ -245,19 +251,30 @@ def _as_command(command: VelocityCommand | Sequence[float]) -> VelocityCommand:
 
 @dataclass
 class _Record:
-    """What every episode has after reset, valid or not."""
+    """What every robot under test of an episode has after reset, valid or not."""
 
     environment: Environment
     config: EpisodeConfig
     recorder: MetricsRecorder
     lidar_info: LidarInfo
     scan: np.ndarray
+    start: Pose2D
+    """This robot's start (the environment's, or its fleet entry's)."""
+    waypoints: tuple[Pose2D, ...]
+    """This robot's goals in order (a mission's stations then home; else its goal)."""
+    index: int = 0
+    """r0, r1, ... in a fleet."""
     outcome: Outcome | None = None
     detail: str = ''
     ticks: int = 0
+    """Control ticks this robot was simulated (until its outcome)."""
     touching: bool = False
+    scan_updated: bool = False
+    """Whether its lidar took ``scan`` at the last tick."""
     mission: MissionTracker | None = None
     """The legs so far (None until the environment was found valid)."""
+    live: _Live | None = None
+    """Its simulation (None when the environment could not be built)."""
 
 
 class ProgressField(NamedTuple):
@@ -296,6 +313,9 @@ class _Live:
     """m/s, map-frame velocity of the robot's centre over the last physics step."""
     leg_progress: list[ProgressField] = field(default_factory=list)
     """Every leg's ProgressField, in order (a plain episode's one)."""
+    pushed_by: tuple[str, int] | None = None
+    """('agent', i) or ('robot', j) that last drove into the robot, until pushed_until."""
+    pushed_until: float = -math.inf
 
 
 class Episode:
@@ -309,11 +329,8 @@ class Episode:
         self._clock = clock
         self._world = World()
         self._agents = DummyAgents()
-        self._pushed_by: int | None = None
-        """The agent that last drove into the robot, until ``_pushed_until`` (sim s)."""
-        self._pushed_until = -math.inf
-        self._record: _Record | None = None
-        self._live: _Live | None = None
+        self._records: list[_Record] = []
+        """One per robot under test (r0 first); [] before the first reset."""
         self.profile = TickProfile()
 
     # --- resource handling ----------------------------------------------------------------
@@ -324,8 +341,7 @@ class Episode:
 
     def close(self) -> None:
         self._world.close()
-        self._record = None
-        self._live = None
+        self._records = []
 
     def __enter__(self) -> Episode:
         return self.open()
@@ -337,18 +353,35 @@ class Episode:
     # --- read-only state ------------------------------------------------------------------
 
     @property
+    def _record(self) -> _Record | None:
+        """Robot r0's record (the only robot's outside fleets)."""
+        return self._records[0] if self._records else None
+
+    @property
+    def _live(self) -> _Live | None:
+        """Robot r0's simulation."""
+        return self._records[0].live if self._records else None
+
+    @property
     def done(self) -> bool:
-        return self._record is not None and self._record.outcome is not None
+        """Whether the episode ended: every robot under test has its outcome."""
+        return bool(self._records) and all(record.outcome is not None
+                                           for record in self._records)
 
     @property
     def outcome(self) -> Outcome | None:
-        return self._record.outcome if self._record else None
+        """The episode's outcome (a fleet's: see :meth:`metrics`); None while it runs."""
+        if not self.done:
+            return None
+        return self._fleet_outcome()[0]
 
     @property
     def time(self) -> float:
         """Sim seconds since the episode's start."""
-        record = self._record
-        return record.ticks * record.config.control_period if record else 0.0
+        records = self._records
+        if not records:
+            return 0.0
+        return max(record.ticks for record in records) * records[0].config.control_period
 
     @property
     def config(self) -> EpisodeConfig:
@@ -361,8 +394,20 @@ class Episode:
 
     @property
     def robot(self) -> Robot:
-        """The robot under test (its sensor height places the base_scan frame)."""
+        """The robot under test (r0 in a fleet; its sensor height places the base_scan
+        frame)."""
         return self._require_live().robot
+
+    @property
+    def robots(self) -> list[Robot]:
+        """Every robot under test, r0 first."""
+        self._require_live()
+        return [record.live.robot for record in self._records if record.live is not None]
+
+    @property
+    def robot_count(self) -> int:
+        """Robots under test of the current episode (1 outside fleets)."""
+        return len(self._records)
 
     @property
     def layout(self) -> WorldLayout:
@@ -379,7 +424,8 @@ class Episode:
     # --- the episode ----------------------------------------------------------------------
 
     def reset(self, environment: Environment, config: EpisodeConfig | None = None) -> Observation:
-        """Start an episode in ``environment``; return the first observation.
+        """Start an episode in ``environment``; return the first observation (robot r0's;
+        :meth:`observations` has every robot's).
 
         Raises InvalidConfigError for an unusable config. An environment that cannot be
         simulated does not raise: the episode is done at once with outcome
@@ -388,17 +434,17 @@ class Episode:
         config = config or EpisodeConfig()
         config.validate()
         self._world.open()
-        self._live = None
         self._agents = DummyAgents(config.agents)
-        self._pushed_by, self._pushed_until = None, -math.inf
         self.profile = TickProfile()
         scan = np.full(config.lidar.beams, np.inf, dtype=np.float32)
         scan.flags.writeable = False
-        record = _Record(environment, config, MetricsRecorder(math.inf), config.lidar.info, scan)
-        self._record = record
+        record = _Record(environment, config, MetricsRecorder(math.inf), config.lidar.info, scan,
+                         start=environment.start, waypoints=())
+        self._records = [record]
 
         try:
             environment.validate()
+            record.waypoints = environment.waypoints
             scenario_limit = config.time_limit is None
             config = record.config = config.resolved(get_scenario(environment.scenario))
             robot = create_robot(str(config.robot), config.robot_params)
@@ -406,8 +452,14 @@ class Episode:
                 raise InvalidConfigError(
                     f'the flyer reaches {robot.top:.2f} m (max_altitude + height): walls '
                     f'must be taller, but world wall_height is {config.world.wall_height} m')
-            if scenario_limit and environment.route_length > 0:
-                route_time = ROUTE_TIME_FACTOR * environment.route_length / robot.top_speed
+            if environment.fleet and RayCaster(config.lidar.caster) is not RayCaster.ANALYTIC:
+                raise InvalidConfigError(
+                    'a fleet episode needs the analytic lidar caster (lidar caster '
+                    f'{config.lidar.caster!r} does not see the other robots)')
+            route_length = max([environment.route_length,
+                                *(member.route_length for member in environment.fleet)])
+            if scenario_limit and route_length > 0:
+                route_time = ROUTE_TIME_FACTOR * route_length / robot.top_speed
                 config = dataclasses.replace(
                     config, time_limit=max(float(config.time_limit or 0.0), route_time))
             if scenario_limit and environment.stations:
@@ -418,147 +470,245 @@ class Episode:
                     per_leg, float(config.time_limit or 0.0))
                     + len(environment.stations) * environment.dwell_time)
             record.config = config
+            robots = [robot, *(create_robot(str(config.robot), config.robot_params)
+                               for _ in environment.fleet)]
         except (SessganGenError, UnknownRobotError) as err:
-            self._end(Outcome.INVALID_ENVIRONMENT, str(err))
-            return self._blank_observation()
+            self._end(record, Outcome.INVALID_ENVIRONMENT, str(err))
+            return self._blank_observation(record)
         clearance_range = float(config.clearance_range or 0.0)
+        self._records = records = [record] + [
+            _Record(environment, config, MetricsRecorder(clearance_range, index),
+                    config.lidar.info, scan, start=member.start, waypoints=(member.goal,),
+                    index=index)
+            for index, member in enumerate(environment.fleet, start=1)]
         record.recorder = MetricsRecorder(clearance_range)
 
         client = self._world.client
         layout = self._world.build(environment, config.physics_timestep, config.world)
-        robot.spawn(client, environment.start,
-                    robot.start_altitude(self._support_height(environment, robot, layout)))
-        overlap = self._start_overlap(environment, robot, layout)
-        if overlap is not None:
-            self._end(Outcome.INVALID_ENVIRONMENT, overlap)
-            return self._blank_observation()
+        for each, body in zip(records, robots, strict=True):
+            body.spawn(client, each.start,
+                       body.start_altitude(self._support_height(each.start, body, layout)))
+        for each, body in zip(records, robots, strict=True):
+            overlap = self._start_overlap(environment, each, body, layout)
+            if overlap is not None:
+                for other in records:
+                    self._end(other, Outcome.INVALID_ENVIRONMENT, overlap)
+                return self._blank_observation(record)
 
-        # A third stream for the range finder leaves the first two as they were before it.
-        noise_seed, agent_seed, range_seed = np.random.SeedSequence(config.seed).spawn(3)
+        # A third stream for the range finder leaves the first two as they were before it;
+        # robots r1, r2, ... draw from streams spawned after those three.
+        streams = np.random.SeedSequence(config.seed)
+        noise_seed, agent_seed, range_seed = streams.spawn(3)
+        fleet_seeds = streams.spawn(2 * len(environment.fleet))
         spec = get_scenario(environment.scenario)
         grid = map_clearance(environment.occupancy, environment.resolution,
                              environment.origin, spec)
         route_need = required_clearances(spec)[1]
-        waypoints = environment.waypoints
-        leg_progress = [
-            self._progress_field(grid, leg_start, leg_goal, environment.feasible, robot,
-                                 route_need)
-            for leg_start, leg_goal in zip((environment.start, *waypoints), waypoints)]
-        keep_clear = [disc for leg_goal, progress in zip(waypoints, leg_progress)
-                      for disc in self._agent_keep_clear(leg_goal, robot, config, progress,
-                                                         route_need)]
-        progress = leg_progress[0]
+        keep_clear: list[tuple[float, float, float]] = []
+        for each, body in zip(records, robots, strict=True):
+            waypoints = each.waypoints
+            feasible = environment.feasible
+            each.live = _Live(
+                robot=body, lidar=Lidar(config.lidar, np.random.default_rng(
+                    noise_seed if each.index == 0 else fleet_seeds[2 * each.index - 2])),
+                clearance=ClearanceSensor(client, body, layout, clearance_range),
+                range_finder=None, progress=ProgressField(grid, np.zeros(0), []),
+                time_limit=float(config.time_limit or 0.0),
+                proximity_distance=float(config.proximity_distance or 0.0),
+                goal_tolerance=float(config.goal_tolerance or 0.0),
+                next_scan_time=record.lidar_info.scan_time)
+            each.live.leg_progress = [
+                self._progress_field(grid, leg_start, leg_goal, feasible, body, route_need)
+                for leg_start, leg_goal in zip((each.start, *waypoints), waypoints)]
+            each.live.progress = each.live.leg_progress[0]
+            keep_clear += [disc for leg_goal, progress in zip(waypoints, each.live.leg_progress)
+                           for disc in self._agent_keep_clear(leg_goal, body, config, progress,
+                                                              route_need)]
+            if each.index > 0:  # agents start away from every robot, as from r0's start
+                keep_clear.append((each.start.x, each.start.y, config.agents.min_start_distance))
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
                            np.random.default_rng(agent_seed), keep_clear=keep_clear)
-        lidar = Lidar(config.lidar, np.random.default_rng(noise_seed))
-        lidar.attach(client, robot, layout, self._agents)
-        clearance = ClearanceSensor(client, robot, layout, clearance_range)
-        clearance.set_agent_heights(self._agents.centre_height, config.agents.height)
-        range_finder = None
-        if robot.flies:
-            range_finder = RangeFinder(config.range_finder, np.random.default_rng(range_seed))
-            range_finder.attach(robot, layout)
-        live = _Live(
-            robot=robot, lidar=lidar, clearance=clearance, range_finder=range_finder,
-            progress=progress,
-            time_limit=float(config.time_limit or 0.0),
-            proximity_distance=float(config.proximity_distance or 0.0),
-            goal_tolerance=float(config.goal_tolerance or 0.0),
-            next_scan_time=record.lidar_info.scan_time)
-        self._live = live
-        live.leg_progress = leg_progress
-        record.mission = MissionTracker(waypoints, environment.dwell_time, live.goal_tolerance)
-        live.best_progress = self._progress_distance(record, live)
-        record.scan = lidar.scan()
-        return self._observation(record, live, scan_updated=True)
+        for each in records:
+            live = each.live
+            assert live is not None
+            others = [other for other in robots if other is not live.robot]
+            live.lidar.attach(client, live.robot, layout, self._agents, others)
+            live.clearance.set_agent_heights(self._agents.centre_height, config.agents.height)
+            live.clearance.set_fleet(others)
+            if live.robot.flies:
+                live.range_finder = RangeFinder(config.range_finder, np.random.default_rng(
+                    range_seed if each.index == 0 else fleet_seeds[2 * each.index - 1]))
+                live.range_finder.attach(live.robot, layout)
+            each.mission = MissionTracker(each.waypoints, environment.dwell_time,
+                                          live.goal_tolerance)
+            live.best_progress = self._progress_distance(live)
+            each.scan = live.lidar.scan()
+        return self._observation(record, scan_updated=True)
+
+    def observations(self, scan_updated: bool = True) -> list[Observation]:
+        """Every robot's observation now (r0 first), the scans as last taken (after reset:
+        the first scans)."""
+        self._require_live()
+        return [self._observation(record, scan_updated) for record in self._records]
 
     def step(self, command: VelocityCommand | Sequence[float]) -> StepResult:
         """Apply ``command`` (body-frame vx, vy, wz, and the flyer's climb rate vz, 0 when
-        left out) for one control tick; return the result."""
+        left out) for one control tick; return the result. A fleet steps with
+        :meth:`step_fleet`."""
+        if len(self._records) > 1:
+            raise EpisodeError(f'a fleet episode of {len(self._records)} robots steps with '
+                               f'step_fleet(), a command per robot')
+        return self.step_fleet((command,))[0]
+
+    def step_fleet(self, commands: Sequence[VelocityCommand | Sequence[float]]
+                   ) -> list[StepResult]:
+        """Apply a command per robot under test (r0 first) for one control tick; return a
+        result per robot: its observation, whether the episode is done and the robot's own
+        outcome. A robot that already ended stands still whatever it is sent."""
+        records = self._records
         record = self._require_record()
-        if record.outcome is not None:
-            raise EpisodeError(f'the episode is over ({record.outcome.value}); call reset()')
-        live = self._require_live()
-        command = _as_command(command)
-        if not (math.isfinite(command.vx) and math.isfinite(command.vy)
-                and math.isfinite(command.wz) and math.isfinite(command.vz)):
-            record.recorder.invalid_commands += 1
-            command = STOP
-        config, robot, recorder = record.config, live.robot, record.recorder
+        if self.done:
+            raise EpisodeError(f'the episode is over ({self.outcome}); call reset()')
+        self._require_live()
+        if len(commands) != len(records):
+            raise EpisodeError(f'{len(records)} robot(s) under test, got {len(commands)} '
+                               f'command(s)')
+        config = record.config
+        running = [each for each in records if each.outcome is None]
+        lives = [each.live for each in running]
+        robots = [live.robot for live in lives if live is not None]
+        applied = []
+        for each in running:
+            command = _as_command(commands[each.index])
+            if not (math.isfinite(command.vx) and math.isfinite(command.vy)
+                    and math.isfinite(command.wz) and math.isfinite(command.vz)):
+                each.recorder.invalid_commands += 1
+                command = STOP
+            applied.append(command)
+        stopped = [each.live.robot for each in records
+                   if each.outcome is not None and each.live is not None]
         client = self._world.client
-        body = robot.body_id
         dt = config.physics_timestep
-        goal = self._goal(record)
-        tolerance = live.goal_tolerance
-        reached = touching = False
+        goals = [self._goal(each) for each in running]
+        tolerance = float(config.goal_tolerance or 0.0)
+        count = len(running)
+        reached = [False] * count
+        touching = [False] * count
+        travelled = [0.0] * count
         clock = self._clock
         started = clock()
 
         # The hot loop: bound methods and locals keep Python's overhead per step low.
-        advance_agents, apply, sync = self._agents.advance, robot.apply, robot.sync
-        step_simulation, hypot = p.stepSimulation, math.hypot
-        x, y = robot.position
-        velocity = live.velocity
+        advance_agents, step_simulation, hypot = self._agents.advance, p.stepSimulation, math.hypot
+        before = [body.position for body in robots]
+        positions = before + [body.position for body in stopped]
+        velocities = [live.velocity for live in lives if live is not None]
         step_time = record.ticks * config.control_period
-        travelled = 0.0
         for _ in range(config.physics_steps_per_tick):
-            advance_agents(dt, (x, y))
-            x_before, y_before = x, y
-            apply(command, dt)
+            advance_agents(dt, positions)
+            for body, command in zip(robots, applied):
+                body.apply(command, dt)
+            for body in stopped:  # an ended robot holds still where it is
+                body.apply(STOP, dt)
             step_simulation(physicsClientId=client)
-            sync()
+            for body in stopped:
+                body.sync()
             step_time += dt
-            x, y = robot.position
-            previous, velocity = velocity, ((x - x_before) / dt, (y - y_before) / dt)
-            partners = contact_partners(client, body)
-            touching = bool(partners)
-            if touching:
-                self._record_contacts(recorder, partners, step_time, x, y, (previous, velocity))
-            travelled += hypot(x - x_before, y - y_before)
-            if hypot(x - goal.x, y - goal.y) <= tolerance:
-                reached = True
-        live.velocity = velocity
-        recorder.record_motion(travelled)
-        record.touching = touching
-        record.ticks += 1
+            for index, body in enumerate(robots):
+                body.sync()
+                x, y = body.position
+                x_before, y_before = before[index]
+                previous = velocities[index]
+                velocities[index] = ((x - x_before) / dt, (y - y_before) / dt)
+                partners = contact_partners(client, body.body_id)
+                if partners:
+                    touching[index] = True
+                    self._record_contacts(running[index], partners, step_time, x, y,
+                                          (previous, velocities[index]))
+                else:
+                    touching[index] = False
+                travelled[index] += hypot(x - x_before, y - y_before)
+                goal = goals[index]
+                if hypot(x - goal.x, y - goal.y) <= tolerance:
+                    reached[index] = True
+                before[index] = (x, y)
+            positions = before + [body.position for body in stopped] if stopped else before
+        for index, each in enumerate(running):
+            live = lives[index]
+            assert live is not None
+            live.velocity = velocities[index]
+            each.recorder.record_motion(travelled[index])
+            each.touching = touching[index]
+            each.ticks += 1
         now = self.time
         physics_done = clock()
 
-        scan_updated = now >= live.next_scan_time - 1e-9
-        if scan_updated:
-            record.scan = live.lidar.scan()
-            live.next_scan_time += record.lidar_info.scan_time
-            if live.next_scan_time <= now:  # lidar faster than control: scan every tick
-                live.next_scan_time = now + config.control_period
         agents = self._agents
-        clearance = live.clearance.measure(agents.body_ids, agents.positions,
-                                           agents.config.radius)
+        clearances = []
+        for each in records:
+            each.scan_updated = False
+        for each in running:
+            live = each.live
+            assert live is not None
+            if now >= live.next_scan_time - 1e-9:
+                each.scan = live.lidar.scan()
+                live.next_scan_time += record.lidar_info.scan_time
+                if live.next_scan_time <= now:  # lidar faster than control: scan every tick
+                    live.next_scan_time = now + config.control_period
+                each.scan_updated = True
+            clearances.append(live.clearance.measure(agents.body_ids, agents.positions,
+                                                     agents.config.radius))
         sensors_done = clock()
 
-        recorder.record_tick(config.control_period, clearance, touching,
-                             live.proximity_distance)
-        self._check_end(record, live, reached, now, hypot(x - goal.x, y - goal.y))
-        observation = self._observation(record, live, scan_updated)
+        for index, each in enumerate(running):
+            live = each.live
+            assert live is not None
+            each.recorder.record_tick(config.control_period, clearances[index],
+                                      touching[index], live.proximity_distance)
+            x, y = live.robot.position
+            goal = goals[index]
+            self._check_end(each, live, reached[index], now, hypot(x - goal.x, y - goal.y))
+        done = self.done
+        results = [StepResult(self._observation(each, each.scan_updated), done, each.outcome)
+                   for each in records]
         finished = clock()
         profile = self.profile
         profile.ticks += 1
         profile.physics += physics_done - started
         profile.sensors += sensors_done - physics_done
         profile.metrics += finished - sensors_done
-        return StepResult(observation, record.outcome is not None, record.outcome)
+        return results
 
     def abort(self, outcome: Outcome | str, detail: str = '') -> None:
-        """End the running episode from outside (e.g. controller_unresponsive).
+        """End the running episode from outside (e.g. controller_unresponsive), for every
+        robot that has not ended yet.
 
         No-op when the episode already ended: its first outcome stands.
         """
-        record = self._require_record()
-        if record.outcome is None:
-            self._end(Outcome(outcome), detail)
+        self._require_record()
+        for record in self._records:
+            if record.outcome is None:
+                self._end(record, Outcome(outcome), detail)
 
     def metrics(self) -> EpisodeMetrics:
-        """The episode's metrics (so far, with outcome None, while it runs)."""
-        record = self._require_record()
+        """The episode's metrics (so far, with outcome None, while it runs). A fleet's add up
+        its robots' (sessgan_sim.metrics.fleet_metrics): its outcome is the first failing
+        robot's (goal_reached when all reached theirs), the detail names each robot's."""
+        self._require_record()
+        records = self._records
+        if len(records) == 1:
+            return self.robot_metrics(0)
+        robots = [self.robot_metrics(index) for index in range(len(records))]
+        outcome, failed = self._fleet_outcome() if self.done else (None, -1)
+        detail = '; '.join(f'r{index}: {metrics.outcome.value if metrics.outcome else "running"}'
+                           + (f' ({metrics.detail})' if metrics.detail else '')
+                           for index, metrics in enumerate(robots))
+        return fleet_metrics(robots, outcome, detail, failed)
+
+    def robot_metrics(self, index: int) -> EpisodeMetrics:
+        """Robot ``index``'s own metrics (r0: the only robot's outside fleets)."""
+        self._require_record()
+        record = self._records[index]
         detail = record.detail
         invalid = record.recorder.invalid_commands
         if invalid:
@@ -566,7 +716,8 @@ class Episode:
                     f'a stop')
             detail = f'{detail}; {note}' if detail else note
         snapshot = record.recorder.snapshot(
-            simulation_time=self.time, feasible=bool(record.environment.feasible),
+            simulation_time=record.ticks * record.config.control_period,
+            feasible=bool(record.environment.feasible),
             distance_to_goal=self._distance_to_goal(record), outcome=record.outcome,
             detail=detail)
         mission = record.mission
@@ -583,24 +734,40 @@ class Episode:
 
     # --- internals ------------------------------------------------------------------------
 
+    def _fleet_outcome(self) -> tuple[Outcome | None, int]:
+        """The episode's outcome and the index of the robot it comes from (-1: every robot
+        reached its goal): the earliest-ending robot that did not reach its goal, or
+        a robot with a fault collision (then collision_limit's or the goal's outcome)."""
+        records = self._records
+        failing = [record for record in records if record.outcome is not Outcome.GOAL_REACHED
+                   or record.recorder.fault_collisions]
+        if not failing:
+            return (records[0].outcome, -1) if records else (None, -1)
+        first = min(failing, key=lambda record: (record.ticks, record.index))
+        return first.outcome, (first.index if len(records) > 1 else -1)
+
     def _require_record(self) -> _Record:
-        if self._record is None:
+        if not self._records:
             raise EpisodeError('no episode yet: call reset(environment, config) first')
-        return self._record
+        return self._records[0]
 
     def _require_live(self) -> _Live:
-        if self._live is None:
+        live = self._records[0].live if self._records else None
+        if live is None:
             raise EpisodeError('no running simulation: reset() has not built a valid episode')
-        return self._live
+        return live
 
-    def _end(self, outcome: Outcome, detail: str) -> None:
-        record = self._require_record()
+    @staticmethod
+    def _end(record: _Record, outcome: Outcome, detail: str) -> None:
         record.outcome = outcome
         record.detail = detail
 
-    def _goal(self, record: _Record) -> Pose2D:
-        """The waypoint in force: the environment's goal in a plain episode."""
-        return record.mission.goal if record.mission is not None else record.environment.goal
+    @staticmethod
+    def _goal(record: _Record) -> Pose2D:
+        """The robot's waypoint in force: its goal in a plain episode."""
+        if record.mission is not None:
+            return record.mission.goal
+        return record.waypoints[-1] if record.waypoints else record.environment.goal
 
     def _check_end(self, record: _Record, live: _Live, reached: bool, now: float,
                    distance: float) -> None:
@@ -610,7 +777,7 @@ class Episode:
         if mission is None:  # reset() sets it whenever it builds a simulation
             raise EpisodeError('no mission: reset() has not built a valid episode')
         if config.collision_limit and recorder.collisions >= config.collision_limit:
-            self._end(Outcome.COLLISION_LIMIT,
+            self._end(record, Outcome.COLLISION_LIMIT,
                       f'{recorder.collisions} collisions reached the limit of '
                       f'{config.collision_limit} at {now:.2f} s')
             return
@@ -618,70 +785,101 @@ class Episode:
                                config.control_period)
         if event is MissionEvent.COMPLETE:
             if mission.legs > 1:
-                self._end(Outcome.GOAL_REACHED,
+                self._end(record, Outcome.GOAL_REACHED,
                           f'completed the mission: reached home, the last of {mission.legs} '
                           f'waypoints, within {live.goal_tolerance:.2f} m at {now:.2f} s')
             else:
-                self._end(Outcome.GOAL_REACHED,
+                self._end(record, Outcome.GOAL_REACHED,
                           f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
             return
         if event is MissionEvent.NEXT_LEG:
             live.progress = live.leg_progress[mission.leg]
-            live.best_progress = self._progress_distance(record, live)
+            live.best_progress = self._progress_distance(live)
         if event is not MissionEvent.NONE:
             live.last_progress_time = now  # arriving and setting off are progress
         if now >= live.time_limit - 1e-9:
-            self._end(Outcome.TIMEOUT, f'time limit of {live.time_limit:.2f} s reached, '
-                                       f'{self._distance_to_goal(record):.2f} m from the goal')
+            self._end(record, Outcome.TIMEOUT,
+                      f'time limit of {live.time_limit:.2f} s reached, '
+                      f'{self._distance_to_goal(record):.2f} m from the goal')
         elif mission.dwelling and distance <= live.goal_tolerance:
             live.last_progress_time = now  # dwelling at a station is not being stuck
         elif config.stuck_timeout > 0:
-            progress = self._progress_distance(record, live)
+            progress = self._progress_distance(live)
             if progress < live.best_progress:
                 live.best_progress = progress
                 live.last_progress_time = now
             elif self._agent_nearby(live):
-                # Waiting for an agent that blocks the way is not stuck (the time limit
-                # still bounds the wait).
+                # Waiting for an agent (or another robot) that blocks the way is not stuck
+                # (the time limit still bounds the wait).
                 live.last_progress_time = now
             elif now - live.last_progress_time >= config.stuck_timeout - 1e-9:
-                self._end(Outcome.STUCK,
+                self._end(record, Outcome.STUCK,
                           f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
                           f'stopped {self._distance_to_goal(record):.2f} m from it at '
                           f'{now:.2f} s')
 
-    def _record_contacts(self, recorder: MetricsRecorder, partners: set[int], time: float,
+    def _record_contacts(self, record: _Record, partners: set[int], time: float,
                          x: float, y: float,
                          velocities: tuple[tuple[float, float], ...]) -> None:
-        """Record one physics step's contacts, attributing each (see sessgan_sim.metrics).
+        """Record one physics step's contacts of ``record``'s robot, attributing each (see
+        sessgan_sim.metrics).
 
-        While an agent drives into the robot (and CONTACT_DEBOUNCE after), whatever else the
-        robot touches is that agent's doing too: it was shoved."""
+        While an agent or another robot under test drives into the robot (and
+        CONTACT_DEBOUNCE after), whatever else the robot touches is its doing too: it was
+        shoved."""
+        live = record.live
+        assert live is not None
+        recorder = record.recorder
         agents = self._agents
         touches_static = False
         for body in partners:
             agent = agents.index_of(body)
-            if agent is None:
+            other = self._robot_index_of(body) if agent is None else None
+            if agent is None and other is None:
                 touches_static = True
                 continue
-            dx, dy = agents.positions[agent, 0] - x, agents.positions[agent, 1] - y
-            distance = math.hypot(dx, dy) or 1e-9
-            # The robot drove into the agent if, just before or during the contact step, it
-            # moved toward it faster than a standing robot would.
-            approach = max((vx * dx + vy * dy) / distance for vx, vy in velocities)
-            pushed = self._pushed_by is not None and time <= self._pushed_until
-            if approach > STANDING_SPEED and not pushed:
-                kind = ContactKind.ROBOT_INTO_AGENT
+            if agent is not None:
+                partner_x, partner_y = agents.positions[agent, 0], agents.positions[agent, 1]
             else:
-                kind = ContactKind.AGENT_INTO_ROBOT
-                self._pushed_by, self._pushed_until = agent, time + CONTACT_DEBOUNCE
-            recorder.record_contact(time, agent, kind, x, y)
+                partner_x, partner_y = self._records[other].live.robot.position  # type: ignore
+            dx, dy = partner_x - x, partner_y - y
+            distance = math.hypot(dx, dy) or 1e-9
+            # The robot drove into the partner if, just before or during the contact step,
+            # it moved toward it faster than a standing robot would.
+            approach = max((vx * dx + vy * dy) / distance for vx, vy in velocities)
+            pushed = live.pushed_by is not None and time <= live.pushed_until
+            if agent is not None:
+                if approach > STANDING_SPEED and not pushed:
+                    kind = ContactKind.ROBOT_INTO_AGENT
+                else:
+                    kind = ContactKind.AGENT_INTO_ROBOT
+                    live.pushed_by, live.pushed_until = ('agent', agent), time + CONTACT_DEBOUNCE
+                recorder.record_contact(time, agent, kind, x, y)
+                continue
+            assert other is not None
+            if approach > STANDING_SPEED and not pushed:
+                kind = ContactKind.ROBOT_INTO_ROBOT
+            else:
+                kind = ContactKind.ROBOT_HIT_BY_ROBOT
+                live.pushed_by, live.pushed_until = ('robot', other), time + CONTACT_DEBOUNCE
+            recorder.record_contact(time, -1, kind, x, y, other_robot=other)
         if touches_static:
-            # Shoved into a wall by an agent: the agent's doing (its index names it).
-            if self._pushed_by is not None and time <= self._pushed_until:
-                recorder.record_contact(time, -1, ContactKind.AGENT_INTO_ROBOT, x, y)
+            # Shoved into a wall by an agent or a robot: its doing (the event names it).
+            if live.pushed_by is not None and time <= live.pushed_until:
+                source, index = live.pushed_by
+                if source == 'agent':
+                    recorder.record_contact(time, -1, ContactKind.AGENT_INTO_ROBOT, x, y)
+                else:
+                    recorder.record_contact(time, -1, ContactKind.ROBOT_HIT_BY_ROBOT, x, y)
             else:
                 recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
+
+    def _robot_index_of(self, body_id: int) -> int | None:
+        """Index of the robot under test whose body is ``body_id``; None for any other."""
+        for record in self._records:
+            if record.live is not None and record.live.robot.body_id == body_id:
+                return record.index
+        return None
 
     @staticmethod
     def _progress_field(grid: CertificateGrid, leg_start: Pose2D, leg_goal: Pose2D,
@@ -725,16 +923,26 @@ class Episode:
         return discs
 
     def _agent_nearby(self, live: _Live) -> bool:
-        """Whether an agent's body is within AGENT_WAIT_DISTANCE of the robot's body."""
+        """Whether an agent's body, or another robot under test, is within
+        AGENT_WAIT_DISTANCE of the robot's body."""
         agents = self._agents
+        robot = live.robot
+        x, y = robot.position
+        for record in self._records:
+            other = record.live.robot if record.live is not None else robot
+            if other is not robot:
+                gap = (math.hypot(other.position[0] - x, other.position[1] - y)
+                       - other.footprint_radius - robot.footprint_radius)
+                if gap < AGENT_WAIT_DISTANCE:
+                    return True
         if not agents.body_ids:
             return False
-        x, y = live.robot.position
         gaps = (np.hypot(agents.positions[:, 0] - x, agents.positions[:, 1] - y)
-                - agents.config.radius - live.robot.footprint_radius)
+                - agents.config.radius - robot.footprint_radius)
         return bool((gaps < AGENT_WAIT_DISTANCE).any())
 
-    def _progress_distance(self, record: _Record, live: _Live) -> float:
+    @staticmethod
+    def _progress_distance(live: _Live) -> float:
         """Distance (m) from the robot to the goal along its ProgressField; inf (never
         progress) where the field does not reach."""
         progress = live.progress
@@ -746,21 +954,20 @@ class Episode:
         return math.inf
 
     def _distance_to_goal(self, record: _Record) -> float:
-        environment = record.environment
         goal = self._goal(record)
-        if self._live is not None:
-            x, y = self._live.robot.position
+        if record.live is not None:
+            x, y = record.live.robot.position
         else:
-            x, y = environment.start.x, environment.start.y
+            x, y = record.start.x, record.start.y
         try:
             distance = math.hypot(x - goal.x, y - goal.y)
         except TypeError:  # an invalid environment may hold anything
             return math.inf
         return distance if math.isfinite(distance) else math.inf
 
-    def _start_overlap(self, environment: Environment, robot: Robot,
+    def _start_overlap(self, environment: Environment, record: _Record, robot: Robot,
                        layout: WorldLayout) -> str | None:
-        """Why the robot's footprint at the start overlaps an obstacle, or None."""
+        """Why the robot's footprint at its start overlaps an obstacle, or None."""
         x, y = robot.position
         client = self._world.client
         for other in layout.obstacles_near(x, y, robot.footprint_radius):
@@ -768,37 +975,40 @@ class Episode:
                 if point[8] < -START_OVERLAP_TOLERANCE:
                     kind = layout.kind_of(other)
                     name = kind.value.replace('_', ' ') if kind else 'obstacle'
-                    start = environment.start
+                    start = record.start
                     row, col = environment.cell_of(x, y)
                     inside = (' (start inside it)'
                               if int(environment.occupancy[row, col]) not in robot.passable_values
                               else '')
-                    return (f'environment {environment.id!r}: the {robot.name} footprint at the '
-                            f'start ({start.x:.2f}, {start.y:.2f}) m overlaps a {name} by '
+                    who = f"robot r{record.index}'s" if environment.fleet else 'the'
+                    return (f'environment {environment.id!r}: {who} {robot.name} footprint at '
+                            f'the start ({start.x:.2f}, {start.y:.2f}) m overlaps a {name} by '
                             f'{-point[8]:.3f} m{inside}')
         return None
 
-    def _observation(self, record: _Record, live: _Live, scan_updated: bool) -> Observation:
+    def _observation(self, record: _Record, scan_updated: bool) -> Observation:
+        live = record.live
+        assert live is not None
         robot = live.robot
         odometry = read_odometry(robot)
         range_finder = live.range_finder
+        time = record.ticks * record.config.control_period
         if range_finder is None:
             return Observation(
-                time=self.time, scan=record.scan, scan_updated=scan_updated,
+                time=time, scan=record.scan, scan_updated=scan_updated,
                 lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
                 goal=self._goal(record), in_contact=record.touching)
         return Observation(
-            time=self.time, scan=record.scan, scan_updated=scan_updated,
+            time=time, scan=record.scan, scan_updated=scan_updated,
             lidar=record.lidar_info, pose=odometry.pose, twist=odometry.twist,
             goal=self._goal(record), in_contact=record.touching,
             altitude=robot.altitude, climb_rate=robot.state.vz,
             range_down=range_finder.measure(), range_finder=range_finder.config)
 
     @staticmethod
-    def _support_height(environment: Environment, robot: Robot, layout: WorldLayout) -> float:
-        """Height (m) of the tallest low obstacle under the robot's footprint at the start
+    def _support_height(start: Pose2D, robot: Robot, layout: WorldLayout) -> float:
+        """Height (m) of the tallest low obstacle under the robot's footprint at ``start``
         (0 on bare ground): a flyer starts landed on it."""
-        start = environment.start
         x, y, radius = float(start.x), float(start.y), robot.footprint_radius
         support = 0.0
         for box in layout.obstacles:
@@ -810,9 +1020,9 @@ class Episode:
                 support = max(support, box.height)
         return support
 
-    def _blank_observation(self) -> Observation:
+    @staticmethod
+    def _blank_observation(record: _Record) -> Observation:
         """The observation of an episode that could not start: no returns, at the start."""
-        record = self._require_record()
         environment = record.environment
         try:
             start, goal = environment.start, environment.goal

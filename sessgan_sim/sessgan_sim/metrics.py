@@ -10,6 +10,10 @@
   event's start), or an agent driving into a robot that stood still or moved away (or shoving
   it into a wall or another agent), which is not the controller's fault.
   ``fault_collisions`` counts the first two.
+* In a fleet episode (several robots under test), a contact between two of them is the fault
+  of the one that moved into the other (``robot_into_robot``, by the same approach-speed rule;
+  both when both did) and not of the one standing or moving away (``robot_hit_by_robot``).
+  Each robot has its own metrics; the episode's (:func:`fleet_metrics`) add them up.
 * proximity_time: sim seconds with clearance (robot body to the nearest obstacle or
   agent) below the proximity distance while not in contact, sampled every control
   tick (each tick counts its whole period).
@@ -61,6 +65,14 @@ class ContactKind(enum.StrEnum):
     AGENT_INTO_ROBOT = 'agent_into_robot'
     """An agent drove into the robot standing still or moving away, or shoved it into
     something else (within CONTACT_DEBOUNCE of driving into it): not its fault."""
+    ROBOT_INTO_ROBOT = 'robot_into_robot'
+    """Fleets: the robot moved into another robot under test: its fault."""
+    ROBOT_HIT_BY_ROBOT = 'robot_hit_by_robot'
+    """Fleets: another robot under test drove into the robot standing still or moving away
+    (or shoved it into something): not its fault."""
+
+
+NOT_FAULT_KINDS = frozenset({ContactKind.AGENT_INTO_ROBOT, ContactKind.ROBOT_HIT_BY_ROBOT})
 
 
 class ContactEvent(NamedTuple):
@@ -73,16 +85,21 @@ class ContactEvent(NamedTuple):
     y: float
     kind: ContactKind
     agent: int
-    """Index of the agent touched; -1 for static obstacles."""
+    """Index of the agent touched; -1 for static obstacles and robots under test."""
+    robot: int = 0
+    """Fleets: index of the robot under test the event belongs to (r0, r1, ...)."""
+    other_robot: int = -1
+    """Fleets: index of the other robot under test touched; -1 for none."""
 
     @property
     def fault(self) -> bool:
         """Whether the robot under test caused it."""
-        return self.kind is not ContactKind.AGENT_INTO_ROBOT
+        return self.kind not in NOT_FAULT_KINDS
 
     def to_dict(self) -> dict[str, Any]:
         return {'time': self.time, 'x': self.x, 'y': self.y, 'kind': self.kind.value,
-                'agent': self.agent, 'fault': self.fault}
+                'agent': self.agent, 'fault': self.fault, 'robot': self.robot,
+                'other_robot': self.other_robot}
 
 
 def risk_score(collisions: int, proximity_time: float, simulation_time: float) -> float:
@@ -127,6 +144,10 @@ class EpisodeMetrics:
     robot_into_agent_collisions: int = 0
     agent_into_robot_collisions: int = 0
     """Agents driving into the robot: recorded, not its fault."""
+    robot_into_robot_collisions: int = 0
+    """Fleets: robots under test moving into another one (faults)."""
+    robot_hit_by_robot_collisions: int = 0
+    """Fleets: robots under test hit by another one: not their fault."""
     fault_risk_score: float = 0.0
     """fault_collisions x proximity_time / simulation_time."""
     contacts: tuple[ContactEvent, ...] = field(default=())
@@ -164,15 +185,18 @@ def is_controller_failure(metrics: Any) -> bool:
 class MetricsRecorder:
     """Accumulates an episode's metrics step by step."""
 
-    def __init__(self, clearance_range: float) -> None:
+    def __init__(self, clearance_range: float, robot: int = 0) -> None:
+        self.robot = robot
+        """Index of the robot under test whose metrics these are (fleets)."""
         self.proximity_time = 0.0
         self.min_clearance = clearance_range
         self.distance_travelled = 0.0
         self.ticks = 0
         self.invalid_commands = 0
         self.contacts: list[ContactEvent] = []
-        self._last_touch: dict[int, float] = {}
-        """Last time (s) each partner was touched; -1 = static obstacles, i = agent i."""
+        self._last_touch: dict[tuple[str, int], float] = {}
+        """Last time (s) each partner was touched: ('agent', -1) = static obstacles,
+        ('agent', i) = agent i, ('robot', j) = robot under test j."""
 
     @property
     def collisions(self) -> int:
@@ -183,14 +207,16 @@ class MetricsRecorder:
         return sum(1 for event in self.contacts if event.fault)
 
     def record_contact(self, time: float, partner: int, kind: ContactKind, x: float,
-                       y: float) -> bool:
-        """Record that the robot touches ``partner`` (-1 static, else an agent index) at
-        ``time`` s; True when this begins a new event (see CONTACT_DEBOUNCE)."""
-        last = self._last_touch.get(partner)
-        self._last_touch[partner] = time
+                       y: float, other_robot: int = -1) -> bool:
+        """Record that the robot touches ``partner`` (-1 static, else an agent index) or
+        robot under test ``other_robot`` at ``time`` s; True when this begins a new event
+        (see CONTACT_DEBOUNCE)."""
+        key = ('robot', other_robot) if other_robot >= 0 else ('agent', partner)
+        last = self._last_touch.get(key)
+        self._last_touch[key] = time
         if last is not None and time - last <= CONTACT_DEBOUNCE + 1e-9:
             return False
-        self.contacts.append(ContactEvent(time, x, y, kind, partner))
+        self.contacts.append(ContactEvent(time, x, y, kind, partner, self.robot, other_robot))
         return True
 
     def record_motion(self, distance: float) -> None:
@@ -229,6 +255,40 @@ class MetricsRecorder:
             static_collisions=kinds.count(ContactKind.STATIC),
             robot_into_agent_collisions=kinds.count(ContactKind.ROBOT_INTO_AGENT),
             agent_into_robot_collisions=kinds.count(ContactKind.AGENT_INTO_ROBOT),
+            robot_into_robot_collisions=kinds.count(ContactKind.ROBOT_INTO_ROBOT),
+            robot_hit_by_robot_collisions=kinds.count(ContactKind.ROBOT_HIT_BY_ROBOT),
             fault_risk_score=risk_score(faults, self.proximity_time, simulation_time),
             contacts=tuple(self.contacts),
         )
+
+
+def fleet_metrics(robots: list[EpisodeMetrics], outcome: Outcome | None, detail: str,
+                  failed_robot: int = -1) -> EpisodeMetrics:
+    """The metrics of a fleet episode from its robots' (r0 first): counts, proximity time and
+    distance added up, the risks computed from those sums over the episode's time (the
+    longest robot's), min_clearance the smallest, final_distance_to_goal the largest, the
+    contacts of every robot in time order; a leg per robot (legs_completed: the robots that
+    reached their goals, failed_leg: ``failed_robot``); ``outcome`` and ``detail`` the
+    fleet's."""
+    simulation_time = max(robot.simulation_time for robot in robots)
+    proximity = sum(robot.proximity_time for robot in robots)
+    collisions = sum(robot.collisions for robot in robots)
+    faults = sum(robot.fault_collisions for robot in robots)
+    summed = {name: sum(getattr(robot, name) for robot in robots) for name in (
+        'static_collisions', 'robot_into_agent_collisions', 'agent_into_robot_collisions',
+        'robot_into_robot_collisions', 'robot_hit_by_robot_collisions', 'invalid_commands',
+        'distance_travelled')}
+    return EpisodeMetrics(
+        collisions=collisions, proximity_time=proximity, simulation_time=simulation_time,
+        risk_score=risk_score(collisions, proximity, simulation_time),
+        feasible=all(robot.feasible for robot in robots),
+        min_clearance=min(robot.min_clearance for robot in robots),
+        final_distance_to_goal=max(robot.final_distance_to_goal for robot in robots),
+        ticks=max(robot.ticks for robot in robots), outcome=outcome, detail=detail,
+        fault_collisions=faults,
+        fault_risk_score=risk_score(faults, proximity, simulation_time),
+        contacts=tuple(sorted((event for robot in robots for event in robot.contacts),
+                              key=lambda event: (event.time, event.robot))),
+        legs=len(robots), legs_completed=sum(robot.legs_completed for robot in robots),
+        leg_times=tuple(time for robot in robots for time in robot.leg_times),
+        failed_leg=failed_robot, **summed)

@@ -172,6 +172,13 @@ class Robot(abc.ABC):
         return self._altitude
 
     @property
+    def vertical_extent(self) -> tuple[float, float]:
+        """Heights (m) of the body's underside and top above the ground now."""
+        half = float(self.params.height) / 2  # every model's params have a body height
+        centre = self.ride_height + self._altitude
+        return centre - half, centre + half
+
+    @property
     def scan_height(self) -> float:
         """Height (m) of the scan plane above the ground now."""
         return self._altitude + self.sensor_height

@@ -39,6 +39,7 @@ import bisect
 import enum
 import math
 import operator
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -310,6 +311,15 @@ class PlanarRayCaster:
                                  ranges)
         return ranges
 
+    def cut_circle(self, x: float, y: float, yaw: float, circle_x: float, circle_y: float,
+                   radius: float, ranges: np.ndarray) -> None:
+        """Lower ``ranges`` (a :meth:`cast` from the same viewpoint) to a circle of ``radius``
+        m centred at (circle_x, circle_y)."""
+        reference = yaw + self._angle_min - self._margin
+        directions = self._directions * math.cos(yaw)
+        directions += self._normals * math.sin(yaw)
+        self._cut_circle(circle_x - x, circle_y - y, radius, reference, directions, ranges)
+
     def _is_opaque(self, x: float, y: float) -> bool:
         col = math.floor((x - self._origin[0]) / self._resolution)
         row = math.floor((y - self._origin[1]) / self._resolution)
@@ -411,6 +421,7 @@ class Lidar:
         self._client = -1
         self._robot: Robot | None = None
         self._agents: DummyAgents | None = None
+        self._fleet: list[Robot] = []
         self._planar: PlanarRayCaster | None = None
         self._casters: dict[int, PlanarRayCaster] = {}
         self._levels: list[float] = []
@@ -421,13 +432,15 @@ class Lidar:
         self._ends: list[list[float]] = []
 
     def attach(self, client: int, robot: Robot, layout: WorldLayout,
-               agents: DummyAgents | None = None) -> None:
-        """Mount the lidar on ``robot``, spawned in ``layout``'s world (with ``agents``, when
-        they are to be seen): beams start at its centre at its sensor height and are cast in
-        its body frame."""
+               agents: DummyAgents | None = None, fleet: Sequence[Robot] = ()) -> None:
+        """Mount the lidar on ``robot``, spawned in ``layout``'s world (with ``agents`` and
+        the other robots under test of a ``fleet``, when they are to be seen): beams start
+        at its centre at its sensor height and are cast in its body frame. The planar caster
+        sees another robot as the circle around its footprint (footprint_radius)."""
         self._client = client
         self._robot = robot
         self._agents = agents
+        self._fleet = list(fleet)
         self._planar = None
         self._casters = {}
         if self.caster is RayCaster.PYBULLET:
@@ -483,6 +496,13 @@ class Lidar:
                                               agents.config.radius)
             else:
                 distances = self._planar.cast(state.x, state.y, state.yaw)
+            for other in self._fleet:
+                # Another robot is seen where the scan plane passes through its body.
+                bottom, top = other.vertical_extent
+                if bottom <= scan_height <= top:
+                    other_state = other.state
+                    self._planar.cut_circle(state.x, state.y, state.yaw, other_state.x,
+                                            other_state.y, other.footprint_radius, distances)
             missed = distances >= config.range_max
             ranges = np.minimum(distances, config.range_max)
         else:
@@ -701,6 +721,7 @@ class ClearanceSensor:
         # Until told (set_agent_heights), agents span every height: no vertical gap.
         self._agent_centre = 0.0
         self._agent_half_height = math.inf
+        self._fleet: list[Robot] = []
         if self.footprint is not None:
             bottom = self.footprint.bottom
             boxes = np.array([(box.x_min, box.y_min, box.x_max, box.y_max, box.height)
@@ -718,9 +739,11 @@ class ClearanceSensor:
                 agent_radius: float) -> float:
         """Clearance in metres: 0 when touching, ``range`` when nothing is within range."""
         if self.footprint is not None:
-            return self._measure_analytic(agent_positions, agent_radius, self.footprint)
+            clearance = self._measure_analytic(agent_positions, agent_radius, self.footprint)
+            return self._fleet_clearance(clearance, self.footprint) if self._fleet else clearance
         x, y = self._robot.position
         candidates = self._layout.obstacles_near(x, y, self._reach)
+        candidates += [other.body_id for other in self._fleet]
         if agent_ids:
             gaps = np.hypot(agent_positions[:, 0] - x, agent_positions[:, 1] - y)
             near = np.flatnonzero(gaps <= self._reach + agent_radius)
@@ -733,10 +756,36 @@ class ClearanceSensor:
                     clearance = point[8]
         return max(clearance, 0.0)
 
+    def set_fleet(self, fleet: Sequence[Robot]) -> None:
+        """The other robots under test of a fleet episode: their bodies count as obstacles
+        (analytically: the circle around each footprint, between its underside and top)."""
+        self._fleet = list(fleet)
+
     def set_agent_heights(self, centre: float, height: float) -> None:
         """Where the agents fly: their centres ``centre`` m above the ground, ``height`` m
         tall (analytic clearance; pybullet's knows the bodies)."""
         self._agent_centre, self._agent_half_height = centre, height / 2
+
+    def _fleet_clearance(self, clearance: float, footprint: Footprint) -> float:
+        """``clearance`` lowered to the distance to the nearest other robot of the fleet."""
+        robot = self._robot
+        state = robot.state
+        bottom, top = robot.vertical_extent
+        rectangle = (None if footprint.radius > 0.0 else
+                     _Rectangle(state.x, state.y, state.yaw, footprint.half_length,
+                                footprint.half_width))
+        for other in self._fleet:
+            other_x, other_y = other.position
+            if rectangle is None:
+                horizontal = (math.hypot(other_x - state.x, other_y - state.y)
+                              - footprint.radius - other.footprint_radius)
+            else:
+                horizontal = (rectangle.distance_to_point(other_x, other_y)
+                              - other.footprint_radius)
+            other_bottom, other_top = other.vertical_extent
+            vertical = max(other_bottom - top, bottom - other_top, 0.0)
+            clearance = min(clearance, math.hypot(max(horizontal, 0.0), vertical))
+        return clearance
 
     def _boxes_near(self, x: float, y: float) -> list[tuple[float, float, float, float, float]]:
         """Boxes (x_min, y_min, x_max, y_max, height) within reach of a body

@@ -69,8 +69,9 @@ SCAN_RAY_MASK = int(CollisionGroup.OBSTACLE | CollisionGroup.AGENT | CollisionGr
 """Mask of lidar rays. Obstacle boxes are hit only in a world without a scan surface, the
 only one where their own mask holds RAY (:attr:`WorldStyle.scan_surface`)."""
 
-ROBOT_MASK = int(CollisionGroup.OBSTACLE | CollisionGroup.AGENT)
-"""Mask of the robot under test: it touches obstacles and agents, nothing else."""
+ROBOT_MASK = int(CollisionGroup.OBSTACLE | CollisionGroup.AGENT | CollisionGroup.ROBOT)
+"""Mask of the robot under test: it touches obstacles, agents and the other robots under
+test of a fleet, nothing else."""
 
 GROUND_THICKNESS = 0.1
 """m, thickness of the ground slab under the map."""

@@ -43,7 +43,8 @@ def test_contact_events_are_debounced_per_partner():
     assert [event.kind for event in recorder.contacts] == [static, static,
                                                            ContactKind.AGENT_INTO_ROBOT]
     assert recorder.contacts[0].to_dict() == {'time': 1.0, 'x': 1.0, 'y': 2.0, 'kind': 'static',
-                                              'agent': -1, 'fault': True}
+                                              'agent': -1, 'fault': True, 'robot': 0,
+                                              'other_robot': -1}
 
 
 def test_proximity_time_counts_only_close_ticks_without_contact():

@@ -23,6 +23,7 @@ import numpy as np
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import BagExportError
 from sessgan_gen.environment import Environment
+from sessgan_gen.fleet import fleet_to_json
 from sessgan_gen.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
 from sessgan_sim.bag_recording import BagRecord, jazzy_typestore, write_episode_bag
@@ -192,6 +193,7 @@ def write_trace_bag(directory: str | Path, environment: Environment, trace: Epis
     facts.setdefault('route_min_clearance', environment.route_min_clearance)
     facts.setdefault('stations', [[pose.x, pose.y, pose.yaw] for pose in environment.stations])
     facts.setdefault('dwell_time', environment.dwell_time)
+    facts.setdefault('fleet', fleet_to_json(environment.fleet))
     facts.setdefault('namespace', '')
     facts['trace'] = trace.summary()
     return write_episode_bag(directory, trace_records(environment, trace), facts,

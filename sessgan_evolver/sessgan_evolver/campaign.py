@@ -38,7 +38,8 @@ from sessgan_evolver.seeding import SeedStream, shared_seeds
 from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
-from sessgan_gen.errors import InvalidMissionError
+from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
+from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
@@ -119,6 +120,9 @@ class CampaignConfig:
     certified (0..16); 0: plain start -> goal episodes."""
     station_dwell_time: float = DEFAULT_DWELL_TIME
     """[2.0] Sim seconds the robot stands still at each mission station (loading)."""
+    robots: int = 1
+    """[1] Robots under test on every map (a fleet episode: robots r1, r2, ... drawn beside
+    the map's own start and goal, each route certified), 1..8; 1: one robot."""
     fitness: FitnessConfig = field(default_factory=FitnessConfig)
 
     def validate(self) -> None:
@@ -126,6 +130,10 @@ class CampaignConfig:
         try:
             self.mission()
         except InvalidMissionError as err:
+            raise CampaignError(str(err)) from err
+        try:
+            self.fleet()
+        except InvalidFleetError as err:
             raise CampaignError(str(err)) from err
         for name in ('generations', 'population', 'maps_per_member', 'workers'):
             if getattr(self, name) < 1:
@@ -176,6 +184,10 @@ class CampaignConfig:
     def mission(self) -> MissionSpec:
         """The mission every map gets (validated: InvalidMissionError names the option)."""
         return MissionSpec(self.mission_stations, self.station_dwell_time).validate()
+
+    def fleet(self) -> FleetSpec:
+        """The robots every map gets (validated: InvalidFleetError names the option)."""
+        return FleetSpec(self.robots).validate(self.mission_stations)
 
     def resolved_time_limit(self) -> float:
         return self.time_limit or get_scenario(self.scenario).time_limit

@@ -230,6 +230,12 @@ class RosEvaluator:
                     f'{environment.id}, the campaign asks for {stations}: a generator already '
                     f'running under {GENERATOR_NAMESPACE} has its own mission_stations '
                     'parameter; stop it or start it with the same one')
+            if environment.feasible and environment.robots != self.config.robots:
+                raise CampaignError(
+                    f'the generator drew {environment.robots} robots on {environment.id}, the '
+                    f'campaign asks for {self.config.robots}: a generator already running '
+                    f'under {GENERATOR_NAMESPACE} has its own robots parameter; stop it or '
+                    'start it with the same one')
         return environments
 
     def generator_died(self, attempt: int) -> bool:
@@ -427,7 +433,8 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
             'ros2', 'run', 'sessgan_gen', 'generator', '--ros-args',
             '-r', f'__ns:={GENERATOR_NAMESPACE}', '-p', f'scenario:={config.scenario}',
             '-p', 'rate:=0.0', '-p', f'mission_stations:={config.mission_stations}',
-            '-p', f'station_dwell_time:={float(config.station_dwell_time)}'])
+            '-p', f'station_dwell_time:={float(config.station_dwell_time)}',
+            '-p', f'robots:={config.robots}'])
     if config.external:
         return generator
     from sessgan_controllers.registry import CONTROLLERS

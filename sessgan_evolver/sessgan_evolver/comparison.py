@@ -58,7 +58,8 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
-from sessgan_gen.errors import InvalidMissionError
+from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
+from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
@@ -108,12 +109,20 @@ class CompareConfig:
     each leg certified (0..16); 0: plain start -> goal episodes."""
     station_dwell_time: float = DEFAULT_DWELL_TIME
     """[2.0] Sim seconds the robot stands still at each mission station."""
+    robots: int = 1
+    """[1] Robots under test on every map of every method (a fleet episode: robots r1, r2,
+    ... drawn beside the map's own start and goal, each route certified), 1..8; 1: one
+    robot."""
 
     def validate(self) -> None:
         get_scenario(self.scenario)
         try:
             self.mission()
         except InvalidMissionError as err:
+            raise CompareError(str(err)) from err
+        try:
+            self.fleet()
+        except InvalidFleetError as err:
             raise CompareError(str(err)) from err
         unknown = [m for m in self.methods if m not in METHODS]
         if unknown or not self.methods:
@@ -141,6 +150,10 @@ class CompareConfig:
         """The mission every map gets (validated: InvalidMissionError names the option)."""
         return MissionSpec(self.mission_stations, self.station_dwell_time).validate()
 
+    def fleet(self) -> FleetSpec:
+        """The robots every map gets (validated: InvalidFleetError names the option)."""
+        return FleetSpec(self.robots).validate(self.mission_stations)
+
     def campaign_config(self, seed: int) -> CampaignConfig:
         return CampaignConfig(
             scenario=self.scenario, population=self.population,
@@ -148,6 +161,7 @@ class CompareConfig:
             controller=self.controller, time_limit=self.time_limit,
             seed_schedule=self.seed_schedule, record_failures=False,
             mission_stations=self.mission_stations, station_dwell_time=self.station_dwell_time,
+            robots=self.robots,
             fitness=FitnessConfig())
 
     def ga_config(self) -> GAConfig:

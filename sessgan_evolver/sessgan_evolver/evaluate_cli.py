@@ -40,7 +40,9 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter
 from sessgan_gen.scenarios import get_scenario
@@ -79,6 +81,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser.add_argument('--station-dwell-time', type=float, default=DEFAULT_DWELL_TIME,
                         help='sim seconds the robot stands still at each mission station '
                              f'(default {DEFAULT_DWELL_TIME})')
+    parser.add_argument('--robots', type=int, default=1,
+                        help='robots under test on every fresh map (a fleet episode: robots '
+                             "r1, r2, ... beside the map's own start and goal, each route "
+                             f'certified; 1..{MAX_ROBOTS}; default 1: one robot)')
     parser.add_argument('--simulate-invalid', action='store_true',
                         help='also simulate maps without a certified route')
     parser.add_argument('--fault-records', type=int, default=0,
@@ -126,6 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         scenario = scenario or 'factory'
         get_scenario(scenario)
         mission = MissionSpec(args.mission_stations, args.station_dwell_time).validate()
+        FleetSpec(args.robots).validate(mission.stations)
         runs = list(args.run) + list(args.exclude_run)
         map_seeds, sim_seeds = used_seeds(runs)
         plan = fresh_seed_plan(args.seed, args.episodes, map_seeds, sim_seeds)

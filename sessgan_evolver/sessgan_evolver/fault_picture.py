@@ -4,7 +4,9 @@ The map (free white, low obstacles grey, walls black), the certified route from 
 goal (the taut route of the route certificate, dashed blue), the robot's trajectory (orange,
 start circle, end square), the agents' paths (thin purple, their last positions as discs),
 every contact the robot caused (red x; agents driving into it: grey x) with the first fault
-event circled, and the coarse cell that keys the fault (red frame).
+event circled, and the coarse cell that keys the fault (red frame). A fleet episode's other
+robots r1, r2, ... show their start (circle), goal (star) and certified route (dashed), each
+in its own colour and labelled; the robot under test is then labelled r0.
 
 :func:`scene_from_bag` reads all of it from a failure bag: the map from ``/map``, the
 trajectory from ``/odom``, contacts from episode.json's metrics, agents from its trace (a
@@ -31,7 +33,13 @@ from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json  # 
 from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
 from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
 from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
-from sessgan_gen.navigation import certify_environment, certify_mission  # noqa: E402
+from sessgan_gen.fleet import fleet_from_json  # noqa: E402
+from sessgan_gen.navigation import (  # noqa: E402
+    certify_environment,
+    certify_fleet,
+    certify_mission,
+)
+from sessgan_gen.route_certificate import RouteCertificate  # noqa: E402
 from sessgan_sim.bag_recording import jazzy_typestore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -66,12 +74,46 @@ class FaultScene:
     """A short title for small pictures (default: the fault's kind)."""
     stations: list[tuple[float, float]] = field(default_factory=list)
     """A mission's stations, in visiting order (``goal`` is then home)."""
+    fleet: list[FleetMember] = field(default_factory=list)
+    """A fleet episode's robots r1, r2, ... (empty: one robot under test)."""
+
+
+@dataclass
+class FleetMember:
+    """One more robot of a fleet episode, as drawn: start, goal, certified route."""
+
+    start: tuple[float, float]
+    goal: tuple[float, float]
+    route: np.ndarray
+    """(n, 2) corners of its certified route (empty: none)."""
+
+
+FLEET_COLOURS = ('#e377c2', '#8c564b', '#bcbd22', '#9467bd', '#393b79', '#637939', '#843c39')
+"""Robots r1..r7 (apart from the route, trajectory, start, agent and contact colours)."""
+
+
+def _corners(route: RouteCertificate | None) -> np.ndarray:
+    if route is None:
+        return np.zeros((0, 2))
+    return np.asarray(route.points, dtype=float).reshape(-1, 2)
+
+
+def fleet_members(environment: Environment) -> list[FleetMember]:
+    """Robots r1, r2, ... of a fleet environment with their certified routes (each among the
+    other robots parked on their goals, sessgan_gen.fleet)."""
+    if not environment.fleet:
+        return []
+    routes = certify_fleet(environment)[1:]
+    return [FleetMember((robot.start.x, robot.start.y), (robot.goal.x, robot.goal.y),
+                        _corners(route)) for robot, route in zip(environment.fleet, routes)]
 
 
 def certified_route(environment: Environment) -> np.ndarray:
     """Corners (n, 2) of the taut certified route of an environment's own start and goal
-    (sessgan_gen.navigation.certify_environment), through every leg of a mission; empty when
-    there is none (or a leg has none)."""
+    (sessgan_gen.navigation.certify_environment), through every leg of a mission, among the
+    other robots of a fleet; empty when there is none (or a leg has none)."""
+    if environment.fleet:
+        return _corners(certify_fleet(environment)[0])
     legs = (certify_mission(environment) if environment.stations
             else [certify_environment(environment)])
     if not legs or any(leg is None for leg in legs):
@@ -104,7 +146,8 @@ def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[
         environment.origin, start, goal, trajectory, np.asarray(trace.agents), contacts,
         certified_route(environment), fault, rule or FaultRule(),
         title or default_title(metrics, fault), fault_place(contacts, trajectory),
-        stations=[(pose.x, pose.y) for pose in environment.stations])
+        stations=[(pose.x, pose.y) for pose in environment.stations],
+        fleet=fleet_members(environment))
 
 
 def default_title(metrics: dict[str, Any], fault: FaultKey | None,
@@ -146,7 +189,8 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
     environment = Environment(str(episode.get('environment_id', bag.name)), scenario,
                               occupancy, resolution, Pose2D(*start[:3]), Pose2D(*goal[:3]),
                               origin, stations=tuple(Pose2D(*station[:3])
-                                                     for station in episode.get('stations', ())))
+                                                     for station in episode.get('stations', ())),
+                              fleet=fleet_from_json(episode.get('fleet')))
     trace = episode.get('trace') or {}
     if not trajectory and trace.get('robot'):
         trajectory = [tuple(row[:2]) for row in trace['robot']]
@@ -163,7 +207,8 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
         np.asarray(trace.get('agents') or np.zeros((0, 0, 2)), dtype=float), contacts,
         certified_route(environment), fault, rule,
         default_title(metrics, fault, str(episode.get('controller', ''))),
-        fault_place(contacts, path), stations=[(pose.x, pose.y) for pose in environment.stations])
+        fault_place(contacts, path), stations=[(pose.x, pose.y) for pose in environment.stations],
+        fleet=fleet_members(environment))
 
 
 def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool = False
@@ -190,6 +235,19 @@ def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool 
         axis.plot(*scene.trajectory[-1], 's', color='#ff7f0e', markersize=6)
     axis.plot(*scene.start, 'o', color='#2ca02c', markersize=8, markeredgecolor='black',
               label='start')
+    if scene.fleet:
+        axis.annotate('r0', scene.start, textcoords='offset points', xytext=(5, 5), fontsize=8)
+    for number, member in enumerate(scene.fleet, 1):
+        colour = FLEET_COLOURS[(number - 1) % len(FLEET_COLOURS)]
+        if len(member.route):
+            axis.plot(member.route[:, 0], member.route[:, 1], '--', color=colour,
+                      linewidth=1.2)
+        axis.plot(*member.start, 'o', color=colour, markersize=7, markeredgecolor='black',
+                  label=f'robot r{number}')
+        axis.plot(*member.goal, '*', color=colour, markersize=11, markeredgecolor='black')
+        for place in (member.start, member.goal):
+            axis.annotate(f'r{number}', place, textcoords='offset points', xytext=(5, 5),
+                          fontsize=8)
     axis.plot(*scene.goal, '*', color='#2ca02c', markersize=13, markeredgecolor='black',
               label='home' if scene.stations else 'goal')
     for number, station in enumerate(scene.stations, 1):

@@ -122,6 +122,7 @@ def replay(args, episode) -> int:
 
 def bag_environment(bag: Path, episode: dict):
     from sessgan_gen.environment import Environment, Pose2D
+    from sessgan_gen.fleet import fleet_from_json
     from sessgan_gen.map_server_io import read_map_server
 
     occupancy, resolution, origin = read_map_server(bag / 'map.yaml')
@@ -134,7 +135,8 @@ def bag_environment(bag: Path, episode: dict):
         route_length=float(episode.get('route_length', 0.0)),
         route_min_clearance=float(episode.get('route_min_clearance', 0.0)),
         stations=tuple(Pose2D(*pose) for pose in episode.get('stations', ())),
-        dwell_time=float(episode.get('dwell_time', 0.0)))
+        dwell_time=float(episode.get('dwell_time', 0.0)),
+        fleet=fleet_from_json(episode.get('fleet')))
 
 
 def resimulate(args, episode: dict) -> int:

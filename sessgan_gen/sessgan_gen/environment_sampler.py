@@ -18,6 +18,7 @@ from sessgan_gen.checkpoint import (
 )
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
 from sessgan_gen.errors import CheckpointError, SamplingRequestError
+from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import MissionSpec
 from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.navigation import make_environment
@@ -89,7 +90,8 @@ class EnvironmentSampler:
                scenario: str | None = None, size: tuple[int, int] | None = None,
                generation: int = -1, member: int = -1,
                mission: MissionSpec | None = None,
-               post_process: bool = True) -> list[Environment]:
+               post_process: bool = True,
+               fleet: FleetSpec | None = None) -> list[Environment]:
         """One Environment per seed; map i depends only on seeds[i] and the weights.
 
         ``size`` is (height, width) in cells; None or zeros mean the scenario's default.
@@ -97,8 +99,10 @@ class EnvironmentSampler:
         start -> goal episodes.
         ``post_process``: apply the scenario's ``track_cleanup`` (sessgan_gen.track_cleanup)
         to every map, when it has one (the race track); False gives the generator's raw maps.
+        ``fleet``: robots under test on each map (sessgan_gen.fleet); None: one.
         """
         mission = (mission or MissionSpec()).validate()
+        fleet = (fleet or FleetSpec()).validate(mission.stations)
         if scenario:
             get_scenario(scenario)  # UnknownScenarioError names the known ones
         if len(seeds) > MAX_SEEDS_PER_REQUEST:
@@ -132,7 +136,7 @@ class EnvironmentSampler:
         return [
             make_environment(cells, spec, environment_id(spec.name, generation, member, int(seed)),
                              seed=int(seed), generation=generation, member=member,
-                             mission=mission)
+                             mission=mission, fleet=fleet)
             for cells, seed in zip(maps, seeds)
         ]
 

@@ -32,3 +32,8 @@ class SamplingRequestError(SessganGenError, ValueError):
 class InvalidMissionError(SessganGenError, ValueError):
     """A mission request that cannot be served: a negative or absurd number of stations, a
     negative or non-finite dwell time."""
+
+
+class InvalidFleetError(SessganGenError, ValueError):
+    """A fleet request that cannot be served: a robot count outside 1..MAX_ROBOTS, or a fleet
+    with mission stations."""

@@ -8,6 +8,8 @@ Serves ``generate_environments`` (sessgan_interfaces/GenerateEnvironments).
 
 With ``mission_stations`` > 0 every environment is a pick-up -> place mission: that many
 stations drawn from the map seed before home, every leg certified (sessgan_gen.missions).
+With ``robots`` > 1 every environment is a fleet episode: robots r1, r2, ... with their own
+start, goal and certified route beside the environment's own (sessgan_gen.fleet).
 """
 
 from __future__ import annotations
@@ -19,8 +21,10 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MAX_MISSION_STATIONS, MissionSpec
 from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import environment_to_msg
@@ -53,6 +57,11 @@ class GeneratorNode(Node):
         self.mission = MissionSpec(
             self.get_parameter('mission_stations').value,
             self.get_parameter('station_dwell_time').value).validate()
+        self.declare_parameter('robots', 1, ParameterDescriptor(
+            description=f'Robots under test on every map (a fleet episode), 1..{MAX_ROBOTS}; '
+                        f'1: one robot'))
+        self.fleet = FleetSpec(self.get_parameter('robots').value).validate(
+            self.mission.stations)
         self.sampler = EnvironmentSampler(
             device=self.get_parameter('device').value,
             max_cells_per_request=int(self.get_parameter('max_cells_per_request').value))
@@ -76,7 +85,7 @@ class GeneratorNode(Node):
         try:
             environment = self.sampler.sample(
                 [self.next_seed], self.get_parameter('checkpoint').value, scenario, size,
-                mission=self.mission)[0]
+                mission=self.mission, fleet=self.fleet)[0]
         except (SessganGenError, ValueError) as err:
             self.get_logger().error(f'cannot generate an environment: {err}')
             self.timer.cancel()
@@ -96,7 +105,8 @@ class GeneratorNode(Node):
         try:
             environments = self.sampler.sample(
                 list(request.seeds), checkpoint, scenario, (request.height, request.width),
-                generation=request.generation, member=request.member, mission=self.mission)
+                generation=request.generation, member=request.member, mission=self.mission,
+                fleet=self.fleet)
         except (SessganGenError, ValueError, RuntimeError) as err:
             response.success = False
             response.message = str(err)

@@ -24,7 +24,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.environment import Environment, FleetRobot, Pose2D
+from sessgan_gen.fleet import FleetSpec, certify_robots, place_fleet
 from sessgan_gen.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
 from sessgan_gen.missions import MissionSpec, certify_legs, place_mission
 from sessgan_gen.route_certificate import (
@@ -182,9 +183,23 @@ def certify_mission(environment: Environment) -> list[RouteCertificate | None]:
                         resolve_scenario(environment.scenario), points)
 
 
+def certify_fleet(environment: Environment) -> list[RouteCertificate | None]:
+    """The certificate of every robot's route, r0 (start -> goal) first, each with the other
+    robots parked on their goals (sessgan_gen.fleet); None for a robot without one.
+    Recomputed from the grid like :func:`certify_environment`."""
+    robots = [((environment.start.x, environment.start.y),
+               (environment.goal.x, environment.goal.y))]
+    robots += [((robot.start.x, robot.start.y), (robot.goal.x, robot.goal.y))
+               for robot in environment.fleet]
+    return certify_robots(environment.occupancy, environment.resolution, environment.origin,
+                          resolve_scenario(environment.scenario), robots)
+
+
 def environment_is_feasible(environment: Environment) -> bool:
     """Whether every leg of an Environment's mission (for a plain episode: start to goal) has
-    a certified route."""
+    a certified route; for a fleet, every robot's route among the others parked."""
+    if environment.fleet:
+        return all(route is not None for route in certify_fleet(environment))
     if not environment.stations:
         return certify_environment(environment) is not None
     return all(leg is not None for leg in certify_mission(environment))
@@ -220,7 +235,8 @@ def most_open_cell(cells: np.ndarray, scenario: ScenarioLike) -> Cell:
 
 def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str,
                      seed: int = 0, generation: int = -1, member: int = -1,
-                     mission: MissionSpec | None = None) -> Environment:
+                     mission: MissionSpec | None = None,
+                     fleet: FleetSpec | None = None) -> Environment:
     """Build the Environment of a token map: occupancy, start, goal and route certificate.
 
     Resolution is the scenario's cell size (metres per cell) and the origin (0, 0), so cell
@@ -235,9 +251,17 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
     ``route_min_clearance`` the tightest leg's (``extra['leg_route_lengths']`` per leg). An
     infeasible mission keeps no stations. Without stations the Environment is the plain
     episode's, exactly.
+
+    ``fleet`` (sessgan_gen.fleet) asks for more robots under test: robots r1, r2, ... are
+    drawn from the seed around the plain episode's start and goal (robot r0's), every route
+    certified with the other robots parked on their goals; ``route_length`` is then r0's
+    route among them and ``route_min_clearance`` the tightest robot's. A map that cannot
+    hold them all is not feasible (``extra['rejection']`` and ``extra['rejection_detail']``)
+    and keeps no fleet. With one robot the Environment is the plain episode's, exactly.
     """
     spec: Scenario = resolve_scenario(scenario_name)
     mission = (mission or MissionSpec()).validate()
+    fleet = (fleet or FleetSpec()).validate(mission.stations)
     array = check_cells(cells, spec)
     occupancy = tokens_to_occupancy(array, spec)
     resolution = spec.cell_size
@@ -258,9 +282,20 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
         length, bottleneck = drawn.route_length, drawn.bottleneck_clearance
         if stations:
             extra['leg_route_lengths'] = [leg.length for leg in drawn.legs]
+    robots: tuple[FleetRobot, ...] = ()
+    if feasible and fleet.robots > 1:
+        placed = place_fleet(placement, spec, seed, fleet)
+        if placed.rejection:
+            feasible = False
+            extra['rejection'] = placed.rejection
+            extra['rejection_detail'] = placed.detail
+        else:
+            robots = placed.robots()
+            length = placed.routes[0].length
+            bottleneck = min(route.bottleneck_clearance for route in placed.routes)
     return Environment(
         id=env_id, scenario=spec.name, occupancy=occupancy, resolution=resolution,
         start=start, goal=goal, origin=(0.0, 0.0), seed=seed, generation=generation,
         member=member, feasible=feasible, route_length=length,
         route_min_clearance=bottleneck, extra=extra, stations=stations,
-        dwell_time=float(mission.dwell_time) if stations else 0.0)
+        dwell_time=float(mission.dwell_time) if stations else 0.0, fleet=robots)

@@ -8,7 +8,7 @@ import numpy as np
 from geometry_msgs.msg import Pose
 from nav_msgs.msg import OccupancyGrid
 
-from sessgan_gen.environment import Environment, Pose2D, check_grid_size
+from sessgan_gen.environment import Environment, FleetRobot, Pose2D, check_grid_size
 from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
@@ -85,7 +85,24 @@ def environment_to_msg(environment: Environment, stamp=None) -> EnvironmentMsg:
     msg.route_min_clearance = float(environment.route_min_clearance)
     msg.stations = [pose_to_msg(station) for station in environment.stations]
     msg.dwell_time = float(environment.dwell_time)
+    msg.fleet_starts = [pose_to_msg(robot.start) for robot in environment.fleet]
+    msg.fleet_goals = [pose_to_msg(robot.goal) for robot in environment.fleet]
+    msg.fleet_route_lengths = [float(robot.route_length) for robot in environment.fleet]
     return msg
+
+
+def fleet_from_msg(msg: EnvironmentMsg) -> tuple[FleetRobot, ...]:
+    """Robots r1, r2, ... of a message's three parallel fleet arrays; InvalidEnvironmentError
+    when their lengths differ (one entry per robot in each)."""
+    lengths = (len(msg.fleet_starts), len(msg.fleet_goals), len(msg.fleet_route_lengths))
+    if len(set(lengths)) != 1:
+        raise InvalidEnvironmentError(
+            f'environment {msg.id!r}: fleet_starts, fleet_goals and fleet_route_lengths must '
+            f'have one entry per fleet robot each, got {lengths[0]}, {lengths[1]} and '
+            f'{lengths[2]}')
+    return tuple(FleetRobot(pose_from_msg(start), pose_from_msg(goal), float(length))
+                 for start, goal, length in zip(msg.fleet_starts, msg.fleet_goals,
+                                                msg.fleet_route_lengths))
 
 
 def environment_from_msg(msg: EnvironmentMsg) -> Environment:
@@ -98,6 +115,6 @@ def environment_from_msg(msg: EnvironmentMsg) -> Environment:
         feasible=bool(msg.feasible), route_length=float(msg.route_length),
         route_min_clearance=float(msg.route_min_clearance),
         stations=tuple(pose_from_msg(station) for station in msg.stations),
-        dwell_time=float(msg.dwell_time))
+        dwell_time=float(msg.dwell_time), fleet=fleet_from_msg(msg))
     environment.validate()
     return environment

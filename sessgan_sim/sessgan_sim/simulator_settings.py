@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, get_type_hints
 
-from sessgan_gen.errors import InvalidMissionError, SessganGenError
+from sessgan_gen.errors import InvalidFleetError, InvalidMissionError, SessganGenError
+from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.json_data import to_json_data
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
@@ -146,6 +147,10 @@ class SimulatorSettings:
     0: plain start -> goal episodes. The evaluate action's environments bring their own."""
     station_dwell_time: float = DEFAULT_DWELL_TIME
     """Free mode: sim seconds the robot stands still at each station (loading)."""
+    robots: int = 1
+    """Free mode: robots under test on every map (a fleet episode: r1, r2, ... drawn beside
+    the map's own start and goal); 1: one robot. The evaluate action's environments bring
+    their own fleet."""
     record_directory: str = ''
     """Free mode: directory for failure bags; empty: none."""
     bag_storage: str = BagStorage.MCAP.value
@@ -202,6 +207,10 @@ class SimulatorSettings:
         try:
             self.mission()
         except InvalidMissionError as err:
+            raise InvalidConfigError(f'parameter {err}') from err
+        try:
+            self.fleet()
+        except InvalidFleetError as err:
             raise InvalidConfigError(f'parameter {err}') from err
         if self.dummy_agents < -1:
             raise InvalidConfigError(f"parameter 'dummy_agents' must be >= 0, or -1 for the "
@@ -260,6 +269,10 @@ class SimulatorSettings:
     def mission(self) -> MissionSpec:
         """The free-mode mission, validated (InvalidMissionError names the parameter)."""
         return MissionSpec(self.mission_stations, self.station_dwell_time).validate()
+
+    def fleet(self) -> FleetSpec:
+        """The free-mode fleet, validated (InvalidFleetError names the parameter)."""
+        return FleetSpec(self.robots).validate(self.mission_stations)
 
     @property
     def step_mode(self) -> StepMode:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from sessgan_gen.fleet import fleet_to_json
 from sessgan_sim.bag_recording import (
     BagWriteError,
     episode_bag_directory,
@@ -47,7 +48,7 @@ def write_failure_bag(record_directory: str, environment, config, metrics,
         'feasible': environment.feasible, 'route_length': environment.route_length,
         'route_min_clearance': environment.route_min_clearance, 'namespace': facts.namespace,
         'stations': [[pose.x, pose.y, pose.yaw] for pose in environment.stations],
-        'dwell_time': environment.dwell_time,
+        'dwell_time': environment.dwell_time, 'fleet': fleet_to_json(environment.fleet),
         'mode': facts.settings.mode,
         'sim_time_origin': facts.sim_time_origin_ns / 1e9,
         'sim_time_origin_ns': int(facts.sim_time_origin_ns),

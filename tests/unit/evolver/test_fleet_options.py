@@ -1,0 +1,98 @@
+"""How users ask for fleets (--robots, the robots parameter), and fleets in episode.json, the
+replayed environment and the fault picture."""
+
+import json
+
+import pytest
+
+from sessgan_evolver.bag_export import write_trace_bag
+from sessgan_evolver.bag_reading import read_episode_json
+from sessgan_evolver.episode_runner import EpisodeRunner
+from sessgan_evolver.fault_picture import (
+    FLEET_COLOURS,
+    fleet_members,
+    scene_from_bag,
+    write_scene_png,
+)
+from sessgan_gen.environment import MAX_ROBOTS
+from sessgan_gen.fleet import FleetSpec
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.token_map import load_example_map
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.fixture(scope='module')
+def fleet():
+    environment = make_environment(load_example_map('factory').cells, 'factory',
+                                   'factory-fleet', seed=0, fleet=FleetSpec(3))
+    assert environment.feasible and environment.robots == 3
+    return environment
+
+
+def test_campaigns_and_comparisons_ask_for_fleets_through_one_validated_spec():
+    from sessgan_evolver.campaign import CampaignConfig
+    from sessgan_evolver.comparison import CompareConfig
+    from sessgan_evolver.errors import CampaignError, CompareError
+
+    with pytest.raises(CampaignError, match='robots .*got 0'):
+        CampaignConfig(robots=0).validate()
+    with pytest.raises(CampaignError, match=f'1..{MAX_ROBOTS}'):
+        CampaignConfig(robots=MAX_ROBOTS + 1).validate()
+    with pytest.raises(CampaignError, match='mission_stations'):
+        CampaignConfig(robots=2, mission_stations=1).validate()
+    config = CampaignConfig(robots=4)
+    config.validate()
+    assert config.fleet() == FleetSpec(4)
+    with pytest.raises(CompareError, match='robots'):
+        CompareConfig(robots=-2).validate()
+    compare = CompareConfig(robots=2)
+    compare.validate()
+    assert compare.campaign_config(seed=3).robots == 2
+
+
+def test_the_command_lines_take_robots():
+    from sessgan_evolver.compare_cli import parse_args as compare_args
+    from sessgan_evolver.evaluate_cli import parse_args as evaluate_args
+
+    assert evaluate_args(['--robots', '3']).robots == 3
+    assert evaluate_args([]).robots == 1
+    assert compare_args(['--robots', '2']).robots == 2
+    campaign_cli = pytest.importorskip('sessgan_evolver.campaign_cli')
+    assert campaign_cli.parse_args(['--robots', '5']).robots == 5
+
+
+def test_a_fleet_survives_episode_json_and_replay(fleet, tmp_path):
+    with EpisodeRunner('factory', 'reference_navigator', time_limit=0.5) as runner:
+        run = runner.run(fleet, seed=1, trace=True, keep_scans=True)
+    bag = write_trace_bag(tmp_path / 'bag', fleet, run.trace, {
+        'controller': 'nav',
+        'metrics': {k: v for k, v in run.metrics.items() if k != 'bag_path'}})
+    episode = read_episode_json(bag)
+    assert episode is not None
+    assert json.loads(json.dumps(episode['fleet'])) == episode['fleet']
+    assert len(episode['fleet']) == 2
+
+    replay_cli = pytest.importorskip('sessgan_evolver.replay_cli')
+    replayed = replay_cli.bag_environment(bag, episode)
+    assert replayed.fleet == fleet.fleet
+    old = {key: value for key, value in episode.items() if key != 'fleet'}  # before fleets
+    assert replay_cli.bag_environment(bag, old).fleet == ()
+
+    # The fault picture draws every robot, its goal and its certified route.
+    scene = scene_from_bag(bag)
+    assert [(m.start, m.goal) for m in scene.fleet] == \
+        [((r.start.x, r.start.y), (r.goal.x, r.goal.y)) for r in fleet.fleet]
+    assert all(len(member.route) >= 2 for member in scene.fleet)
+    assert tuple(scene.route[0]) == pytest.approx((fleet.start.x, fleet.start.y))
+    assert write_scene_png(scene, tmp_path / 'fleet.png').stat().st_size > 0
+
+
+def test_fleet_members_have_their_own_colours_and_routes(fleet):
+    members = fleet_members(fleet)
+    assert len(members) == 2 <= len(FLEET_COLOURS)
+    for member, robot in zip(members, fleet.fleet):
+        assert tuple(member.route[0]) == pytest.approx((robot.start.x, robot.start.y))
+        assert tuple(member.route[-1]) == pytest.approx((robot.goal.x, robot.goal.y))
+    single = make_environment(load_example_map('factory').cells, 'factory', 'one', seed=0)
+    assert fleet_members(single) == []

@@ -405,6 +405,8 @@ def metrics_dict(msg) -> dict:
         'static_collisions': int(msg.static_collisions),
         'robot_into_agent_collisions': int(msg.robot_into_agent_collisions),
         'agent_into_robot_collisions': int(msg.agent_into_robot_collisions),
+        'robot_into_robot_collisions': int(msg.robot_into_robot_collisions),
+        'robot_hit_by_robot_collisions': int(msg.robot_hit_by_robot_collisions),
         'proximity_time': float(msg.proximity_time),
         'simulation_time': float(msg.simulation_time), 'risk_score': float(msg.risk_score),
         'fault_risk_score': float(msg.fault_risk_score),
@@ -536,7 +538,8 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
         with InProcessEvaluator(
                 config.scenario, controller, config.time_limit,
                 record_directory=campaign.bags_dir if config.record_failures else None,
-                bag_storage=config.bag_storage, mission=config.mission()) as evaluator:
+                bag_storage=config.bag_storage, mission=config.mission(),
+                fleet=config.fleet()) as evaluator:
             result = campaign.run(evaluator, resume=resume)
     except KeyboardInterrupt:
         log(f'interrupted (continue later with --resume --run {run_name} --in-process)')

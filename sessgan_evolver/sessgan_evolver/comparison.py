@@ -242,7 +242,8 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     label = f'{method}-seed{seed}'
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                             simulate_invalid=False, observer=episode_log,
-                            mission=config.mission()) as evaluator:
+                            mission=config.mission(),
+                            fleet=config.fleet()) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
         if method == 'sessgan':
@@ -311,7 +312,8 @@ def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Pat
     plan = fresh_seed_plan(config.evaluation_seed, config.fresh_episodes, used_maps, used_sims)
     summaries: dict[str, FreshSeedSummary] = {}
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, mission=config.mission()) as evaluator:
+                            simulate_invalid=False, mission=config.mission(),
+                            fleet=config.fleet()) as evaluator:
         for run in runs:
             if run.source is None or run.source_key in summaries:
                 continue
@@ -439,7 +441,8 @@ def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method:
     with a trace for the picture."""
     rows = []
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, mission=config.mission()) as evaluator:
+                            simulate_invalid=False, mission=config.mission(),
+                            fleet=config.fleet()) as evaluator:
         for method in config.methods:
             method_runs = [r for r in runs if r.figures.method == method]
             if not method_runs:

@@ -260,29 +260,33 @@ class EpisodeRunner:
         self.open()
         episode = self._episode
         assert episode is not None
-        controller = self.make_controller(environment)
+        # A fleet's robots each get a controller of their own, as each gets its own node.
+        controllers = [self.make_controller(environment) for _ in range(environment.robots)]
         started = self._clock()
         observation = episode.reset(environment, self.episode_config(seed, environment))
-        goal = Goal(observation.goal.x, observation.goal.y)
+        observations = episode.observations() if not episode.done else [observation]
+        goals = [Goal(each.goal.x, each.goal.y) for each in observations]
         recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
-        goal_reached = False
+        goal_reached = [False] * len(observations)
         while not episode.done:
-            if (observation.goal.x, observation.goal.y) != (goal.x, goal.y):
-                # A mission's next waypoint: as the controller node takes a new goal_pose.
-                goal = Goal(observation.goal.x, observation.goal.y)
-                goal_reached = False
-                controller.reset()
-            scan, state = node_inputs(observation)
-            # As the controller node: STOP from the first tick the controller says the goal
-            # is reached, and for a non-finite command.
-            goal_reached = goal_reached or controller.goal_reached(state, goal)
-            command = STOP if goal_reached else controller.compute_command(scan, state, goal)
-            if not command.is_finite():
-                command = STOP
-            values = command.values()
-            observation = episode.step(values).observation
+            commands = []
+            for index, (controller, each) in enumerate(zip(controllers, observations)):
+                if (each.goal.x, each.goal.y) != (goals[index].x, goals[index].y):
+                    # A mission's next waypoint: as the controller node takes a new goal_pose.
+                    goals[index] = Goal(each.goal.x, each.goal.y)
+                    goal_reached[index] = False
+                    controller.reset()
+                scan, state = node_inputs(each)
+                # As the controller node: STOP from the first tick the controller says the
+                # goal is reached, and for a non-finite command.
+                goal_reached[index] = (goal_reached[index]
+                                       or controller.goal_reached(state, goals[index]))
+                command = (STOP if goal_reached[index]
+                           else controller.compute_command(scan, state, goals[index]))
+                commands.append((command if command.is_finite() else STOP).values())
+            observations = [result.observation for result in episode.step_fleet(commands)]
             if recorder is not None:
-                recorder.add(observation, values)
+                recorder.add(observations[0], commands[0])
         wall_time = self._clock() - started
         result = episode.metrics()
         metrics = result.to_dict()

@@ -132,7 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         scenario = scenario or 'factory'
         get_scenario(scenario)
         mission = MissionSpec(args.mission_stations, args.station_dwell_time).validate()
-        FleetSpec(args.robots).validate(mission.stations)
+        fleet = FleetSpec(args.robots).validate(mission.stations)
         runs = list(args.run) + list(args.exclude_run)
         map_seeds, sim_seeds = used_seeds(runs)
         plan = fresh_seed_plan(args.seed, args.episodes, map_seeds, sim_seeds)
@@ -152,7 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with InProcessEvaluator(scenario, args.controller, args.time_limit,
                                 simulate_invalid=args.simulate_invalid,
-                                mission=mission) as evaluator:
+                                mission=mission, fleet=fleet) as evaluator:
             for source in sources:
                 progress.start(source.label, len(plan.pairs))
                 result = evaluate_source(source, plan, evaluator, rule,

@@ -272,7 +272,7 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
         for index, ((map_seed, sim_seed), cells) in enumerate(zip(plan.pairs, maps)):
             environment = make_environment(cells, evaluator.scenario,
                                            f'fresh-{index:04d}-s{map_seed}', seed=map_seed,
-                                           mission=evaluator.mission)
+                                           mission=evaluator.mission, fleet=evaluator.fleet)
             evaluator.run_environment(environment, sim_seed, source.label)
             if progress is not None:
                 progress(index + 1, len(plan.pairs))

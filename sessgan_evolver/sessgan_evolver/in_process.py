@@ -24,6 +24,7 @@ from sessgan_evolver.episode_runner import EpisodeRun, EpisodeRunner
 from sessgan_evolver.faults import is_valid_failure
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import MissionSpec
 from sessgan_sim.bag_recording import episode_bag_directory
 from sessgan_sim.metrics import EpisodeMetrics, Outcome
@@ -57,10 +58,12 @@ class InProcessEvaluator:
                  record_directory: str | Path | None = None, bag_storage: str = 'mcap',
                  simulate_invalid: bool = True, settings: SimulatorSettings | None = None,
                  observer: EpisodeObserver | None = None,
-                 mission: MissionSpec | None = None) -> None:
-        """``mission``: the stations every sampled map gets (None: plain episodes)."""
+                 mission: MissionSpec | None = None, fleet: FleetSpec | None = None) -> None:
+        """``mission``: the stations every sampled map gets (None: plain episodes);
+        ``fleet``: the robots under test every sampled map gets (None: one)."""
         self.scenario = scenario
         self.mission = (mission or MissionSpec()).validate()
+        self.fleet = (fleet or FleetSpec()).validate(self.mission.stations)
         self.runner = EpisodeRunner(scenario, controller, time_limit, settings)
         self.sampler = EnvironmentSampler()
         self.record_directory = Path(record_directory) if record_directory else None
@@ -88,7 +91,8 @@ class InProcessEvaluator:
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
         return self.sampler.sample(seeds, weights, self.scenario, generation=generation,
-                                   member=member, mission=self.mission)
+                                   member=member, mission=self.mission,
+                                   fleet=self.fleet)
 
     def evaluate(self, jobs: Sequence[EpisodeJob],
                  on_result: Callable[[EpisodeJob, dict], None]) -> None:

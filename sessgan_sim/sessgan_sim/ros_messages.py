@@ -43,23 +43,26 @@ def transform(stamp: Time, parent: str, child: str, x: float = 0.0, y: float = 0
     return msg
 
 
-def dynamic_tf_msg(stamp: Time, x: float, y: float, yaw: float, z: float = 0.0) -> TFMessage:
+def dynamic_tf_msg(stamp: Time, x: float, y: float, yaw: float, z: float = 0.0,
+                   prefix: str = '') -> TFMessage:
     """map->odom (identity: perfect localisation) and odom->base_footprint (``z``: a flyer's
-    altitude)."""
-    return TFMessage(transforms=[transform(stamp, MAP_FRAME, ODOM_FRAME),
-                                 transform(stamp, ODOM_FRAME, BASE_FOOTPRINT, x, y, z, yaw)])
+    altitude); a fleet robot's frames carry its ``prefix`` ('r1/'), map is shared."""
+    return TFMessage(transforms=[
+        transform(stamp, MAP_FRAME, prefix + ODOM_FRAME),
+        transform(stamp, prefix + ODOM_FRAME, prefix + BASE_FOOTPRINT, x, y, z, yaw)])
 
 
 def static_tf_msg(stamp: Time, base_height: float, scan_height: float,
-                  range_down: bool = False) -> TFMessage:
+                  range_down: bool = False, prefix: str = '') -> TFMessage:
     """base_footprint->base_link->base_scan, and with ``range_down`` base_link->
     base_range_down (at the body's underside, x axis down), all in one message (tf_static
-    convention)."""
-    transforms = [transform(stamp, BASE_FOOTPRINT, BASE_LINK, z=base_height),
-                  transform(stamp, BASE_LINK, SCAN_FRAME, z=scan_height - base_height)]
+    convention); every frame with a fleet robot's ``prefix``."""
+    transforms = [transform(stamp, prefix + BASE_FOOTPRINT, prefix + BASE_LINK, z=base_height),
+                  transform(stamp, prefix + BASE_LINK, prefix + SCAN_FRAME,
+                            z=scan_height - base_height)]
     if range_down:
-        transforms.append(transform(stamp, BASE_LINK, RANGE_DOWN_FRAME, z=-base_height,
-                                    pitch=math.pi / 2))
+        transforms.append(transform(stamp, prefix + BASE_LINK, prefix + RANGE_DOWN_FRAME,
+                                    z=-base_height, pitch=math.pi / 2))
     return TFMessage(transforms=transforms)
 
 

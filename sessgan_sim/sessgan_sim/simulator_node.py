@@ -53,7 +53,7 @@ from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSetting
 from sessgan_sim.worker.commands import CommandReceiver
 from sessgan_sim.worker.failure_bags import EpisodeFacts, remove_partial_bags, write_failure_bag
 from sessgan_sim.worker.nav2_stack import Nav2Stack
-from sessgan_sim.worker.stepping import EpisodeClock, EpisodeStepper
+from sessgan_sim.worker.stepping import EpisodeClock, EpisodeStepper, FleetStepper
 from sessgan_sim.worker.topics import LATCHED_QOS, Recording, RobotTopics
 
 
@@ -73,6 +73,9 @@ class SimulatorNode(Node):
         command_type = TwistStamped if self.settings.use_stamped_cmd_vel else Twist
         self.commands = CommandReceiver(self, command_type)
         self.stepper = EpisodeStepper(self.topics, self.commands, command_type.__name__)
+        self.fleet_steppers: list[EpisodeStepper] = []
+        """Fleet robots' topics and command readers, in namespaces r0, r1, ... (made when
+        a fleet episode first needs them)."""
         self.stack = Nav2Stack(self, self.callback_group, lambda: self.commands.running)
         self.clock_origin_ns = int(round(self.settings.sim_time_origin * 1e9))
         self.cleaned_directories: set[str] = set()
@@ -167,7 +170,8 @@ class SimulatorNode(Node):
             cells = occupancy_to_tokens(occupancy, get_scenario(scenario))
             environment = make_environment(cells, scenario, f'free-{self.free_seed}',
                                            seed=self.free_seed,
-                                           mission=self.settings.mission())
+                                           mission=self.settings.mission(),
+                                           fleet=self.settings.fleet())
         except (SessganGenError, ValueError) as err:
             self.get_logger().error(f'ignoring the map on environment: {err}')
             return
@@ -200,6 +204,10 @@ class SimulatorNode(Node):
             config.validate()
         except (SessganSimError, ValueError) as err:
             return invalid_metrics(environment.id, str(err))
+        if environment.fleet and (settings.goal_via.uses_action or settings.reset_costmaps):
+            return invalid_metrics(environment.id, (
+                "a fleet episode sends each robot's goal on its goal_pose: goal_interface "
+                f'{settings.goal_interface!r} and reset_costmaps serve one robot'))
         episode = self.episode
         observation = episode.reset(environment, config)
         config = episode.config  # resolved: scenario defaults filled in
@@ -207,6 +215,9 @@ class SimulatorNode(Node):
         startup_timeout = settings.controller_startup_timeout
         if episode.done:
             metrics = episode.metrics()
+        elif environment.fleet:
+            metrics = self.run_fleet(episode, environment, clock, settings, recording,
+                                     goal_handle)
         elif not self.stepper.wait_for_controller(startup_timeout):
             if self.commands.running:
                 episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
@@ -272,6 +283,48 @@ class SimulatorNode(Node):
                                                  recording, facts, self.get_logger())
         return message
 
+    def run_fleet(self, episode: Episode, environment: Environment, clock: EpisodeClock,
+                  settings: SimulatorSettings, recording: Recording | None, goal_handle):
+        """The ticks of a fleet episode: each robot's topics in its namespace (r0, r1, ...,
+        frames prefixed 'r0/', ...), lockstep waiting for every driving robot's command."""
+        fleet = FleetStepper(self.fleet_steppers_for(episode.robot_count))
+        startup_timeout = settings.controller_startup_timeout
+        missing = fleet.wait_for_controllers(startup_timeout)
+        if missing is not None:
+            if all(stepper.commands.running for stepper in fleet.steppers):
+                episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                              f'robot r{missing}: no controller subscribed to '
+                              f'{fleet.steppers[missing].topics.names["scan"]} and published '
+                              f'cmd_vel within {startup_timeout:.1f} s wall time')
+            else:
+                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
+            return episode.metrics()
+        for stepper, robot in zip(fleet.steppers, episode.robots, strict=True):
+            stepper.topics.publish_world(environment, robot.ride_height, robot.sensor_height,
+                                         clock.stamp_ns(0.0), recording, range_down=robot.flies)
+        loop_start = time.monotonic()
+        metrics = fleet.run(episode, episode.observations(), clock, settings, recording,
+                            goal_handle)
+        self.log_timing(environment.id, metrics, episode.profile, time.monotonic() - loop_start)
+        self.clock_origin_ns = clock.stamp_ns(episode.time + episode.config.control_period)
+        return metrics
+
+    def fleet_steppers_for(self, robots: int) -> list[EpisodeStepper]:
+        """The topics and command readers of ``robots`` fleet robots, each on a node of its
+        own in namespace r<i> under ours (made once, kept for later episodes)."""
+        command_type = self.commands.msg_type
+        while len(self.fleet_steppers) < robots:
+            index = len(self.fleet_steppers)
+            namespace = f'{self.get_namespace().rstrip("/")}/r{index}'
+            # Not the process's remappings: its __ns would move the node back to ours.
+            node = rclpy.create_node(f'{self.get_name()}_r{index}', namespace=namespace,
+                                     context=self.context, use_global_arguments=False)
+            self.fleet_steppers.append(EpisodeStepper(
+                RobotTopics(node, frame_prefix=f'r{index}/'),
+                CommandReceiver(node, command_type, use_global_arguments=False),
+                command_type.__name__))
+        return self.fleet_steppers[:robots]
+
     def clean_record_directory(self, record_directory: str) -> None:
         """Remove partial bags a killed worker left, once per directory and process."""
         if record_directory and record_directory not in self.cleaned_directories:
@@ -295,6 +348,8 @@ class SimulatorNode(Node):
         """Cut a running episode off (outcome cancelled, its goal aborted) and wait up to
         ``grace`` seconds for it to end; no new episode starts (at exit, ROS still up)."""
         self.commands.stop()
+        for stepper in self.fleet_steppers:
+            stepper.commands.stop()
         if self.busy.acquire(timeout=grace):
             self.busy.release()
 
@@ -303,6 +358,9 @@ class SimulatorNode(Node):
         idle = self.busy.acquire(timeout=5.0)
         self.episode.close()
         self.commands.destroy()
+        for stepper in self.fleet_steppers:
+            stepper.commands.destroy()
+            stepper.topics.node.destroy_node()
         if idle:
             self.busy.release()
 
@@ -326,6 +384,8 @@ def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetric
     msg.static_collisions = int(metrics.static_collisions)
     msg.robot_into_agent_collisions = int(metrics.robot_into_agent_collisions)
     msg.agent_into_robot_collisions = int(metrics.agent_into_robot_collisions)
+    msg.robot_into_robot_collisions = int(metrics.robot_into_robot_collisions)
+    msg.robot_hit_by_robot_collisions = int(metrics.robot_hit_by_robot_collisions)
     msg.fault_risk_score = float(metrics.fault_risk_score)
     msg.invalid_commands = int(metrics.invalid_commands)
     msg.legs = int(metrics.legs)

@@ -22,12 +22,14 @@ class CommandReceiver:
     controller_unresponsive after the timeout, never hang it or shift later commands.
     """
 
-    def __init__(self, parent, msg_type, topic: str = 'cmd_vel') -> None:
+    def __init__(self, parent, msg_type, topic: str = 'cmd_vel',
+                 use_global_arguments: bool = True) -> None:
         """A reader of ``topic`` on a node of its own beside ``parent`` (same namespace and
-        context); ``msg_type``: Twist or TwistStamped."""
+        context); ``msg_type``: Twist or TwistStamped. ``use_global_arguments=False``: the
+        process's remappings (its ``__ns``) do not apply, as for a fleet robot's node."""
         self.node = node = rclpy.create_node(
             parent.get_name() + '_cmd_vel', namespace=parent.get_namespace(),
-            context=parent.context)
+            context=parent.context, use_global_arguments=use_global_arguments)
         self.msg_type = msg_type
         self.subscription = node.create_subscription(msg_type, topic, lambda _: None,
                                                      COMMAND_QOS)

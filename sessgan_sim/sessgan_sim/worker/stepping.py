@@ -220,3 +220,116 @@ class EpisodeStepper:
         feedback.collisions = so_far.collisions
         feedback.distance_to_goal = so_far.final_distance_to_goal
         goal_handle.publish_feedback(feedback)
+
+
+class FleetStepper:
+    """Runs a fleet episode's ticks: one EpisodeStepper (topics and command reader in the
+    robot's namespace) per robot under test, r0 first.
+
+    Each tick publishes every robot's clock, odom, tf and scan; lockstep then waits for a
+    command from every robot still driving (one that ended, at its goal say, stands still
+    and may fall silent, as Nav2 does after a goal succeeds). Goals go out on each robot's
+    goal_pose (and waypoints); a fleet has no NavigateToPose client.
+    """
+
+    def __init__(self, steppers: list[EpisodeStepper]) -> None:
+        self.steppers = steppers
+
+    def wait_for_controllers(self, timeout: float) -> int | None:
+        """Wait for every robot's controller (EpisodeStepper.wait_for_controller); the
+        index of the first that did not come within ``timeout`` wall seconds, else None."""
+        deadline = time.monotonic() + timeout
+        for index, stepper in enumerate(self.steppers):
+            if not stepper.wait_for_controller(max(0.0, deadline - time.monotonic())):
+                return index
+        return None
+
+    def run(self, episode, observations, clock: EpisodeClock, settings: SimulatorSettings,
+            recording: Recording | None, goal_handle=None):
+        """Step the fleet ``episode`` from ``observations`` (a robot each) until it ends;
+        returns its metrics."""
+        lockstep = settings.step_mode is StepMode.LOCKSTEP
+        timeout = settings.controller_timeout
+        dt = episode.config.control_period
+        feedback_every = max(1, int(round(FEEDBACK_PERIOD / dt)))
+        steppers = self.steppers
+        stamp_ns = clock.stamp_ns(0.0)
+        for stepper, observation in zip(steppers, observations, strict=True):
+            stepper.commands.take_all()  # stale answers of an earlier episode
+            stepper.topics.forget_goal()
+            stepper.topics.publish_waypoints([observation.goal], stamp_ns, recording)
+            stepper.topics.publish_goal(observation.goal, stamp_ns, recording)
+        commands: list = [None] * len(steppers)
+        heard = [time.monotonic()] * len(steppers)
+        wall_origin = time.monotonic()
+        next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
+        first = True
+        ticks = 0
+        while not episode.done:
+            if goal_handle is not None and goal_handle.is_cancel_requested:
+                episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
+                break
+            if not all(stepper.commands.running for stepper in steppers):
+                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
+                break
+            stamp_ns = clock.stamp_ns(observations[0].time)
+            for stepper, observation in zip(steppers, observations):
+                stepper.topics.publish_tick(observation, stamp_ns, recording)
+            if time.monotonic() >= next_goal_check:
+                for stepper in steppers:
+                    stepper.topics.republish_goal()  # to a goal_pose reader that joined late
+                next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
+            driving = [index for index in range(len(steppers))
+                       if episode.robot_metrics(index).outcome is None]
+            limit = settings.controller_startup_timeout if first else timeout
+            silent = None
+            if lockstep:
+                for index in driving:
+                    stepper = steppers[index]
+                    received = stepper.wait_for_command(
+                        time.monotonic() + limit,
+                        (lambda topics=stepper.topics: topics.republish_goal(force=True))
+                        if first else None)
+                    if received is None:
+                        silent = index
+                        break
+                    commands[index] = received
+            else:
+                tick_deadline = (wall_origin
+                                 + (observations[0].time + dt) / settings.real_time_factor)
+                time.sleep(max(0.0, tick_deadline - time.monotonic()))
+                now = time.monotonic()
+                for index, stepper in enumerate(steppers):
+                    received_all = stepper.commands.take_all()
+                    if received_all:
+                        commands[index], heard[index] = received_all[-1], now
+                for index in driving:
+                    limit = (settings.controller_startup_timeout if commands[index] is None
+                             else timeout)
+                    if now - heard[index] > limit:
+                        silent = index
+                        break
+            if silent is not None:
+                if all(stepper.commands.running for stepper in steppers):
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                                  f'robot r{silent}: no cmd_vel within {limit:.1f} s wall time')
+                continue  # the loop's head ends a shut-down episode as cancelled
+            first = False
+            values = []
+            for stepper, command in zip(steppers, commands):
+                values.append(rm.twist_values(command) if command is not None
+                              else (0.0, 0.0, 0.0))
+                if recording is not None and command is not None:
+                    recording.add(stepper.topics.names['cmd_vel'], stepper.command_msgtype,
+                                  stamp_ns, command)
+            if lockstep:
+                commands = [None] * len(steppers)  # each tick waits for fresh ones
+            observations = [result.observation for result in episode.step_fleet(values)]
+            ticks += 1
+            if goal_handle is not None and ticks % feedback_every == 0:
+                EpisodeStepper.publish_feedback(goal_handle, episode, observations[0])
+        if not lockstep:
+            stamp_ns = clock.stamp_ns(observations[0].time)
+            for stepper, observation in zip(steppers, observations):
+                stepper.topics.publish_tick(observation, stamp_ns, recording)
+        return episode.metrics()

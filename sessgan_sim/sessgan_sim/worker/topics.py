@@ -66,9 +66,12 @@ class Recording:
 
 
 class RobotTopics:
-    """The publishers of the robot-under-test contract on ``node``."""
+    """The publishers of the robot-under-test contract on ``node`` (a fleet robot's: on a
+    node in its namespace, its frames named with ``frame_prefix``, e.g. 'r1/')."""
 
-    def __init__(self, node) -> None:
+    def __init__(self, node, frame_prefix: str = '') -> None:
+        self.node = node
+        self.frame_prefix = frame_prefix
         self.publishers = {
             # Missions: every waypoint at once, latched like goal_pose.
             'waypoints': node.create_publisher(Path, 'waypoints', LATCHED_QOS),
@@ -106,7 +109,8 @@ class RobotTopics:
         stamp = time_of(stamp_ns)
         self.publish('map', occupancy_grid_msg(environment, stamp=stamp), stamp_ns, recording)
         self.publish('tf_static', rm.static_tf_msg(stamp, ride_height, sensor_height,
-                                                   range_down), stamp_ns, recording)
+                                                   range_down, self.frame_prefix),
+                     stamp_ns, recording)
 
     def publish_goal(self, goal: Pose2D, stamp_ns: int, recording: Recording | None) -> None:
         """The goal on goal_pose (latched: a transient-local reader that joins later gets
@@ -163,19 +167,22 @@ class RobotTopics:
         pose = observation.pose
         altitude = observation.altitude
         twist = observation.twist
-        odom = cdr.odometry(stamp, rm.ODOM_FRAME, rm.BASE_FOOTPRINT, pose.x, pose.y, pose.yaw,
-                            twist.vx, twist.vy, twist.wz, z=altitude, vz=observation.climb_rate)
+        prefix = self.frame_prefix
+        odom = cdr.odometry(stamp, prefix + rm.ODOM_FRAME, prefix + rm.BASE_FOOTPRINT, pose.x,
+                            pose.y, pose.yaw, twist.vx, twist.vy, twist.wz, z=altitude,
+                            vz=observation.climb_rate)
         self.publish('odom', odom, stamp_ns, recording)
         if recording is not None or self.readers('tf') > 0:
             # Building tf costs more than the check; most controllers under test use odom.
             self.publish('tf', rm.dynamic_tf_msg(time_of(stamp_ns), pose.x, pose.y, pose.yaw,
-                                                 altitude), stamp_ns, recording)
+                                                 altitude, prefix), stamp_ns, recording)
         ranger = observation.range_finder
         if ranger is not None and observation.range_down is not None:
             self.publish('range_down', cdr.range_reading(
-                stamp, rm.RANGE_DOWN_FRAME, observation.range_down, ranger.field_of_view,
+                stamp, prefix + rm.RANGE_DOWN_FRAME, observation.range_down, ranger.field_of_view,
                 ranger.min_range, ranger.max_range), stamp_ns, recording)
         lidar = observation.lidar
         self.publish('scan', cdr.laser_scan(
-            stamp, rm.SCAN_FRAME, observation.scan, lidar.angle_min, lidar.angle_increment,
-            lidar.range_min, lidar.range_max, lidar.scan_time), stamp_ns, recording)
+            stamp, prefix + rm.SCAN_FRAME, observation.scan, lidar.angle_min,
+            lidar.angle_increment, lidar.range_min, lidar.range_max, lidar.scan_time),
+            stamp_ns, recording)

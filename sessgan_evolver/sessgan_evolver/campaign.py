@@ -197,7 +197,8 @@ class CampaignConfig:
         on another worker: ``episode_timeout`` if set, else twice the time limit (a clocked
         simulator runs at real time; at least 30 s) plus the world's build and stepping time,
         which grow with the map (:data:`EPISODE_TIMEOUT_SECONDS_PER_CELL`,
-        :data:`EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND`)."""
+        :data:`EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND`); a fleet's robots each add
+        their share of stepping."""
         if self.episode_timeout:
             return self.episode_timeout
         # A mission's legs each take up to a plain episode's time, plus the dwells.
@@ -205,7 +206,8 @@ class CampaignConfig:
                       + self.mission_stations * self.station_dwell_time)
         per_cell = (EPISODE_TIMEOUT_SECONDS_PER_CELL
                     + EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND * time_limit)
-        return max(30.0, 2.0 * time_limit) + per_cell * max(0, int(cells))
+        return (max(30.0, 2.0 * time_limit)
+                + per_cell * max(0, int(cells)) * max(1, int(self.robots)))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -302,7 +302,8 @@ class RosEvaluator:
                 if not self.pool.pairs:
                     raise CampaignError(f'every simulator worker died repeatedly; last: '
                                         f'{report}:\n{pair.simulator.log_tail(1000)}\n'
-                                        f'{pair.controller.log_tail(1000)}')
+                                        + '\n'.join(child.log_tail(1000)
+                                                    for child in pair.controllers))
         for name, deadline in list(self.starting.items()):
             restarted = self.pair_of(name)
             if restarted is None:
@@ -373,7 +374,7 @@ class RosEvaluator:
                         metrics = metrics_dict(response.result.metrics)
                         pair = self.pair_of(name)
                         if (metrics['outcome'] == CONTROLLER_UNRESPONSIVE and pair is not None
-                                and not pair.controller.alive):
+                                and not all(child.alive for child in pair.controllers)):
                             continue  # its controller died: the next loop re-runs it
                         del running[name]
                         on_result(state.job, metrics)
@@ -451,15 +452,24 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
     for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'
         ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
+        # A fleet's robots each get a controller in their namespace (/w0/r0, /w0/r1, ...),
+        # on the clock the simulator publishes there.
+        robot_namespaces = ([f'{namespace}/r{index}' for index in range(config.robots)]
+                            if config.robots > 1 else [namespace])
         pool.start_pair(
             namespace,
             (f'simulator_w{worker}', [
                 'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
                 '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}',
                 *simulator_args]),
-            (f'{controller}_w{worker}', [
-                'ros2', 'run', 'sessgan_controllers', controller, *ros_args,
-                '-p', 'use_sim_time:=true', *robot_args]),
+            *((f'{controller}_{robot_namespace[1:].replace("/", "_")}', [
+                'ros2', 'run', 'sessgan_controllers', controller, '--ros-args',
+                '-r', f'__ns:={robot_namespace}', *(
+                    ['-r', f'/clock:={robot_namespace}/clock', '-p',
+                     f'base_frame_id:={robot_namespace.rsplit("/", 1)[1]}/base_footprint']
+                    if config.robots > 1 else []),
+                '-p', 'use_sim_time:=true', *robot_args])
+              for robot_namespace in robot_namespaces),
             core=core, batch=True)
     return generator
 

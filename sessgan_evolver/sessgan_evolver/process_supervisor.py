@@ -144,23 +144,33 @@ class ProcessSupervisor:
 
 @dataclass
 class WorkerPair:
-    """A simulator worker and the controller under test beside it, in one namespace."""
+    """A simulator worker and the controller under test beside it, in one namespace (a
+    fleet's: a controller per robot, in the robots' namespaces under it)."""
 
     namespace: str
     simulator: ChildProcess
-    controller: ChildProcess
+    controllers: list[ChildProcess]
     restarts: int = 0
     """How often the pair was restarted after one of its processes died."""
 
     @property
+    def controller(self) -> ChildProcess:
+        """The (first robot's) controller."""
+        return self.controllers[0]
+
+    @property
+    def children(self) -> list[ChildProcess]:
+        return [self.simulator, *self.controllers]
+
+    @property
     def alive(self) -> bool:
-        return self.simulator.alive and self.controller.alive
+        return all(child.alive for child in self.children)
 
     def death_report(self) -> str:
         """Which of the pair's processes died and how, e.g. 'nearness_diagram_w0 (pid 42) was
-        killed by SIGKILL'; empty while both live."""
+        killed by SIGKILL'; empty while all live."""
         return '; '.join(f'{child.name} (pid {child.process.pid}) {child.exit_description()}'
-                         for child in (self.simulator, self.controller) if not child.alive)
+                         for child in self.children if not child.alive)
 
     def logged_since_start(self, text: str) -> bool:
         """True once the pair's current simulator process has logged ``text``."""
@@ -185,11 +195,13 @@ class WorkerPool:
         self.quarantined: dict[str, WorkerPair] = {}
 
     def start_pair(self, namespace: str, simulator: tuple[str, list[str]],
-                   controller: tuple[str, list[str]], core: int | None = None,
+                   *controllers: tuple[str, list[str]], core: int | None = None,
                    batch: bool = False) -> WorkerPair:
-        """Start a pair; ``simulator`` and ``controller`` are (log name, command)."""
+        """Start a pair; ``simulator`` and each of ``controllers`` (one, or a fleet's one
+        per robot) are (log name, command)."""
         pair = WorkerPair(namespace, self.supervisor.start(*simulator, core=core, batch=batch),
-                          self.supervisor.start(*controller, core=core, batch=batch))
+                          [self.supervisor.start(*controller, core=core, batch=batch)
+                           for controller in controllers])
         self.pairs[namespace] = pair
         return pair
 
@@ -201,14 +213,14 @@ class WorkerPool:
         """Restart both processes of ``pair``; False (and the pair stopped and quarantined) if
         it was restarted ``max_restarts`` times already."""
         if pair.restarts >= self.max_restarts:
-            self.supervisor.stop([pair.simulator, pair.controller], grace_seconds=2.0)
+            self.supervisor.stop(pair.children, grace_seconds=2.0)
             self.quarantined[pair.namespace] = self.pairs.pop(pair.namespace)
             return False
         # The survivor goes first, so the new simulator never meets the old controller.
-        self.supervisor.stop([pair.simulator, pair.controller], grace_seconds=2.0)
-        pair.simulator, pair.controller = (
+        self.supervisor.stop(pair.children, grace_seconds=2.0)
+        pair.simulator, *pair.controllers = (
             self.supervisor.start(child.name, child.command, child.core, child.batch)
-            for child in (pair.simulator, pair.controller))
+            for child in pair.children)
         pair.restarts += 1
         return True
 

@@ -13,8 +13,9 @@ contact events), which the fault pictures read.
 
 from __future__ import annotations
 
+import heapq
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ import numpy as np
 
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import BagExportError
-from sessgan_gen.environment import Environment
+from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.fleet import fleet_to_json
 from sessgan_gen.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
@@ -91,18 +92,13 @@ class _Messages:
         return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
             header=self.header(seconds, MAP_FRAME), pose=self.pose(x, y, yaw)))
 
-    def waypoints(self, environment: Environment, seconds: float) -> bytes:
-        """nav_msgs/Path of the mission's waypoints (the goal alone in a plain episode)."""
+    def waypoints(self, waypoints: Sequence[Pose2D], seconds: float) -> bytes:
+        """nav_msgs/Path of a mission's waypoints (the goal alone in a plain episode)."""
         header = self.header(seconds, MAP_FRAME)
         stamped = self.types['geometry_msgs/msg/PoseStamped']
         return self.serialize(self.types['nav_msgs/msg/Path'](header=header, poses=[
             stamped(header=header, pose=self.pose(pose.x, pose.y, pose.yaw))
-            for pose in environment.waypoints]))
-
-    def goal(self, environment: Environment, seconds: float) -> bytes:
-        goal = environment.goal
-        return self.serialize(self.types['geometry_msgs/msg/PoseStamped'](
-            header=self.header(seconds, MAP_FRAME), pose=self.pose(goal.x, goal.y, goal.yaw)))
+            for pose in waypoints]))
 
     def twist(self, vx: float, vy: float, wz: float, vz: float = 0.0) -> bytes:
         vector = self.types['geometry_msgs/msg/Vector3']
@@ -115,7 +111,24 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
                   namespace: str = '') -> Iterator[BagRecord]:
     """The bag records of an episode, in publishing order (module docstring); with the
     mission's ``waypoints`` after the first goal, and each later ``goal_pose`` of a mission
-    (``trace.goals``) before the tick it went out at."""
+    (``trace.goals``) before the tick it went out at. A fleet's robots each publish under
+    r<i>/ with frames prefixed r<i>/ (as the simulator node does), in time order."""
+    prefix = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    if not trace.fleet:
+        yield from _robot_records(environment, trace, prefix, '', environment.waypoints)
+        return
+    robots = [(trace, environment.waypoints)]
+    robots += [(other, (member.goal,)) for other, member in zip(trace.fleet, environment.fleet,
+                                                                 strict=True)]
+    yield from heapq.merge(*(
+        _robot_records(environment, robot_trace, f'{prefix}/r{index}', f'r{index}/', waypoints)
+        for index, (robot_trace, waypoints) in enumerate(robots)),
+        key=lambda record: record.timestamp_ns)
+
+
+def _robot_records(environment: Environment, trace: EpisodeTrace, prefix: str,
+                   frames: str, waypoints: Sequence[Pose2D]) -> Iterator[BagRecord]:
+    """One robot's records under topic ``prefix``, its frames prefixed ``frames``."""
     if trace.scans is None:
         raise BagExportError('the trace has no scans: run the episode with keep_scans=True')
     ticks = len(trace.times)
@@ -123,26 +136,29 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
             and len(trace.commands) == max(0, ticks - 1)):
         raise BagExportError(f'trace lengths differ: {ticks} times, {len(trace.poses)} poses, '
                              f'{len(trace.scans)} scans, {len(trace.commands)} commands')
-    prefix = '/' + namespace.strip('/') if namespace.strip('/') else ''
     messages = _Messages()
     lidar = trace.lidar
     start = float(trace.times[0]) if ticks else 0.0
     start_ns = _nanoseconds(start)
     yield BagRecord(f'{prefix}/map', 'nav_msgs/msg/OccupancyGrid', start_ns,
                     messages.occupancy_grid(environment, start))
-    static = [messages.transform(start, BASE_FOOTPRINT, BASE_LINK, z=trace.base_height),
-              messages.transform(start, BASE_LINK, SCAN_FRAME,
+    odom, footprint, base, scan_frame, range_frame = (
+        frames + name for name in (ODOM_FRAME, BASE_FOOTPRINT, BASE_LINK, SCAN_FRAME,
+                                   RANGE_DOWN_FRAME))
+    static = [messages.transform(start, footprint, base, z=trace.base_height),
+              messages.transform(start, base, scan_frame,
                                  z=trace.sensor_height - trace.base_height)]
     ranger = trace.range_finder if trace.range_down is not None else {}
     if ranger:
-        static.append(messages.transform(start, BASE_LINK, RANGE_DOWN_FRAME,
+        static.append(messages.transform(start, base, range_frame,
                                          z=-trace.base_height, pitch=math.pi / 2))
     yield BagRecord(f'{prefix}/tf_static', 'tf2_msgs/msg/TFMessage', start_ns,
                     messages.tf(static))
+    first = waypoints[0]
     yield BagRecord(f'{prefix}/goal_pose', 'geometry_msgs/msg/PoseStamped', start_ns,
-                    messages.goal(environment, start))
+                    messages.goal_at(first.x, first.y, first.yaw, start))
     yield BagRecord(f'{prefix}/waypoints', 'nav_msgs/msg/Path', start_ns,
-                    messages.waypoints(environment, start))
+                    messages.waypoints(waypoints, start))
     later_goals = {row: (x, y, yaw) for row, x, y, yaw in trace.goals if row > 0}
     for tick in range(ticks):
         seconds = float(trace.times[tick])
@@ -157,18 +173,18 @@ def trace_records(environment: Environment, trace: EpisodeTrace,
         yield BagRecord(f'{prefix}/clock', 'rosgraph_msgs/msg/Clock', stamp_ns,
                         cdr.clock(stamp))
         yield BagRecord(f'{prefix}/odom', 'nav_msgs/msg/Odometry', stamp_ns, cdr.odometry(
-            stamp, ODOM_FRAME, BASE_FOOTPRINT, x, y, yaw, vx, vy, wz, z=z, vz=vz))
+            stamp, odom, footprint, x, y, yaw, vx, vy, wz, z=z, vz=vz))
         yield BagRecord(f'{prefix}/tf', 'tf2_msgs/msg/TFMessage', stamp_ns, messages.tf([
-            messages.transform(seconds, MAP_FRAME, ODOM_FRAME),
-            messages.transform(seconds, ODOM_FRAME, BASE_FOOTPRINT, x, y, z, yaw)]))
+            messages.transform(seconds, MAP_FRAME, odom),
+            messages.transform(seconds, odom, footprint, x, y, z, yaw)]))
         if ranger and trace.range_down is not None:
             yield BagRecord(f'{prefix}/range_down', 'sensor_msgs/msg/Range', stamp_ns,
-                            cdr.range_reading(stamp, RANGE_DOWN_FRAME,
+                            cdr.range_reading(stamp, range_frame,
                                               float(trace.range_down[tick]),
                                               ranger['field_of_view'], ranger['min_range'],
                                               ranger['max_range']))
         yield BagRecord(f'{prefix}/scan', 'sensor_msgs/msg/LaserScan', stamp_ns, cdr.laser_scan(
-            stamp, SCAN_FRAME, trace.scans[tick], lidar['angle_min'], lidar['angle_increment'],
+            stamp, scan_frame, trace.scans[tick], lidar['angle_min'], lidar['angle_increment'],
             lidar['range_min'], lidar['range_max'], lidar['scan_time']))
         if tick < len(trace.commands):
             yield BagRecord(f'{prefix}/cmd_vel', 'geometry_msgs/msg/Twist', stamp_ns,

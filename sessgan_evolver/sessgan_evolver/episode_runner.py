@@ -118,6 +118,9 @@ class EpisodeTrace:
     """(n,) a flyer's downward range readings in metres; None without the sensor."""
     range_finder: dict[str, float] = field(default_factory=dict)
     """field_of_view, min_range, max_range of the downward range sensor."""
+    fleet: list[EpisodeTrace] = field(default_factory=list)
+    """A fleet episode's robots r1, r2, ... (each with its own poses, scans, commands,
+    contacts and goals; their agents are r0's); empty for one robot under test."""
 
     def summary(self, max_points: int = 400) -> dict[str, Any]:
         """Plain data for episode.json: the trajectory and agent paths thinned to at most
@@ -126,7 +129,7 @@ class EpisodeTrace:
         rows = list(range(0, len(self.times), step))
         if rows and rows[-1] != len(self.times) - 1:
             rows.append(len(self.times) - 1)
-        return {
+        summary = {
             'times': [round(float(t), 4) for t in self.times[rows]],
             'robot': np.round(self.poses[rows], 4).tolist(),
             'agents': np.round(self.agents[rows], 4).tolist(),
@@ -134,6 +137,9 @@ class EpisodeTrace:
             'robot_radius': self.robot_radius,
             'agent_radius': self.agent_radius,
         }
+        if self.fleet:
+            summary['fleet'] = [np.round(other.poses[rows], 4).tolist() for other in self.fleet]
+        return summary
 
 
 @dataclass
@@ -263,10 +269,11 @@ class EpisodeRunner:
         # A fleet's robots each get a controller of their own, as each gets its own node.
         controllers = [self.make_controller(environment) for _ in range(environment.robots)]
         started = self._clock()
-        observation = episode.reset(environment, self.episode_config(seed, environment))
-        observations = episode.observations() if not episode.done else [observation]
+        episode.reset(environment, self.episode_config(seed, environment))
+        observations = episode.observations()
         goals = [Goal(each.goal.x, each.goal.y) for each in observations]
-        recorder = _TraceRecorder(episode, observation, keep_scans) if trace else None
+        recorders = ([_TraceRecorder(episode, each, keep_scans, index)
+                      for index, each in enumerate(observations)] if trace else [])
         goal_reached = [False] * len(observations)
         while not episode.done:
             commands = []
@@ -285,23 +292,26 @@ class EpisodeRunner:
                            else controller.compute_command(scan, state, goals[index]))
                 commands.append((command if command.is_finite() else STOP).values())
             observations = [result.observation for result in episode.step_fleet(commands)]
-            if recorder is not None:
-                recorder.add(observations[0], commands[0])
+            for recorder, each, values in zip(recorders, observations, commands):
+                recorder.add(each, values)
         wall_time = self._clock() - started
         result = episode.metrics()
         metrics = result.to_dict()
         metrics['wall_time'] = wall_time
         metrics['bag_path'] = ''
-        episode_trace = recorder.finish(list(result.contacts)) if recorder else None
-        if recorder is not None and episode_trace is not None:
-            episode_trace.goals = recorder.goals
+        episode_trace = None
+        if recorders:
+            traces = [recorder.finish(list(episode.robot_metrics(index).contacts))
+                      for index, recorder in enumerate(recorders)]
+            episode_trace, episode_trace.fleet = traces[0], traces[1:]
         return EpisodeRun(metrics, episode_trace, wall_time)
 
 
 class _TraceRecorder:
     """Collects an EpisodeTrace while an episode runs."""
 
-    def __init__(self, episode: Episode, observation: Observation, keep_scans: bool) -> None:
+    def __init__(self, episode: Episode, observation: Observation, keep_scans: bool,
+                 robot: int = 0) -> None:
         self.episode = episode
         self.keep_scans = keep_scans
         self.times: list[float] = []
@@ -314,10 +324,10 @@ class _TraceRecorder:
         self.agents: list[np.ndarray] = []
         self.scans: list[np.ndarray] = []
         try:
-            robot = episode.robot
-            self.robot_radius = float(robot.footprint_radius)
-            self.base_height = float(robot.ride_height)
-            self.sensor_height = float(robot.sensor_height)
+            body = episode.robots[robot]
+            self.robot_radius = float(body.footprint_radius)
+            self.base_height = float(body.ride_height)
+            self.sensor_height = float(body.sensor_height)
         except EpisodeError:  # an episode that could not start has no robot
             self.robot_radius = self.base_height = self.sensor_height = 0.0
         self.agent_radius = float(episode.agents.config.radius)
@@ -367,4 +377,5 @@ class _TraceRecorder:
             range_finder=({'field_of_view': self.range_finder.field_of_view,
                            'min_range': self.range_finder.min_range,
                            'max_range': self.range_finder.max_range}
-                          if self.range_finder else {}))
+                          if self.range_finder else {}),
+            goals=self.goals)

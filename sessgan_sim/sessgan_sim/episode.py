@@ -331,6 +331,8 @@ class Episode:
         self._agents = DummyAgents()
         self._records: list[_Record] = []
         """One per robot under test (r0 first); [] before the first reset."""
+        self._latest: list[Observation] = []
+        """Every robot's latest observation (r0's alone when the episode could not start)."""
         self.profile = TickProfile()
 
     # --- resource handling ----------------------------------------------------------------
@@ -474,7 +476,8 @@ class Episode:
                                for _ in environment.fleet)]
         except (SessganGenError, UnknownRobotError) as err:
             self._end(record, Outcome.INVALID_ENVIRONMENT, str(err))
-            return self._blank_observation(record)
+            self._latest = [self._blank_observation(record)]
+            return self._latest[0]
         clearance_range = float(config.clearance_range or 0.0)
         self._records = records = [record] + [
             _Record(environment, config, MetricsRecorder(clearance_range, index),
@@ -493,7 +496,8 @@ class Episode:
             if overlap is not None:
                 for other in records:
                     self._end(other, Outcome.INVALID_ENVIRONMENT, overlap)
-                return self._blank_observation(record)
+                self._latest = [self._blank_observation(record)]
+                return self._latest[0]
 
         # A third stream for the range finder leaves the first two as they were before it;
         # robots r1, r2, ... draw from streams spawned after those three.
@@ -543,13 +547,14 @@ class Episode:
                                           live.goal_tolerance)
             live.best_progress = self._progress_distance(live)
             each.scan = live.lidar.scan()
-        return self._observation(record, scan_updated=True)
+        self._latest = [self._observation(each, scan_updated=True) for each in records]
+        return self._latest[0]
 
-    def observations(self, scan_updated: bool = True) -> list[Observation]:
-        """Every robot's observation now (r0 first), the scans as last taken (after reset:
-        the first scans)."""
-        self._require_live()
-        return [self._observation(record, scan_updated) for record in self._records]
+    def observations(self) -> list[Observation]:
+        """Every robot's latest observation (r0 first): of the last reset or step (r0's
+        blank one when the episode could not start)."""
+        self._require_record()
+        return list(self._latest)
 
     def step(self, command: VelocityCommand | Sequence[float]) -> StepResult:
         """Apply ``command`` (body-frame vx, vy, wz, and the flyer's climb rate vz, 0 when
@@ -671,6 +676,7 @@ class Episode:
         done = self.done
         results = [StepResult(self._observation(each, each.scan_updated), done, each.outcome)
                    for each in records]
+        self._latest = [result.observation for result in results]
         finished = clock()
         profile = self.profile
         profile.ticks += 1

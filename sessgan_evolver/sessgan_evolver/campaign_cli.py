@@ -27,6 +27,7 @@ from sessgan_evolver.process_supervisor import (
     ProcessSupervisor,
     WorkerPair,
     WorkerPool,
+    controller_placements,
     worker_cores,
 )
 from sessgan_gen.config_cli import build_parser, config_from_namespace
@@ -452,24 +453,18 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
     for worker, core in enumerate(worker_cores(config.workers)):
         namespace = f'/w{worker}'
         ros_args = ['--ros-args', '-r', f'__ns:={namespace}']
-        # A fleet's robots each get a controller in their namespace (/w0/r0, /w0/r1, ...),
-        # on the clock the simulator publishes there.
-        robot_namespaces = ([f'{namespace}/r{index}' for index in range(config.robots)]
-                            if config.robots > 1 else [namespace])
         pool.start_pair(
             namespace,
             (f'simulator_w{worker}', [
                 'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
                 '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}',
                 *simulator_args]),
+            # A fleet's robots each get a controller of their own (/w0/r0, /w0/r1, ...).
             *((f'{controller}_{robot_namespace[1:].replace("/", "_")}', [
-                'ros2', 'run', 'sessgan_controllers', controller, '--ros-args',
-                '-r', f'__ns:={robot_namespace}', *(
-                    ['-r', f'/clock:={robot_namespace}/clock', '-p',
-                     f'base_frame_id:={robot_namespace.rsplit("/", 1)[1]}/base_footprint']
-                    if config.robots > 1 else []),
+                'ros2', 'run', 'sessgan_controllers', controller, '--ros-args', *placement,
                 '-p', 'use_sim_time:=true', *robot_args])
-              for robot_namespace in robot_namespaces),
+              for robot_namespace, placement in controller_placements(namespace,
+                                                                     config.robots)),
             core=core, batch=True)
     return generator
 

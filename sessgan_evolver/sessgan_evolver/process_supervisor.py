@@ -225,6 +225,22 @@ class WorkerPool:
         return True
 
 
+def controller_placements(namespace: str, robots: int) -> list[tuple[str, list[str]]]:
+    """Where each robot's controller runs beside a simulator in ``namespace``, and the ROS
+    arguments that put it there: the simulator's namespace for one robot; for a fleet, r0,
+    r1, ... under it, each on the clock the simulator publishes there and with its TwistStamped
+    commands in frame r<i>/base_footprint."""
+    if robots <= 1:
+        return [(namespace, ['-r', f'__ns:={namespace}'])]
+    placements = []
+    for index in range(robots):
+        robot_namespace = f'{namespace.rstrip("/")}/r{index}'
+        placements.append((robot_namespace, [
+            '-r', f'__ns:={robot_namespace}', '-r', f'/clock:={robot_namespace}/clock',
+            '-p', f'base_frame_id:=r{index}/base_footprint']))
+    return placements
+
+
 def worker_cores(workers: int) -> list[int | None]:
     """The core for each of ``workers`` simulator/controller pairs: round robin over the cores
     this process may use; None (no pinning) where that set cannot be read."""

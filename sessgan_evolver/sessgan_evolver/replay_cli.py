@@ -195,7 +195,7 @@ def resimulate(args, episode: dict) -> int:
                     return EXIT_ERROR
                 start_resimulation_graph(supervisor, settings, namespace, log_directory,
                                          None if args.external else controller, worker_cores,
-                                         str(episode.get('robot', '')))
+                                         str(episode.get('robot', '')), environment.robots)
             client = ActionClient(node, EvaluateEnvironment, action_name)
             if not client.wait_for_server(timeout_sec=60.0):
                 logs = ''.join(child.log_tail(800) for child in supervisor.children)
@@ -264,10 +264,14 @@ def action_present(node, name: str, wait: float) -> bool:
 
 
 def start_resimulation_graph(supervisor, settings, namespace: str, log_directory: Path,
-                             controller: str | None, worker_cores, robot_model: str) -> None:
+                             controller: str | None, worker_cores, robot_model: str,
+                             robots: int = 1) -> None:
     """A simulator with ``settings`` under ``namespace`` and, unless None, the built-in
-    ``controller`` beside it (one core, batch scheduling, like a campaign's workers)."""
+    ``controller`` beside it (one per robot of a fleet; one core, batch scheduling, like a
+    campaign's workers)."""
     import yaml
+
+    from sessgan_evolver.process_supervisor import controller_placements
 
     params_file = log_directory / 'simulator_params.yaml'
     params_file.write_text(yaml.safe_dump({'/**': {'ros__parameters': settings.to_dict()}}))
@@ -281,9 +285,10 @@ def start_resimulation_graph(supervisor, settings, namespace: str, log_directory
         stamped = ['-p', 'use_stamped_cmd_vel:=true'] if settings.use_stamped_cmd_vel else []
         spec = CONTROLLERS.get(controller)
         robot = spec.node_arguments(robot_model) if spec else []
-        supervisor.start('controller', ['ros2', 'run', 'sessgan_controllers', controller,
-                                        *ros_args, '-p', 'use_sim_time:=true', *stamped,
-                                        *robot], core=core, batch=True)
+        for index, (_, placement) in enumerate(controller_placements(namespace, robots)):
+            supervisor.start(f'controller{index if robots > 1 else ""}', [
+                'ros2', 'run', 'sessgan_controllers', controller, '--ros-args', *placement,
+                '-p', 'use_sim_time:=true', *stamped, *robot], core=core, batch=True)
 
 
 def main(argv=None) -> int:

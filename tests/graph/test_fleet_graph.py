@@ -12,10 +12,12 @@ from __future__ import annotations
 import json
 import math
 import subprocess
+import time
 
 import pytest
 
 from tests.graph.test_reference_navigator_graph import start_navigator
+from tests.graph.test_resimulation import resimulate, table
 from tests.graph.test_simulator_graph import evaluate, room, start_simulator
 
 pytestmark = pytest.mark.graph
@@ -90,6 +92,15 @@ def test_lockstep_waits_for_every_robot_and_the_bag_holds_both(node_processes, r
     assert run.returncode == 0, run.stdout + run.stderr
     assert f'replayed {sum(counts.values())} messages' in run.stdout + run.stderr
 
+    # Re-simulation rebuilds the fleet from episode.json, a navigator per robot, and comes
+    # out the same (lockstep).
+    run = resimulate(metrics.bag_path, '--controller', 'reference_navigator')
+    assert run.returncode == 0, run.stdout + run.stderr
+    rows = table(run.stdout)
+    for row in ('outcome', 'collisions', 'sim time', 'travelled m', 'ticks', 'legs completed'):
+        recorded, again = rows[row]
+        assert recorded == again, (row, run.stdout)
+
 
 def test_a_missing_robot_controller_is_named(node_processes, ros_node):
     from sessgan_gen.ros_conversion import environment_to_msg
@@ -98,6 +109,11 @@ def test_a_missing_robot_controller_is_named(node_processes, ros_node):
     start_simulator(node_processes, namespace, 'dummy_agents:=0',
                     'controller_startup_timeout:=3.0')
     start_navigator(node_processes, f'{namespace}/r0', 'diff_drive')  # r1 has none
+    # r0's navigator up before the short start-up wait begins, so r1 is the one missing.
+    deadline = time.monotonic() + 60
+    while ros_node.count_subscribers(f'{namespace}/r0/scan') < 1:
+        assert time.monotonic() < deadline, 'the r0 navigator did not subscribe to scan'
+        time.sleep(0.1)
     metrics, _ = evaluate(ros_node, namespace, environment_to_msg(crossing_environment()),
                           timeout=120)
     assert metrics.outcome == 'controller_unresponsive', metrics.detail

@@ -80,12 +80,14 @@ class FaultScene:
 
 @dataclass
 class FleetMember:
-    """One more robot of a fleet episode, as drawn: start, goal, certified route."""
+    """One more robot of a fleet episode, as drawn: start, goal, certified route, path."""
 
     start: tuple[float, float]
     goal: tuple[float, float]
     route: np.ndarray
     """(n, 2) corners of its certified route (empty: none)."""
+    trajectory: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    """(n, 2) where it drove (empty: not known)."""
 
 
 FLEET_COLOURS = ('#e377c2', '#8c564b', '#bcbd22', '#9467bd', '#393b79', '#637939', '#843c39')
@@ -98,14 +100,18 @@ def _corners(route: RouteCertificate | None) -> np.ndarray:
     return np.asarray(route.points, dtype=float).reshape(-1, 2)
 
 
-def fleet_members(environment: Environment) -> list[FleetMember]:
+def fleet_members(environment: Environment, trajectories: Sequence[np.ndarray] = ()
+                  ) -> list[FleetMember]:
     """Robots r1, r2, ... of a fleet environment with their certified routes (each among the
-    other robots parked on their goals, sessgan_gen.fleet)."""
+    other robots parked on their goals, sessgan_gen.fleet) and, when given, where they
+    drove (``trajectories``, r1 first)."""
     if not environment.fleet:
         return []
     routes = certify_fleet(environment)[1:]
+    paths = list(trajectories) + [np.zeros((0, 2))] * (len(routes) - len(trajectories))
     return [FleetMember((robot.start.x, robot.start.y), (robot.goal.x, robot.goal.y),
-                        _corners(route)) for robot, route in zip(environment.fleet, routes)]
+                        _corners(route), np.asarray(path, dtype=float).reshape(-1, 2))
+            for robot, route, path in zip(environment.fleet, routes, paths)]
 
 
 def certified_route(environment: Environment) -> np.ndarray:
@@ -139,7 +145,8 @@ def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[
     """The scene of an in-process episode."""
     start = (environment.start.x, environment.start.y)
     goal = (environment.goal.x, environment.goal.y)
-    contacts = [contact.to_dict() for contact in trace.contacts]
+    contacts = sorted((contact.to_dict() for robot in (trace, *trace.fleet)
+                       for contact in robot.contacts), key=lambda contact: contact['time'])
     trajectory = np.asarray(trace.poses)[:, :2]
     return FaultScene(
         environment.scenario, np.asarray(environment.occupancy), environment.resolution,
@@ -147,7 +154,8 @@ def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[
         certified_route(environment), fault, rule or FaultRule(),
         title or default_title(metrics, fault), fault_place(contacts, trajectory),
         stations=[(pose.x, pose.y) for pose in environment.stations],
-        fleet=fleet_members(environment))
+        fleet=fleet_members(environment, [np.asarray(other.poses)[:, :2]
+                                          for other in trace.fleet]))
 
 
 def default_title(metrics: dict[str, Any], fault: FaultKey | None,
@@ -168,7 +176,8 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
     episode = read_episode_json(bag) or {}
     store = jazzy_typestore()
     occupancy = resolution = origin = None
-    trajectory = []
+    odometry: dict[str, list[tuple[float, float]]] = {}
+    """Positions by odom topic: a fleet's robots each publish their own."""
     for message in iter_bag_messages(bag):
         name = message.topic.rsplit('/', 1)[-1]
         if name == 'map' and occupancy is None:
@@ -179,9 +188,15 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
             origin = (float(grid.info.origin.position.x), float(grid.info.origin.position.y))
         elif name == 'odom':
             odom: Any = store.deserialize_cdr(message.data, message.msgtype)
-            trajectory.append((odom.pose.pose.position.x, odom.pose.pose.position.y))
+            odometry.setdefault(message.topic, []).append(
+                (odom.pose.pose.position.x, odom.pose.pose.position.y))
     if occupancy is None or resolution is None or origin is None:
         raise FaultPictureError(f'bag {bag} has no map message')
+    fleet = fleet_from_json(episode.get('fleet'))
+    robots = [[] if not fleet else next(
+        (path for topic, path in odometry.items() if topic.endswith(f'/r{index}/odom')), [])
+        for index in range(len(fleet) + 1)]
+    trajectory = robots[0] if fleet else next(iter(odometry.values()), [])
     scenario = str(episode.get('scenario') or 'factory')
     start = tuple(episode.get('start') or (*(trajectory[0] if trajectory else (0.0, 0.0)),
                                             0.0))
@@ -190,7 +205,7 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
                               occupancy, resolution, Pose2D(*start[:3]), Pose2D(*goal[:3]),
                               origin, stations=tuple(Pose2D(*station[:3])
                                                      for station in episode.get('stations', ())),
-                              fleet=fleet_from_json(episode.get('fleet')))
+                              fleet=fleet)
     trace = episode.get('trace') or {}
     if not trajectory and trace.get('robot'):
         trajectory = [tuple(row[:2]) for row in trace['robot']]
@@ -208,7 +223,7 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
         certified_route(environment), fault, rule,
         default_title(metrics, fault, str(episode.get('controller', ''))),
         fault_place(contacts, path), stations=[(pose.x, pose.y) for pose in environment.stations],
-        fleet=fleet_members(environment))
+        fleet=fleet_members(environment, [np.asarray(path, dtype=float) for path in robots[1:]]))
 
 
 def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool = False
@@ -242,6 +257,10 @@ def draw_scene(axis: Any, scene: FaultScene, legend: bool = True, compact: bool 
         if len(member.route):
             axis.plot(member.route[:, 0], member.route[:, 1], '--', color=colour,
                       linewidth=1.2)
+        if len(member.trajectory):
+            axis.plot(member.trajectory[:, 0], member.trajectory[:, 1], '-', color=colour,
+                      linewidth=1.6)
+            axis.plot(*member.trajectory[-1], 's', color=colour, markersize=6)
         axis.plot(*member.start, 'o', color=colour, markersize=7, markeredgecolor='black',
                   label=f'robot r{number}')
         axis.plot(*member.goal, '*', color=colour, markersize=11, markeredgecolor='black')

@@ -804,9 +804,13 @@ class Episode:
         if event is not MissionEvent.NONE:
             live.last_progress_time = now  # arriving and setting off are progress
         if now >= live.time_limit - 1e-9:
+            blocking = self._robots_nearby(live)
             self._end(record, Outcome.TIMEOUT,
                       f'time limit of {live.time_limit:.2f} s reached, '
-                      f'{self._distance_to_goal(record):.2f} m from the goal')
+                      f'{self._distance_to_goal(record):.2f} m from the goal' + (
+                          f'; robot(s) {", ".join(f"r{index}" for index in blocking)} within '
+                          f'{AGENT_WAIT_DISTANCE:.1f} m (waiting for each other?)'
+                          if blocking else ''))
         elif mission.dwelling and distance <= live.goal_tolerance:
             live.last_progress_time = now  # dwelling at a station is not being stuck
         elif config.stuck_timeout > 0:
@@ -934,18 +938,27 @@ class Episode:
         agents = self._agents
         robot = live.robot
         x, y = robot.position
+        if self._robots_nearby(live):
+            return True
+        if not agents.body_ids:
+            return False
+        gaps = (np.hypot(agents.positions[:, 0] - x, agents.positions[:, 1] - y)
+                - agents.config.radius - robot.footprint_radius)
+        return bool((gaps < AGENT_WAIT_DISTANCE).any())
+
+    def _robots_nearby(self, live: _Live) -> list[int]:
+        """The other robots under test within AGENT_WAIT_DISTANCE of the robot's body."""
+        robot = live.robot
+        x, y = robot.position
+        nearby = []
         for record in self._records:
             other = record.live.robot if record.live is not None else robot
             if other is not robot:
                 gap = (math.hypot(other.position[0] - x, other.position[1] - y)
                        - other.footprint_radius - robot.footprint_radius)
                 if gap < AGENT_WAIT_DISTANCE:
-                    return True
-        if not agents.body_ids:
-            return False
-        gaps = (np.hypot(agents.positions[:, 0] - x, agents.positions[:, 1] - y)
-                - agents.config.radius - robot.footprint_radius)
-        return bool((gaps < AGENT_WAIT_DISTANCE).any())
+                    nearby.append(record.index)
+        return nearby
 
     @staticmethod
     def _progress_distance(live: _Live) -> float:

@@ -6,6 +6,7 @@ import pytest
 from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.bag_reading import read_bag_topics
 from sessgan_evolver.episode_runner import EpisodeRunner
+from sessgan_evolver.fault_picture import scene_from_bag
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
@@ -48,3 +49,9 @@ def test_a_fleet_trace_bag_holds_every_robots_topics(fleet, tmp_path):
         assert counts[f'{robot}/scan'] == counts[f'{robot}/odom'] == 41, counts
         assert counts[f'{robot}/cmd_vel'] == 40 and counts[f'{robot}/goal_pose'] == 1
     assert '/scan' not in counts
+    # The fault picture draws each robot's own path from its own odom.
+    scene = scene_from_bag(bag)
+    assert tuple(scene.trajectory[0]) == pytest.approx((fleet.start.x, fleet.start.y), abs=1e-3)
+    start = fleet.fleet[0].start
+    assert len(scene.fleet[0].trajectory) == 41
+    assert tuple(scene.fleet[0].trajectory[0]) == pytest.approx((start.x, start.y), abs=1e-3)

@@ -128,9 +128,11 @@ def test_the_sampler_cleans_race_tracks_deterministically():
         track = first.occupancy == 0
         assert len(reachable_regions(track).sizes) == 1
         assert len(reachable_regions(original.occupancy == 0).sizes) > 10
-        # Bridges and filled specks aside, the post-process only deletes road.
+        # Bridges, filled specks and the circuit's widened pinches aside, the post-process
+        # only deletes road (widened pinches: 3.0 % of a served track on average, at most
+        # 8.5 %, over seeds 800000-800199).
         added = track & (original.occupancy != 0)
-        assert added.sum() < 0.05 * track.sum()
+        assert added.sum() < 0.1 * track.sum()
     # Scenarios without a cleanup are sampled as before.
     assert get_scenario('factory').track_cleanup is None
     factory = sampler.sample([5], scenario='factory')[0]

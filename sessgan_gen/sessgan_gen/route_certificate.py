@@ -11,7 +11,10 @@ decides that, deterministically from the map and the environment seed:
 * **Start and goal** are sub-cell centres whose clearance is at least ``robot_radius +
   clearance_margin``. The start is drawn from the seed among them; the goal among those that
   are far along the route from it: at least :func:`min_route_steps` (half the map's shorter
-  side) and at least half the farthest such cell. Both yaws point along the route.
+  side) and at least half the farthest such cell; for a scenario with a
+  ``goal_track_fraction`` (the race track: 0.5), also at least that fraction of the track's
+  length, the longest route between two such cells of the start's region
+  (:func:`track_length_steps`). Both yaws point along the route.
 * **Route certificate**: a 4-connected shortest path from start to goal through sub-cells
   whose clearance is at least ``robot_radius + route_margin`` (Nav2's inscribed radius plus an
   inflation margin). A map is a *valid test* (``feasible``) only when it exists. The
@@ -31,7 +34,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sessgan_gen.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
+from sessgan_gen.grid_search import (
+    FlatGrid,
+    bfs,
+    flat_grid,
+    label_regions,
+    to_cell,
+    to_flat,
+    walk_back,
+)
 from sessgan_gen.scenarios import Scenario
 
 Cell = tuple[int, int]
@@ -177,6 +188,23 @@ def min_route_steps(shape: tuple[int, int], subdivision: int) -> int:
     return max(2, int(0.5 * min(shape[0], shape[1]))) * subdivision
 
 
+def track_length_steps(flat: FlatGrid, region: list[int], candidates: np.ndarray) -> int:
+    """The track's length in grid steps: the longest shortest route between two
+    ``candidates`` (flat indices) of one 4-connected ``region`` (its flat indices), by a
+    double sweep: the candidate farthest from the region's first cell, then the candidate
+    farthest from that one. Exact on tree-shaped tracks and on a single loop (half the
+    lap), at most the longest route otherwise; 0 when the region holds no candidate."""
+    inside = candidates[np.isin(candidates, np.asarray(region))]
+    if not len(inside):
+        return 0
+    dist = [-1] * len(flat.open_cells)
+    bfs(flat, region[0], dist)
+    end = int(inside[int(np.argmax(np.asarray(dist)[inside]))])
+    dist = [-1] * len(flat.open_cells)
+    bfs(flat, end, dist)
+    return int(np.asarray(dist)[inside].max())
+
+
 def _yaw_along(points: list[tuple[float, float]]) -> float:
     (x0, y0), (x1, y1) = points[0], points[-1]
     return math.atan2(y1 - y0, x1 - x0) if (x0, y0) != (x1, y1) else 0.0
@@ -283,13 +311,20 @@ def place_start_goal(occupancy: np.ndarray, resolution: float, origin: tuple[flo
     region_sizes = np.array([len(order) for order in orders])
     starts = candidates[region_sizes[candidate_labels] > min_steps]
     rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(0x5E55,)))
+    track_lengths: dict[int, int] = {}
     for _ in range(START_TRIES if len(starts) else 0):
         start = int(starts[rng.integers(len(starts))])
         dist = [-1] * len(flat.open_cells)
         bfs(flat, start, dist)
         steps = np.asarray(dist)[candidates]
         farthest_steps = int(steps.max())
-        goals = candidates[steps >= max(min_steps, 0.5 * farthest_steps)]
+        need = max(min_steps, 0.5 * farthest_steps)
+        if spec.goal_track_fraction > 0:
+            region = labels[start]
+            if region not in track_lengths:
+                track_lengths[region] = track_length_steps(flat, orders[region], candidates)
+            need = max(need, spec.goal_track_fraction * track_lengths[region])
+        goals = candidates[steps >= need]
         if not len(goals):
             continue
         goal = int(goals[rng.integers(len(goals))])

@@ -41,6 +41,16 @@ class TrackCleanup:
     max_spur_cells: int = 0
     """Remove dead-end spurs whose skeleton ends within this many cells of a junction (longer
     dead ends stay whole). 0: off."""
+    keep_circuit: bool = False
+    """Keep only the track's largest circuit (sessgan_gen.track_cleanup.keep_circuit): the
+    largest biconnected block of the track's skeleton, a network of loops in which every two
+    points lie on a common loop, with its road; the rest (dead ends, roads joining circuits)
+    is removed. Tracks without a long enough circuit stay as the other steps leave them."""
+    min_circuit_sides: float = 1.0
+    """Shortest circuit kept, as its centre line's length in the map's shorter sides."""
+    min_circuit_width: float = 0.0
+    """Cells: where the kept circuit's road is narrower than this (a pinch), it is widened to
+    this width around its centre line. 0: off."""
 
 
 @dataclass(frozen=True)
@@ -86,6 +96,12 @@ class Scenario:
     inscribed radius plus an inflation margin); at most ``clearance_margin``."""
     track_cleanup: TrackCleanup | None = None
     """Structural post-process the sampler applies to generated maps (None: none)."""
+    goal_track_fraction: float = 0.0
+    """The goal lies at least this fraction of the track's length along the route from the
+    start, the track's length being the longest certified route between two clear points of
+    the start's region (sessgan_gen.route_certificate.track_length_steps); 0: off (the
+    goal is only at least half the map's shorter side and half the farthest clear point
+    away)."""
 
     @property
     def num_tokens(self) -> int:
@@ -119,6 +135,9 @@ def register_scenario(scenario: Scenario) -> Scenario:
         raise ValueError(
             f'scenario {scenario.name!r}: track_cleanup tokens {cleanup.track_token!r}, '
             f'{cleanup.off_track_token!r} must be among its tokens {scenario.tokens}')
+    if not 0.0 <= scenario.goal_track_fraction <= 1.0:
+        raise ValueError(f'scenario {scenario.name!r}: goal_track_fraction '
+                         f'({scenario.goal_track_fraction}) must lie in [0, 1]')
     if not 0 <= scenario.route_margin <= scenario.clearance_margin:
         raise ValueError(
             f'scenario {scenario.name!r}: margins must satisfy 0 <= route_margin '
@@ -174,11 +193,18 @@ register_scenario(Scenario(
     # track at least 3.2 m wide, and the route keeps a 1.8 m lane.
     clearance_margin=1.0,
     route_margin=0.3,
+    # Start and goal at least half the track's length apart (on a closed circuit, where the
+    # longest route is half a lap: at least a quarter lap apart, the return the rest of it).
+    goal_track_fraction=0.5,
     # The generator draws the example's road but as a maze of ~70 pieces with ~42 dead ends:
     # join one-cell breaks, keep the main piece, drop specks and spurs up to four track
-    # widths (README, race-track realism; sessgan_gen.track_cleanup).
+    # widths, then keep the largest circuit (the example is one closed circuit), its pinches
+    # widened to 3 m, the narrowest road of the example (README, race-track realism;
+    # sessgan_gen.track_cleanup).
     track_cleanup=TrackCleanup(track_token='T', off_track_token='O', max_island_cells=25,
-                               bridge_gaps=True, keep_main_piece=True, max_spur_cells=20),
+                               bridge_gaps=True, keep_main_piece=True, max_spur_cells=20,
+                               keep_circuit=True, min_circuit_sides=1.0,
+                               min_circuit_width=3.0),
 ))
 
 register_scenario(Scenario(

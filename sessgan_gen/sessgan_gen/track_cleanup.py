@@ -13,7 +13,17 @@ the generator's), in this order:
    ``max_spur_cells`` skeleton steps (:func:`sessgan_gen.track_realism.prune_spurs`), the
    branches that stay regrow their tips through the pruned pixels, and track cells covered
    only by the inscribed discs of removed skeleton cells (radius + 1 cell) are removed;
-4. steps 1 and 2 again (a spur's removal may leave a speck or a hole).
+4. steps 1 and 2 again (a spur's removal may leave a speck or a hole);
+5. keep the largest circuit (``keep_circuit``, :func:`keep_circuit`): the largest
+   biconnected block of the skeleton's 8-neighbour graph, when its centre line is at least
+   ``min_circuit_sides`` times the map's shorter side long. A block is a network of loops
+   in which every two points lie on a common loop, so a car can drive from any point to
+   any other and back another way; the road of the rest (dead ends of any length, roads
+   that join two circuits) is removed as in step 3, and where the circuit's road is
+   narrower than ``min_circuit_width`` (a pinch the car's certified lane cannot pass) it is
+   widened to that width around the centre line: the only road this step draws. Then
+   fill specks and keep the largest piece again (no bridging: a removed road must not be
+   joined back). A track without such a circuit keeps the result of step 4.
 
 Deterministic: a pure function of the map, so maps stay deterministic per seed.
 """
@@ -114,6 +124,93 @@ def remove_spurs(track: np.ndarray, max_spur_cells: int) -> np.ndarray:
     return mask & ~(cut & ~keep)
 
 
+MIN_LOOP_PIXELS = 8
+"""Pixels of the shortest skeleton loop that encloses a cell (the ring around one cell)."""
+
+
+def largest_loop_block(skeleton_mask: np.ndarray) -> np.ndarray:
+    """Bool mask of the pixels of the largest biconnected block (most pixels; ties: the first
+    found) of a skeleton's 8-neighbour graph that holds a loop around at least one cell
+    (``MIN_LOOP_PIXELS`` or more: smaller blocks are the triangles and diamonds of 8-adjacent
+    pixels at junctions); all False when there is none. Tarjan's algorithm, iterative."""
+    thin = np.asarray(skeleton_mask, dtype=bool)
+    rows, cols = np.nonzero(thin)
+    height, width = thin.shape
+    index = np.full((height + 2, width + 2), -1, dtype=np.int64)
+    index[rows + 1, cols + 1] = np.arange(len(rows))
+    neighbours = [[int(index[row + 1 + d_row, col + 1 + d_col])
+                   for d_row in (-1, 0, 1) for d_col in (-1, 0, 1)
+                   if (d_row or d_col) and index[row + 1 + d_row, col + 1 + d_col] >= 0]
+                  for row, col in zip(rows.tolist(), cols.tolist())]
+    order = [-1] * len(rows)
+    low = [0] * len(rows)
+    counter = 0
+    best: set[int] = set()
+    for root in range(len(rows)):
+        if order[root] >= 0:
+            continue
+        order[root] = low[root] = counter
+        counter += 1
+        stack = [(root, -1, iter(neighbours[root]))]
+        edges: list[tuple[int, int]] = []
+        while stack:
+            node, parent, pending = stack[-1]
+            descended = False
+            for other in pending:
+                if order[other] < 0:
+                    edges.append((node, other))
+                    order[other] = low[other] = counter
+                    counter += 1
+                    stack.append((other, node, iter(neighbours[other])))
+                    descended = True
+                    break
+                if other != parent and order[other] < order[node]:
+                    edges.append((node, other))
+                    low[node] = min(low[node], order[other])
+            if descended:
+                continue
+            stack.pop()
+            if not stack:
+                continue
+            above = stack[-1][0]
+            low[above] = min(low[above], low[node])
+            if low[node] >= order[above]:
+                block: set[int] = set()
+                while True:
+                    edge = edges.pop()
+                    block.update(edge)
+                    if edge == (above, node):
+                        break
+                if len(block) >= MIN_LOOP_PIXELS and len(block) > len(best):
+                    best = block
+    out = np.zeros_like(thin)
+    chosen = np.array(sorted(best), dtype=np.int64)
+    out[rows[chosen], cols[chosen]] = True
+    return out
+
+
+def keep_circuit(track: np.ndarray, min_circuit_cells: float, min_width: float = 0.0
+                 ) -> np.ndarray:
+    """The track reduced to its largest circuit (step 5 of the module docstring); the track
+    unchanged when its skeleton has no biconnected block of at least ``min_circuit_cells``
+    pixels."""
+    mask = np.asarray(track, dtype=bool)
+    thin = skeleton(mask)
+    circuit = largest_loop_block(thin)
+    if circuit.sum() < max(MIN_LOOP_PIXELS, min_circuit_cells):
+        return mask.copy()
+    clearance = track_clearance(mask)
+    radius = 0.5 * min_width
+    rows, cols = np.nonzero(circuit)
+    narrow = clearance[rows, cols] < radius
+    widened = mask | paint_discs(mask.shape, rows[narrow], cols[narrow],
+                                 np.full(int(narrow.sum()), radius))
+    keep = paint_discs(mask.shape, rows, cols, np.maximum(clearance[rows, cols], radius) + 1.0)
+    rows, cols = np.nonzero(thin & ~circuit)
+    cut = paint_discs(mask.shape, rows, cols, clearance[rows, cols] + 1.0)
+    return widened & ~(cut & ~keep)
+
+
 def clean_track(track: np.ndarray, cleanup: TrackCleanup) -> np.ndarray:
     """The track mask after the post-process of the module docstring."""
     mask = fill_islands(track, cleanup.max_island_cells)
@@ -124,6 +221,12 @@ def clean_track(track: np.ndarray, cleanup: TrackCleanup) -> np.ndarray:
     if cleanup.max_spur_cells > 0:
         mask = fill_islands(remove_spurs(mask, cleanup.max_spur_cells),
                             cleanup.max_island_cells)
+        if cleanup.keep_main_piece:
+            mask = largest_piece(mask)
+    if cleanup.keep_circuit:
+        mask = keep_circuit(mask, cleanup.min_circuit_sides * min(mask.shape),
+                            cleanup.min_circuit_width)
+        mask = fill_islands(mask, cleanup.max_island_cells)
         if cleanup.keep_main_piece:
             mask = largest_piece(mask)
     return mask

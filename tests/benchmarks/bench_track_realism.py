@@ -5,6 +5,7 @@ Not a test (pytest does not collect it); run it and read the figures::
     python tests/benchmarks/bench_track_realism.py                      # 200 seeds
     python tests/benchmarks/bench_track_realism.py --seeds 20 --png tracks.png
     python tests/benchmarks/bench_track_realism.py --no-post-process   # the raw generator
+    python tests/benchmarks/bench_track_realism.py --checkpoint my_racetrack.pt
 
 It samples race tracks from the shipped generator (through the sampler, so with the
 racetrack scenario's structural post-process unless ``--no-post-process``) with fresh seeds
@@ -42,13 +43,15 @@ SCENARIO = 'racetrack'
 
 
 def generated_environments(seeds: list[int], progress: ProgressPrinter,
-                           post_process: bool) -> list[Environment]:
+                           post_process: bool, checkpoint: Path | None = None
+                           ) -> list[Environment]:
     sampler = EnvironmentSampler()
     environments: list[Environment] = []
     progress.start('generated tracks', len(seeds))
     for first in range(0, len(seeds), BATCH):
         batch = seeds[first:first + BATCH]
-        environments += sampler.sample(batch, scenario=SCENARIO, post_process=post_process)
+        environments += sampler.sample(batch, checkpoint=checkpoint, scenario=SCENARIO,
+                                       post_process=post_process)
         progress.update(len(environments))
     return environments
 
@@ -154,18 +157,23 @@ def main() -> None:
     parser.add_argument('--no-post-process', action='store_true',
                         help="the generator's raw maps, without the racetrack scenario's "
                              'track_cleanup (sessgan_gen.track_cleanup)')
+    parser.add_argument('--checkpoint', type=Path, default=None,
+                        help='a racetrack generator checkpoint (.pt) instead of the shipped one')
     args = parser.parse_args()
     progress = ProgressPrinter()
     started = time.perf_counter()
     seeds = list(range(FIRST_SEED, FIRST_SEED + args.seeds))
-    generated = generated_environments(seeds, progress, not args.no_post_process)
+    generated = generated_environments(seeds, progress, not args.no_post_process,
+                                       args.checkpoint)
     sample_seconds = time.perf_counter() - started
     example = example_environments(seeds[:max(1, args.example_placements)])
     columns = {
         'generated': summary(generated, measure_all(generated, 'generated', progress)),
         'example': summary(example, measure_all(example, 'example', progress)),
     }
-    print(f'racetrack, {args.seeds} generated maps (seeds {FIRST_SEED}..'
+    source = args.checkpoint or 'the shipped generator'
+    print(f'racetrack, {args.seeds} generated maps of {source} '
+          f'(seeds {FIRST_SEED}..'
           f'{FIRST_SEED + args.seeds - 1}; '
           f'{"raw generator output" if args.no_post_process else "with the track cleanup"}'
           '), example map with '

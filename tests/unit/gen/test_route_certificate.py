@@ -1,18 +1,24 @@
 """Valid tests: start/goal clearance, the route certificate and its determinism."""
 
+import dataclasses
 
 import numpy as np
 import pytest
 
 from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.grid_search import bfs, flat_grid
 from sessgan_gen.navigation import certify_environment, make_environment
 from sessgan_gen.route_certificate import (
     bottleneck_clearance,
     certificate_subdivision,
     clearance_field,
+    map_clearance,
+    place_start_goal,
     required_clearances,
+    track_length_steps,
 )
 from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import tokens_to_occupancy
 
 pytestmark = pytest.mark.unit
 
@@ -107,3 +113,62 @@ def test_bottleneck_is_the_tightest_unavoidable_passage():
     assert bottleneck_clearance(clearance, (0, 0), (3, 3), 0.0) == 1.0
     clearance[1:3, :] = [[0.2, 0.6, 0.3, 0.2], [0.2, 0.4, 0.3, 0.2]]
     assert bottleneck_clearance(clearance, (0, 0), (3, 3), 0.0) == 0.4
+
+
+def serpentine_track(size=64):
+    """A racetrack token map: one 5-cell road winding through four straights, about 270 m
+    long on a 64 m map (track 0, out of bounds 1)."""
+    cells = np.ones((size, size), dtype=np.int64)
+    for row in (4, 20, 36, 52):
+        cells[row:row + 5, 4:size - 4] = 0
+    cells[4:25, size - 9:size - 4] = 0
+    cells[20:41, 4:9] = 0
+    cells[36:57, size - 9:size - 4] = 0
+    return cells
+
+
+def test_track_length_is_the_longest_route_between_clear_points():
+    spec = get_scenario('racetrack')
+    occupancy = tokens_to_occupancy(serpentine_track(32), spec)
+    grid = map_clearance(occupancy, spec.cell_size, (0.0, 0.0), spec)
+    place_need, route_need = required_clearances(spec)
+    flat = flat_grid(grid.clearance >= route_need - 1e-9)
+    rows, cols = np.nonzero(grid.clearance >= place_need - 1e-9)
+    candidates = (rows + 1) * flat.stride + cols + 1
+    region = [index for index, value in enumerate(flat.open_cells) if value]
+    longest = 0
+    for source in candidates.tolist():  # brute force: every pair of clear points
+        dist = [-1] * len(flat.open_cells)
+        bfs(flat, source, dist)
+        longest = max(longest, int(np.asarray(dist)[candidates].max()))
+    assert track_length_steps(flat, region, candidates) == longest
+    assert track_length_steps(flat, region, candidates[:0]) == 0
+
+
+def test_race_track_goals_lie_half_the_track_length_along_the_route():
+    spec = get_scenario('racetrack')
+    assert spec.goal_track_fraction == 0.5
+    assert get_scenario('factory').goal_track_fraction == 0.0
+    assert get_scenario('drone').goal_track_fraction == 0.0
+    occupancy = tokens_to_occupancy(serpentine_track(), spec)
+    grid = map_clearance(occupancy, spec.cell_size, (0.0, 0.0), spec)
+    place_need, route_need = required_clearances(spec)
+    flat = flat_grid(grid.clearance >= route_need - 1e-9)
+    rows, cols = np.nonzero(grid.clearance >= place_need - 1e-9)
+    region = [index for index, value in enumerate(flat.open_cells) if value]
+    length = track_length_steps(flat, region, (rows + 1) * flat.stride + cols + 1)
+    assert length * grid.cell_size > 200  # m: the road is one long path
+    without = dataclasses.replace(spec, goal_track_fraction=0.0)
+    apart, apart_without = [], []
+    for seed in range(30):
+        for rule, steps in ((spec, apart), (without, apart_without)):
+            placement = place_start_goal(occupancy, spec.cell_size, (0.0, 0.0), rule, seed)
+            assert placement.certificate is not None
+            steps.append(len(placement.certificate.path) - 1)
+    assert min(apart) >= 0.5 * length
+    # Half the farthest point from the start alone lets a start mid-track take a goal a
+    # quarter of the track away.
+    assert min(apart_without) < 0.5 * length
+    again = place_start_goal(occupancy, spec.cell_size, (0.0, 0.0), spec, 7)
+    first = place_start_goal(occupancy, spec.cell_size, (0.0, 0.0), spec, 7)
+    assert (again.start, again.goal) == (first.start, first.goal)

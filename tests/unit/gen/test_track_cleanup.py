@@ -16,10 +16,12 @@ from sessgan_gen.track_cleanup import (
     clean_token_map,
     clean_track,
     fill_islands,
+    keep_circuit,
+    largest_loop_block,
     largest_piece,
     remove_spurs,
 )
-from sessgan_gen.track_realism import count_dead_ends
+from sessgan_gen.track_realism import count_dead_ends, skeleton, track_clearance
 
 pytestmark = pytest.mark.unit
 
@@ -126,9 +128,11 @@ def test_the_sampler_cleans_race_tracks_deterministically():
         track = first.occupancy == 0
         assert len(reachable_regions(track).sizes) == 1
         assert len(reachable_regions(original.occupancy == 0).sizes) > 10
-        # Bridges and filled specks aside, the post-process only deletes road.
+        # Bridges, filled specks and the circuit's widened pinches aside, the post-process
+        # only deletes road (widened pinches: 3.0 % of a served track on average, at most
+        # 8.5 %, over seeds 800000-800199).
         added = track & (original.occupancy != 0)
-        assert added.sum() < 0.05 * track.sum()
+        assert added.sum() < 0.1 * track.sum()
     # Scenarios without a cleanup are sampled as before.
     assert get_scenario('factory').track_cleanup is None
     factory = sampler.sample([5], scenario='factory')[0]
@@ -155,3 +159,49 @@ def test_generated_maps_are_cleaned_as_the_sampler_serves_them():
         assert (tokens_to_occupancy(cells, spec) == environment.occupancy).all()
     factory = np.zeros((2, 32, 32), dtype=np.int64)
     assert clean_generated_maps(factory, 'factory') is factory
+
+
+def test_largest_loop_block_is_the_biggest_loop_without_its_tails():
+    thin = np.zeros((30, 60), dtype=bool)
+    thin[2, 2:20] = thin[20, 2:20] = True          # a 18 x 19 square loop
+    thin[2:21, 2] = thin[2:21, 19] = True
+    thin[10, 20:30] = True                          # a road to a smaller loop
+    thin[6, 30:40] = thin[14, 30:40] = True         # a 9 x 10 loop
+    thin[6:15, 30] = thin[6:15, 39] = True
+    thin[25, 40:58] = True                          # a separate straight road
+    block = largest_loop_block(thin)
+    big = np.zeros_like(thin)
+    big[2, 2:20] = big[20, 2:20] = big[2:21, 2] = big[2:21, 19] = True
+    # The big loop, and at most the first pixel of a road that leaves it (a pixel beside a
+    # junction closes a triangle with two of the loop's pixels).
+    assert (block | big == block).all() and (block & ~big).sum() <= 1
+    tree = np.zeros((10, 10), dtype=bool)
+    tree[5, :] = True
+    tree[:5, 5] = True
+    assert not largest_loop_block(tree).any()
+
+
+def test_keep_circuit_keeps_the_loop_and_drops_dead_ends_and_side_loops():
+    track = np.zeros((60, 140), dtype=bool)
+    track[:, :60] = ring()                          # the circuit, centre line about 90 long
+    track[27:32, 46:80] = True                      # a road to a smaller loop ...
+    small = ring(size=30, inner=5.0, outer=10.0)
+    track[15:45, 78:108] = small
+    track[27:32, 106:139] = True                    # ... and a dead end beyond it
+    track[28:32, 13:17] = False                     # a pinch: the ring is 1 cell wide here
+    assert count_dead_ends(track) >= 1
+    kept = keep_circuit(track, min_circuit_cells=40, min_width=3.0)
+    kept = largest_piece(fill_islands(kept, 25))
+    assert not kept[:, 64:].any()                   # side road, small loop and dead end gone
+    assert count_dead_ends(kept) == 0
+    assert (kept[:, :55] == track[:, :55]).mean() > 0.97  # the loop stays as it was ...
+    assert track_clearance(track)[28:32, 13:19].max() == 0.5
+    assert (track_clearance(kept)[28:32, 13:19].max(axis=1) >= 1.0).all()  # ... pinch: 3 wide
+    assert (kept & ~track).sum() <= 20
+    # A circuit shorter than asked for, or none at all: the track is left as it is.
+    assert (keep_circuit(track, min_circuit_cells=1000, min_width=3.0) == track).all()
+    tree = np.zeros((40, 40), dtype=bool)
+    tree[18:23, :] = True
+    tree[:20, 18:23] = True
+    assert (keep_circuit(tree, 3, 3.0) == tree).all()
+    assert largest_loop_block(skeleton(kept)).sum() >= 40

@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
 import time
 
 import pytest
 
 from tests.graph.test_reference_navigator_graph import start_navigator
-from tests.graph.test_resimulation import resimulate, table
+from tests.graph.test_resimulation import replay_all, resimulate_same
 from tests.graph.test_simulator_graph import evaluate, room, start_simulator
 
 pytestmark = pytest.mark.graph
@@ -85,21 +84,10 @@ def test_lockstep_waits_for_every_robot_and_the_bag_holds_both(node_processes, r
     episode = json.loads((tmp_path / 'bags' / 'fleet-crossing' / 'episode.json').read_text())
     assert len(episode['fleet']) == 1
 
-    # Replay re-publishes every robot's messages (at 20x, under another namespace).
-    run = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', metrics.bag_path,
-                          '--rate', '20', '--namespace', '/fleet_replay'],
-                         capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stdout + run.stderr
-    assert f'replayed {sum(counts.values())} messages' in run.stdout + run.stderr
-
-    # Re-simulation rebuilds the fleet from episode.json, a navigator per robot, and comes
-    # out the same (lockstep).
-    run = resimulate(metrics.bag_path, '--controller', 'reference_navigator')
-    assert run.returncode == 0, run.stdout + run.stderr
-    rows = table(run.stdout)
-    for row in ('outcome', 'collisions', 'sim time', 'travelled m', 'ticks', 'legs completed'):
-        recorded, again = rows[row]
-        assert recorded == again, (row, run.stdout)
+    # Replay re-publishes every robot's messages; re-simulation rebuilds the fleet from
+    # episode.json, a navigator per robot, and comes out the same (lockstep).
+    replay_all(metrics.bag_path, sum(counts.values()), '/fleet_replay')
+    resimulate_same(metrics.bag_path, '--controller', 'reference_navigator')
 
 
 def test_a_missing_robot_controller_is_named(node_processes, ros_node):

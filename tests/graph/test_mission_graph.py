@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
 
 import pytest
 
 from tests.graph.test_reference_navigator_graph import start_navigator
-from tests.graph.test_resimulation import resimulate, table
+from tests.graph.test_resimulation import replay_all, resimulate_same
 from tests.graph.test_simulator_graph import evaluate, start_simulator
 
 pytestmark = pytest.mark.graph
@@ -108,20 +107,10 @@ def test_mission_failure_bag_replays_and_resimulates(node_processes, ros_node, t
     counts = {topic.topic: topic.message_count for topic in read_bag_topics(metrics.bag_path)}
     assert counts[f'{namespace}/goal_pose'] == 2 and counts[f'{namespace}/waypoints'] == 1
 
-    # Replay re-publishes every message (at 20x, under another namespace).
-    run = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', metrics.bag_path,
-                          '--rate', '20', '--namespace', '/mission_replay'],
-                         capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stdout + run.stderr
-    assert f'replayed {sum(counts.values())} messages' in run.stdout + run.stderr
-
-    # Re-simulation rebuilds the mission from episode.json and fails on the same leg.
-    run = resimulate(metrics.bag_path, '--controller', 'reference_navigator')
-    assert run.returncode == 0, run.stdout + run.stderr
-    rows = table(run.stdout)
-    for row in ('outcome', 'collisions', 'sim time', 'travelled m', 'ticks', 'legs completed'):
-        recorded, again = rows[row]
-        assert recorded == again, (row, run.stdout)
+    # Replay re-publishes every message; re-simulation rebuilds the mission from episode.json
+    # and fails on the same leg.
+    replay_all(metrics.bag_path, sum(counts.values()), '/mission_replay')
+    rows = resimulate_same(metrics.bag_path, '--controller', 'reference_navigator')
     assert rows['legs completed'][0] == '1/2'
     assert math.isclose(float(rows['sim time'][0]), 25.0, abs_tol=0.06)
 

@@ -43,6 +43,25 @@ def table(stdout: str) -> dict[str, tuple[str, str]]:
     return rows
 
 
+def replay_all(bag: str, messages: int, namespace: str) -> None:
+    """Replay re-publishes all ``messages`` of ``bag`` (at 20x, under ``namespace``)."""
+    run = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', bag, '--rate', '20',
+                          '--namespace', namespace], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert f'replayed {messages} messages' in run.stdout + run.stderr
+
+
+def resimulate_same(bag: str, *options: str) -> dict[str, tuple[str, str]]:
+    """Re-simulate ``bag`` and check the episode comes out the same (lockstep); the table."""
+    run = resimulate(bag, *options)
+    assert run.returncode == 0, run.stdout + run.stderr
+    rows = table(run.stdout)
+    for row in ('outcome', 'collisions', 'sim time', 'travelled m', 'ticks', 'legs completed'):
+        recorded, again = rows[row]
+        assert recorded == again, (row, run.stdout)
+    return rows
+
+
 def factory_example():
     from sessgan_gen.token_map import load_example_map
 

@@ -23,6 +23,8 @@ from sessgan_sim.worker.topics import Recording, RobotTopics
 GOAL_REPUBLISH_PERIOD = 1.0
 """Wall seconds between checks for late goal_pose readers (and, in lockstep before the first
 command, between unconditional resends of the goal)."""
+SETTLE_PERIOD = 0.5
+"""Wall seconds a fleet's controllers that just came up get before the first tick."""
 FEEDBACK_PERIOD = 0.25
 """Sim seconds between evaluate feedback messages."""
 
@@ -239,9 +241,18 @@ class FleetStepper:
         """Wait for every robot's controller (EpisodeStepper.wait_for_controller); the
         index of the first that did not come within ``timeout`` wall seconds, else None."""
         deadline = time.monotonic() + timeout
+        started = time.monotonic()
         for index, stepper in enumerate(self.steppers):
             if not stepper.wait_for_controller(max(0.0, deadline - time.monotonic())):
                 return index
+        if time.monotonic() - started > 0.05:
+            # Controllers that came up just now: while we waited for one, discovery of
+            # another's odom or clock reader may still have been under way (a tick it misses
+            # is never sent again). Let it settle, then check everyone once more.
+            time.sleep(SETTLE_PERIOD)
+            for index, stepper in enumerate(self.steppers):
+                if not stepper.wait_for_controller(max(0.0, deadline - time.monotonic())):
+                    return index
         return None
 
     def run(self, episode, observations, clock: EpisodeClock, settings: SimulatorSettings,

@@ -290,9 +290,11 @@ class PlanarRayCaster:
                         faces.normal_axis * (2 * self._beams))
 
     def cast(self, x: float, y: float, yaw: float, circles: np.ndarray | None = None,
-             radius: float = 0.0) -> np.ndarray:
+             radius: float = 0.0,
+             more_circles: Sequence[tuple[float, float, float]] = ()) -> np.ndarray:
         """Distance in m along every beam from (x, y), the beams turned by ``yaw`` rad, to the
-        first face or circle (``circles``: float (n, 2) centres, all ``radius`` m); inf where
+        first face or circle (``circles``: float (n, 2) centres, all ``radius`` m;
+        ``more_circles``: (x, y, radius) each, e.g. a fleet's other robots); inf where
         nothing lies within range_max. Hits beyond range_max may read inf or their distance.
         """
         reference = yaw + self._angle_min - self._margin
@@ -309,16 +311,10 @@ class PlanarRayCaster:
             for circle_x, circle_y in circles.tolist():
                 self._cut_circle(circle_x - x, circle_y - y, radius, reference, directions,
                                  ranges)
+        for circle_x, circle_y, circle_radius in more_circles:
+            self._cut_circle(circle_x - x, circle_y - y, circle_radius, reference, directions,
+                             ranges)
         return ranges
-
-    def cut_circle(self, x: float, y: float, yaw: float, circle_x: float, circle_y: float,
-                   radius: float, ranges: np.ndarray) -> None:
-        """Lower ``ranges`` (a :meth:`cast` from the same viewpoint) to a circle of ``radius``
-        m centred at (circle_x, circle_y)."""
-        reference = yaw + self._angle_min - self._margin
-        directions = self._directions * math.cos(yaw)
-        directions += self._normals * math.sin(yaw)
-        self._cut_circle(circle_x - x, circle_y - y, radius, reference, directions, ranges)
 
     def _is_opaque(self, x: float, y: float) -> bool:
         col = math.floor((x - self._origin[0]) / self._resolution)
@@ -491,18 +487,15 @@ class Lidar:
             if agents is not None and not (abs(scan_height - agents.centre_height)
                                            < agents.config.height / 2):
                 agents = None
+            # Another robot of a fleet is seen where the scan plane passes through its body.
+            others = [(other.state.x, other.state.y, other.footprint_radius)
+                      for other in self._fleet
+                      if other.vertical_extent[0] <= scan_height <= other.vertical_extent[1]]
             if agents is not None:
                 distances = self._planar.cast(state.x, state.y, state.yaw, agents.positions,
-                                              agents.config.radius)
+                                              agents.config.radius, others)
             else:
-                distances = self._planar.cast(state.x, state.y, state.yaw)
-            for other in self._fleet:
-                # Another robot is seen where the scan plane passes through its body.
-                bottom, top = other.vertical_extent
-                if bottom <= scan_height <= top:
-                    other_state = other.state
-                    self._planar.cut_circle(state.x, state.y, state.yaw, other_state.x,
-                                            other_state.y, other.footprint_radius, distances)
+                distances = self._planar.cast(state.x, state.y, state.yaw, more_circles=others)
             missed = distances >= config.range_max
             ranges = np.minimum(distances, config.range_max)
         else:

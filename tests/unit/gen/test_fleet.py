@@ -24,7 +24,8 @@ from sessgan_gen.missions import MissionSpec
 from sessgan_gen.navigation import certify_fleet, environment_is_feasible, make_environment
 from sessgan_gen.route_certificate import map_clearance, required_clearances
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import load_example_map
+from tests.unit.gen.served_maps import served_token_maps
 
 pytestmark = pytest.mark.unit
 
@@ -34,11 +35,7 @@ SEEDS = {'factory': range(710_000, 710_012), 'drone': range(710_000, 710_004),
 
 @pytest.fixture(scope='module')
 def maps():
-    sampler = EnvironmentSampler()
-    return {scenario: [(environment.seed, occupancy_to_tokens(environment.occupancy,
-                                                              get_scenario(scenario)))
-                       for environment in sampler.sample(list(seeds), scenario=scenario)]
-            for scenario, seeds in SEEDS.items()}
+    return served_token_maps(SEEDS)
 
 
 def as_tuple(environment: Environment):

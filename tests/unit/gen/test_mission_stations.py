@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.errors import InvalidEnvironmentError, InvalidMissionError
 from sessgan_gen.missions import MAX_MISSION_STATIONS, MissionSpec
 from sessgan_gen.navigation import (
@@ -18,7 +17,8 @@ from sessgan_gen.navigation import (
 )
 from sessgan_gen.route_certificate import map_clearance, required_clearances
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import load_example_map
+from tests.unit.gen.served_maps import served_token_maps
 
 pytestmark = pytest.mark.unit
 
@@ -28,11 +28,7 @@ SEEDS = {'factory': range(700_000, 700_030), 'drone': range(700_000, 700_010),
 
 @pytest.fixture(scope='module')
 def maps():
-    sampler = EnvironmentSampler()
-    return {scenario: [(environment.seed, occupancy_to_tokens(environment.occupancy,
-                                                              get_scenario(scenario)))
-                       for environment in sampler.sample(list(seeds), scenario=scenario)]
-            for scenario, seeds in SEEDS.items()}
+    return served_token_maps(SEEDS)
 
 
 def as_tuple(environment: Environment):

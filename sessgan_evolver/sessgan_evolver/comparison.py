@@ -13,10 +13,10 @@ episode, for every method). Per run:
   valid failure whose fault was confirmed, and the search's wall seconds at that episode
   plus that fault's confirmation re-runs (CPU seconds beside it);
 * **fresh-seed failure rate of the final generator** (sessgan_evolver.fresh_seed): SESS-GAN's
-  fittest member of its last generation; ``random`` and ``latent`` (weights frozen) leave
-  the generator they sampled; ``cellular_automaton`` is its own generator; ``grid_ga``
-  leaves none. Every generator is evaluated on the same fresh seed pairs, disjoint from all
-  seeds of all runs, once per distinct generator;
+  fittest member of its last generation; ``random``, ``latent`` and ``screened`` (weights
+  frozen) leave the generator they sampled; ``cellular_automaton`` is its own generator;
+  ``grid_ga`` leaves none. Every generator is evaluated on the same fresh seed pairs,
+  disjoint from all seeds of all runs, once per distinct generator;
 * **TPKL and uniqueness of the failing maps**: of the maps of its distinct faults (first
   occurrence each), to the example map.
 
@@ -199,6 +199,9 @@ class RunFigures:
     failing_tpkl: float | None = None
     failing_uniqueness: float | None = None
     fault_records: list[str] = field(default_factory=list)
+    cheap_wall: float = 0.0
+    """Wall seconds the method spent on cheap work (screening, surrogate; within
+    search_wall)."""
 
     def row(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -246,6 +249,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
                             fleet=config.fleet()) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
+        cheap_wall = 0.0
         if method == 'sessgan':
             search = run_sessgan_search(config.campaign_config(seed), evaluator, config.budget,
                                         output / 'runs', label, log)
@@ -255,6 +259,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
             searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
                                      config.ga_config())
             run_search(searcher, evaluator, config.budget, label)
+            cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))
             source, source_key = _final_source(config, method)
         search_wall = time.perf_counter() - episode_log.started
         search_cpu = time.process_time() - episode_log.cpu_started
@@ -288,7 +293,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
         generator=source.label if source is not None else '',
         failing_tpkl=tile_pattern_kl(example, tokens) if tokens else None,
         failing_uniqueness=uniqueness_report(tokens).mean if tokens else None,
-        fault_records=[str(path) for path in written])
+        fault_records=[str(path) for path in written], cheap_wall=cheap_wall)
     log(f'{label}: {episodes} episodes, {figures.valid_failures} valid failures, '
         f'{len(faults)} distinct faults, {len(confirmed)}/{len(checked)} confirmed, '
         f'{search_wall:.0f} s')
@@ -296,7 +301,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
 
 
 def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None, str]:
-    if method in ('random', 'latent'):
+    if method in ('random', 'latent', 'screened'):
         label = 'shipped generator' if not config.checkpoint else config.checkpoint
         return PyramidSource(label, config.scenario, config.checkpoint or None), 'pyramid:base'
     if method == 'cellular_automaton':
@@ -379,6 +384,7 @@ def method_table(config: CompareConfig, runs: Sequence[MethodRun]) -> str:
                              ('distinct_faults', 'distinct faults', '{:.1f}'),
                              ('confirmed_faults', 'confirmed distinct faults', '{:.1f}'),
                              ('search_wall', 'search wall s', '{:.0f}'),
+                             ('cheap_wall', 'cheap work wall s (within search)', '{:.1f}'),
                              ('search_cpu', 'search CPU s', '{:.0f}')]
     for key, label, number_format in rows:
         cells = [format_spread([getattr(f, key) for f in by_method[m]], number_format)
@@ -523,8 +529,8 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
         '* Every map goes through the same validity certificate; maps without a certified '
         'route are not simulated and still cost one episode.',
         '* SESS-GAN runs whole generations of population x K episodes; its final generator '
-        "is its last generation's fittest member. random and latent leave the generator they "
-        'sampled (weights frozen); grid_ga leaves none.',
+        "is its last generation's fittest member. random, latent and screened leave the "
+        'generator they sampled (weights frozen); grid_ga leaves none.',
         '* Files: runs.csv (every run), faults.csv (every distinct fault), episodes.csv '
         '(every episode), fresh_seed.csv, faults/<method>-seed<s>/ (bags and pictures of '
         'confirmed faults), runs/ (SESS-GAN campaigns).',

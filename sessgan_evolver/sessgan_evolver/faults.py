@@ -139,18 +139,23 @@ def fault_key(environment: Environment, event: FaultEvent, rule: FaultRule) -> F
     map_row, map_col = environment.cell_of(event.x, event.y)
     row = math.floor(map_row / rule.coarse_cells)
     col = math.floor(map_col / rule.coarse_cells)
+    return FaultKey(event.kind, int(row), int(col),
+                    place_context(np.asarray(environment.occupancy), row, col, rule))
+
+
+def place_context(occupancy: np.ndarray, row: int, col: int, rule: FaultRule) -> str:
+    """The ``context`` digest of coarse cell (row, col) of an occupancy grid (the map
+    around it, module docstring)."""
     top, left = row * rule.coarse_cells - rule.context_cells, col * rule.coarse_cells \
         - rule.context_cells
     side = rule.coarse_cells + 2 * rule.context_cells
-    occupancy = np.asarray(environment.occupancy)
     patch = np.full((side, side), OUTSIDE, dtype=np.int16)
     rows = slice(max(top, 0), min(top + side, occupancy.shape[0]))
     cols = slice(max(left, 0), min(left + side, occupancy.shape[1]))
     if rows.start < rows.stop and cols.start < cols.stop:
         patch[rows.start - top:rows.stop - top, cols.start - left:cols.stop - left] = \
             occupancy[rows, cols]
-    digest = hashlib.sha256(patch.tobytes() + f'{side}'.encode()).hexdigest()
-    return FaultKey(event.kind, int(row), int(col), digest)
+    return hashlib.sha256(patch.tobytes() + f'{side}'.encode()).hexdigest()
 
 
 def key_of_failure(environment: Environment, metrics: Mapping[str, Any],

@@ -16,6 +16,9 @@ Noise maps (one float array per generator scale, standard normal):
   becomes ``sqrt(1 - s^2) * z + s * e`` with fresh standard normal ``e``, so mutated noise is
   still standard normal (the generator sees inputs like those it was trained on) and keeps
   a correlation of ``sqrt(1 - s^2)`` with its parent;
+* ``mutate_noise_region``: the same, only inside a rectangle given in fractions of the map
+  (every chosen scale's noise covers the whole map at its own resolution), so the map
+  changes around one place and stays the same away from it;
 * ``crossover_noise``: each scale's noise taken whole from one parent or the other.
 """
 
@@ -91,8 +94,10 @@ def crossover_token_maps(first: np.ndarray, second: np.ndarray, rng: np.random.G
 
 
 def mutate_noise(noise: NoiseMaps, rng: np.random.Generator, strength: float,
-                 scale_probability: float = 0.5) -> NoiseMaps:
-    """A mutated copy of per-scale noise (module docstring); ``strength`` s in [0, 1]."""
+                 scale_probability: float = 0.5,
+                 scales: tuple[int, ...] | None = None) -> NoiseMaps:
+    """A mutated copy of per-scale noise (module docstring); ``strength`` s in [0, 1].
+    ``scales``: mutate exactly these scales (0 the coarsest) instead of drawing them."""
     if not 0.0 <= strength <= 1.0:
         raise MapOperatorError(f'noise mutation strength must lie in [0, 1], got {strength}')
     if not 0.0 <= scale_probability <= 1.0:
@@ -100,9 +105,15 @@ def mutate_noise(noise: NoiseMaps, rng: np.random.Generator, strength: float,
                                f'{scale_probability}')
     if not noise:
         raise MapOperatorError('no noise maps to mutate')
-    chosen = rng.random(len(noise)) < scale_probability
-    if not chosen.any():
-        chosen[int(rng.integers(0, len(noise)))] = True
+    if scales is not None:
+        if not scales or any(not 0 <= scale < len(noise) for scale in scales):
+            raise MapOperatorError(f'scales must name some of the {len(noise)} noise maps, '
+                                   f'got {scales}')
+        chosen = np.isin(np.arange(len(noise)), scales)
+    else:
+        chosen = rng.random(len(noise)) < scale_probability
+        if not chosen.any():
+            chosen[int(rng.integers(0, len(noise)))] = True
     keep = math.sqrt(1.0 - strength * strength)
     mutated = []
     for is_chosen, scale in zip(chosen, noise):
@@ -113,6 +124,36 @@ def mutate_noise(noise: NoiseMaps, rng: np.random.Generator, strength: float,
         else:
             values = values.copy()
         mutated.append(values)
+    return mutated
+
+
+def mutate_noise_region(noise: NoiseMaps, rng: np.random.Generator, strength: float,
+                        region: tuple[float, float, float, float],
+                        scales: tuple[int, ...]) -> NoiseMaps:
+    """A copy of per-scale noise mutated like ``mutate_noise`` only inside ``region`` =
+    (top, left, bottom, right) as fractions of the map's height and width, on ``scales``
+    (each at least one noise cell)."""
+    if not 0.0 <= strength <= 1.0:
+        raise MapOperatorError(f'noise mutation strength must lie in [0, 1], got {strength}')
+    top, left, bottom, right = region
+    if not 0.0 <= top < bottom <= 1.0 or not 0.0 <= left < right <= 1.0:
+        raise MapOperatorError(f'region must be (top, left, bottom, right) within [0, 1] with '
+                               f'top < bottom and left < right, got {region}')
+    if not scales or any(not 0 <= scale < len(noise) for scale in scales):
+        raise MapOperatorError(f'scales must name some of the {len(noise)} noise maps, got '
+                               f'{scales}')
+    keep = math.sqrt(1.0 - strength * strength)
+    mutated = [np.array(scale, dtype=np.float32, copy=True) for scale in noise]
+    for scale in scales:
+        values = mutated[scale]
+        height, width = values.shape[-2:]
+        rows = slice(min(int(top * height), height - 1), max(math.ceil(bottom * height),
+                                                            int(top * height) + 1))
+        cols = slice(min(int(left * width), width - 1), max(math.ceil(right * width),
+                                                           int(left * width) + 1))
+        window = values[..., rows, cols]
+        fresh = rng.standard_normal(window.shape).astype(np.float32)
+        values[..., rows, cols] = keep * window + strength * fresh
     return mutated
 
 

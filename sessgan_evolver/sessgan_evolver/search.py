@@ -76,10 +76,14 @@ class EpisodeLog:
 def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
                run_label: str = '') -> int:
     """Ask, run and tell until ``budget`` episodes have run (a last batch that would
-    overrun is cut short and not told). Returns the episodes run."""
+    overrun is cut short and not told). Returns the episodes run. Each proposal is run on
+    its own Environment when it has one, else on make_environment's for its seeds."""
     if budget < 1:
         raise SearchError(f'the episode budget must be >= 1, got {budget}')
     label = run_label or method.name
+    # A method's own Environment is a plain episode's; missions and fleets are drawn from
+    # the seeds as for every method.
+    plain = evaluator.mission.stations == 0 and evaluator.fleet.robots == 1
     done = 0
     while done < budget:
         proposals = method.ask()
@@ -88,11 +92,16 @@ def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
         batch = proposals[:budget - done]
         results = []
         for proposal in batch:
-            environment = make_environment(
-                proposal.cells, evaluator.scenario, f'{label}-e{done:05d}',
-                seed=proposal.resolved_environment_seed, mission=evaluator.mission)
+            environment_id = f'{label}-e{done:05d}'
+            if proposal.environment is not None and plain:
+                environment = dataclasses.replace(proposal.environment, id=environment_id)
+            else:
+                environment = make_environment(
+                    proposal.cells, evaluator.scenario, environment_id,
+                    seed=proposal.resolved_environment_seed, mission=evaluator.mission,
+                    fleet=evaluator.fleet)
             run = evaluator.run_environment(environment, proposal.sim_seed, proposal.origin)
-            results.append(Evaluated(proposal, environment, run.metrics))
+            results.append(Evaluated(proposal, environment, run.metrics, run.trace))
             done += 1
         if len(batch) < len(proposals):
             break

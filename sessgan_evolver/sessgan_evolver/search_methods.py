@@ -12,7 +12,9 @@ one episode of the budget. SESS-GAN itself (weight evolution) runs as the real C
   space directly), initial maps from the cellular automaton, operators of map_operators;
 * ``latent``: a genetic algorithm over the generator's noise inputs with the weights frozen
   (latent variable evolution, Volz et al. 2018), initial noise = fresh seeds' noise, so
-  generation 0 is random sampling of the generator.
+  generation 0 is random sampling of the generator;
+* ``screened``: children of failing tests in the generator's latent space and fresh samples,
+  screened by cheap signals before they cost an episode (sessgan_evolver.screened_search).
 
 Both genetic algorithms use the campaign's settings (population 12, 1 elite, tournaments of
 3, crossover probability 0.5) and its fitness formula for one map per individual
@@ -37,6 +39,7 @@ from sessgan_evolver.cellular_automaton import (
     CellularAutomatonConfig,
     CellularAutomatonGenerator,
 )
+from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import SearchMethodError
 from sessgan_evolver.fitness import FitnessConfig, member_fitness
 from sessgan_evolver.map_operators import (
@@ -75,6 +78,9 @@ class Proposal:
     """How it was made, for logs (e.g. 'generation 3 crossover 2x7 + paint')."""
     environment_seed: int | None = None
     """The Environment's seed (start and goal placement); None: the map seed (0 if none)."""
+    environment: Environment | None = None
+    """A plain episode's Environment the method built and certified itself (its own start
+    and goal, e.g. another map's); None: the driver builds it from the seeds."""
 
     @property
     def resolved_environment_seed(self) -> int:
@@ -90,6 +96,8 @@ class Evaluated:
     proposal: Proposal
     environment: Environment
     metrics: Mapping[str, Any]
+    trace: EpisodeTrace | None = None
+    """The episode's trace (where a failure happened), when the driver kept one."""
 
 
 class SearchMethod(Protocol):
@@ -357,6 +365,13 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
             sample_token_maps_from_noise(self.pyramid, genotypes), self.spec.name))
 
 
+def _screened(scenario: str, seed: int, checkpoint: str | bytes | None) -> SearchMethod:
+    # Imported here: sessgan_evolver.screened_search builds on this module's types.
+    from sessgan_evolver.screened_search import ScreenedSearch
+
+    return ScreenedSearch(scenario, seed, checkpoint)
+
+
 BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None'], SearchMethod]
 """(scenario, search seed, generator checkpoint or None, GA settings or None) -> method."""
 
@@ -367,10 +382,11 @@ BASELINES: dict[str, BaselineFactory] = {
         scenario, seed),
     'latent': lambda scenario, seed, checkpoint, ga: LatentEvolution(scenario, seed, ga,
                                                                      checkpoint),
+    'screened': lambda scenario, seed, checkpoint, ga: _screened(scenario, seed, checkpoint),
 }
 """Methods the search driver runs, by name (``sessgan`` runs as the real Campaign)."""
 
-METHODS = ('sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent')
+METHODS = ('sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent', 'screened')
 """Every method ``compare`` knows, in report order."""
 
 

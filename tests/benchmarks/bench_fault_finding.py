@@ -8,12 +8,21 @@ report's own table, the figures the goals are stated in:
 * SESS-GAN's confirmed distinct faults per 1,000 episodes against random sampling's and the
   grid GA's (ratio of the means over seeds, and the seed-by-seed ratios);
 * the fresh-seed valid-failure rate of SESS-GAN's final generator against the shipped
-  generator's, and its fresh maps' TPKL against the shipped generator's.
+  generator's, and its fresh maps' TPKL against the shipped generator's;
+* every method's confirmed distinct faults against random sampling's (the ``screened``
+  search's goal: 2.8x), its cheap work's share of its search wall time, and a stricter
+  count, *fault situations*: confirmed faults of a run grouped when they have the same kind
+  and coarse cell on maps that differ in fewer than ``SITUATION_CELLS`` of their cells (a
+  local variant of the same failing map counts once).
 
-Usage (CPU-heavy; run with nice)::
+``--budget`` takes a comma-separated list (one comparison per budget). Usage (CPU-heavy; run
+with nice)::
 
     nice -n 10 python tests/benchmarks/bench_fault_finding.py --scenario factory \\
         --controllers nearness_diagram --seeds 0,1,2 --budget 360 --fresh 40
+    nice -n 5 python tests/benchmarks/bench_fault_finding.py --scenario factory \\
+        --controllers nearness_diagram --methods random,screened --seeds 100,101,102 \\
+        --budget 100,300 --fresh 10
 """
 
 from __future__ import annotations
@@ -60,13 +69,55 @@ def describe_ratio(runs, method: str, other: str, key: str) -> str:
             f'{", ".join(per_seed)})')
 
 
+SITUATION_CELLS = 0.1
+"""Share of map cells two failing maps must differ in to be different fault situations."""
+
+
+def fault_situations(run) -> int:
+    """Confirmed distinct faults of a run grouped into situations (module docstring)."""
+    representatives: list[tuple[str, int, int, np.ndarray]] = []
+    for entry in run.faults:
+        if entry.confirmation is None or not entry.confirmation.confirmed:
+            continue
+        occupancy = np.asarray(run.records[entry.first].environment.occupancy)
+        key = entry.key
+        if not any(kind == key.kind and row == key.row and col == key.col
+                   and other.shape == occupancy.shape
+                   and np.mean(other != occupancy) < SITUATION_CELLS
+                   for kind, row, col, other in representatives):
+            representatives.append((key.kind, key.row, key.col, occupancy))
+    return len(representatives)
+
+
+def describe_method(runs, method: str) -> str:
+    """Per-seed figures of one method: confirmed faults, situations, first confirmed episode,
+    cheap work share."""
+    mine = sorted((r for r in runs if r.figures.method == method),
+                  key=lambda r: r.figures.search_seed)
+    confirmed = [r.figures.confirmed_per_1000 for r in mine]
+    situations = [1000.0 * fault_situations(r) / r.figures.episodes for r in mine]
+    first = [r.figures.first_confirmed_episode for r in mine]
+    share = [100.0 * r.figures.cheap_wall / r.figures.search_wall for r in mine
+             if r.figures.search_wall > 0]
+
+    def spread(values) -> str:
+        present = [float(v) for v in values if v is not None]
+        if not present:
+            return 'none'
+        std = float(np.std(present, ddof=1)) if len(present) > 1 else 0.0
+        return f'{np.mean(present):.1f} ± {std:.1f} ({", ".join(f"{v:.0f}" for v in present)})'
+    return (f'{method}: confirmed distinct faults / 1,000 episodes {spread(confirmed)}; fault '
+            f'situations / 1,000 episodes {spread(situations)}; episodes to the first '
+            f'confirmed fault {spread(first)}; cheap work % of search wall {spread(share)}')
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scenario', default='factory')
     parser.add_argument('--controllers', default='', help="comma-separated ('': scenario's)")
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--seeds', default='0,1,2')
-    parser.add_argument('--budget', type=int, default=360)
+    parser.add_argument('--budget', default='360', help='comma-separated budgets')
     parser.add_argument('--fresh', type=int, default=40)
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--confirm-limit', type=int, default=0)
@@ -78,35 +129,48 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     command = ' '.join(sys.argv[1:] if argv is None else argv)
+    budgets = [int(b) for b in args.budget.split(',') if b]
     for controller in args.controllers.split(',') if args.controllers else ['']:
-        config = CompareConfig(
-            scenario=args.scenario, controller=controller,
-            methods=tuple(m for m in args.methods.split(',') if m),
-            search_seeds=tuple(int(s) for s in args.seeds.split(',') if s),
-            budget=args.budget, fresh_episodes=args.fresh, repeats=args.repeats,
-            confirm_limit=args.confirm_limit, time_limit=args.time_limit,
-            seed_schedule=args.seed_schedule, population=args.population,
-            maps_per_member=args.maps_per_member)
-        output = args.output / f'{args.scenario}-{controller or "default"}'
-        result = run_comparison(
-            config, output, f'python tests/benchmarks/bench_fault_finding.py {command}',
-            log=lambda message: print(f'[compare] {message}', file=sys.stderr, flush=True))
-        print(f'\n## {args.scenario}, {controller or "default controller"} '
-              f'({result.wall_time / 60:.1f} min; report {result.report_path})\n')
-        print(method_table(config, result.runs))
-        for other in ('random', 'grid_ga', 'latent'):
-            if 'sessgan' in config.methods and other in config.methods:
-                print(describe_ratio(result.runs, 'sessgan', other, 'confirmed_per_1000'))
-        sessgan = [r for r in result.runs if r.figures.method == 'sessgan']
-        shipped = next((s for key, s in result.fresh.items() if key == 'pyramid:base'), None)
-        if sessgan and shipped is not None:
-            rates = [r.figures.fresh_failure_rate for r in sessgan]
-            print(f'fresh-seed failure rate: SESS-GAN final generators {rates} vs shipped '
-                  f'{shipped.failure_rate}')
-            tpkls = [result.fresh[r.source_key].tpkl for r in sessgan]
-            print(f'fresh-seed TPKL: SESS-GAN {[round(t, 3) for t in tpkls]} vs shipped '
-                  f'{shipped.tpkl:.3f}')
+        for budget in budgets:
+            run_one(args, controller, budget, command)
     return 0
+
+
+def run_one(args: argparse.Namespace, controller: str, budget: int, command: str) -> None:
+    config = CompareConfig(
+        scenario=args.scenario, controller=controller,
+        methods=tuple(m for m in args.methods.split(',') if m),
+        search_seeds=tuple(int(s) for s in args.seeds.split(',') if s),
+        budget=budget, fresh_episodes=args.fresh, repeats=args.repeats,
+        confirm_limit=args.confirm_limit, time_limit=args.time_limit,
+        seed_schedule=args.seed_schedule, population=args.population,
+        maps_per_member=args.maps_per_member)
+    output = args.output / f'{args.scenario}-{controller or "default"}-{budget}'
+    result = run_comparison(
+        config, output, f'python tests/benchmarks/bench_fault_finding.py {command}',
+        log=lambda message: print(f'[compare] {message}', file=sys.stderr, flush=True))
+    print(f'\n## {args.scenario}, {controller or "default controller"}, {budget} episodes '
+          f'({result.wall_time / 60:.1f} min; report {result.report_path})\n')
+    print(method_table(config, result.runs))
+    for other in ('random', 'grid_ga', 'latent'):
+        if 'sessgan' in config.methods and other in config.methods:
+            print(describe_ratio(result.runs, 'sessgan', other, 'confirmed_per_1000'))
+    if 'random' in config.methods:
+        for method in config.methods:
+            if method not in ('random', 'sessgan'):
+                print(describe_ratio(result.runs, method, 'random', 'confirmed_per_1000'))
+    for method in config.methods:
+        print(describe_method(result.runs, method))
+    sessgan = [r for r in result.runs if r.figures.method == 'sessgan']
+    shipped = next((s for key, s in result.fresh.items() if key == 'pyramid:base'), None)
+    if sessgan and shipped is not None:
+        rates = [r.figures.fresh_failure_rate for r in sessgan]
+        print(f'fresh-seed failure rate: SESS-GAN final generators {rates} vs shipped '
+              f'{shipped.failure_rate}')
+        tpkls = [result.fresh[r.source_key].tpkl for r in sessgan]
+        print(f'fresh-seed TPKL: SESS-GAN {[round(t, 3) for t in tpkls]} vs shipped '
+              f'{shipped.tpkl:.3f}')
+    sys.stdout.flush()
 
 
 if __name__ == '__main__':

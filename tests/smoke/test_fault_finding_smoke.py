@@ -1,5 +1,5 @@
 """Tiny runs of the fault-finding commands: an in-process campaign, its fresh-seed evaluation
-and a comparison of two methods, through `ros2 run`."""
+and a comparison of three methods (the screened search among them), through `ros2 run`."""
 
 from __future__ import annotations
 
@@ -35,8 +35,13 @@ def test_campaign_in_process_then_fresh_seeds_then_compare(ros_workspace, tmp_pa
     with open(tmp_path / 'fresh' / 'episodes.csv') as handle:
         assert len(list(csv.DictReader(handle))) == 8
 
-    run(['compare', '--methods', 'random,cellular_automaton', '--search-seeds', '0,1,2',
-         '--budget', '3', '--time-limit', '3', '--fresh-episodes', '2', '--repeats', '1',
-         '--output', 'compare'], tmp_path)
+    run(['compare', '--methods', 'random,cellular_automaton,screened', '--search-seeds',
+         '0,1,2', '--budget', '3', '--time-limit', '3', '--fresh-episodes', '2', '--repeats',
+         '1', '--output', 'compare'], tmp_path)
     for name in ('report.md', 'compare.png', 'failing_maps.png', 'runs.csv'):
         assert (tmp_path / 'compare' / name).stat().st_size > 0
+    with open(tmp_path / 'compare' / 'runs.csv') as handle:
+        runs = list(csv.DictReader(handle))
+    screened = [row for row in runs if row['method'] == 'screened']
+    assert len(screened) == 3 and all(int(row['episodes']) == 3 for row in screened)
+    assert all(0 < float(row['cheap_wall']) < float(row['search_wall']) for row in screened)

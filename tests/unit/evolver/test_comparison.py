@@ -40,13 +40,20 @@ def test_every_method_runs_at_equal_budget_and_is_reported(tmp_path):
         else:
             assert figures.generator and figures.fresh_valid_fraction is not None
     # One fresh-seed evaluation per distinct generator: 2 SESS-GAN members, the shipped
-    # generator (random and latent), the cellular automaton.
+    # generator (random, latent and screened), the cellular automaton.
     assert len(result.fresh) == 4
     output = tmp_path / 'compare'
     for name in ('report.md', 'compare.png', 'failing_maps.png', 'fresh_seed.csv',
                  'fresh_seed_plan.txt'):
         assert (output / name).stat().st_size > 0
-    assert len(read(output / 'runs.csv')) == 10 and len(read(output / 'episodes.csv')) == 40
+    runs = read(output / 'runs.csv')
+    assert len(runs) == 2 * len(METHODS) and len(read(output / 'episodes.csv')) == \
+        8 * len(METHODS)
+    # Only the screened search does cheap work before its episodes, inside its search time.
+    for row in runs:
+        cheap = float(row['cheap_wall'])
+        assert (cheap > 0) == (row['method'] == 'screened')
+        assert cheap < float(row['search_wall'])
     report = (output / 'report.md').read_text()
     assert 'compare --tiny' in report and all(method in report for method in METHODS)
     with pytest.raises(CompareError, match='holds a comparison'):

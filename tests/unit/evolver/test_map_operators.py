@@ -10,6 +10,7 @@ from sessgan_evolver.map_operators import (
     crossover_noise,
     crossover_token_maps,
     mutate_noise,
+    mutate_noise_region,
     mutate_token_map,
 )
 
@@ -57,6 +58,31 @@ def test_noise_mutation_keeps_shapes_and_standard_normal_statistics():
                zip(mutate_noise(noise, np.random.default_rng(1), 0.0), noise))
     with pytest.raises(MapOperatorError):
         mutate_noise(noise, rng, 1.5)
+    # Named scales: exactly those change, whatever the draw.
+    for seed in range(5):
+        fine = mutate_noise(noise, np.random.default_rng(seed), 0.3, scales=(1,))
+        assert np.array_equal(fine[0], noise[0]) and not np.array_equal(fine[1], noise[1])
+    with pytest.raises(MapOperatorError, match='scales'):
+        mutate_noise(noise, rng, 0.3, scales=(2,))
+
+
+def test_regional_noise_mutation_changes_only_its_rectangle_on_its_scales():
+    rng = np.random.default_rng(0)
+    noise = [rng.standard_normal((2, 8, 8)).astype(np.float32),
+             rng.standard_normal((2, 32, 32)).astype(np.float32)]
+    child = mutate_noise_region(noise, np.random.default_rng(1), 1.0, (0.25, 0.5, 0.5, 0.75),
+                                scales=(1,))
+    assert np.array_equal(child[0], noise[0])
+    changed = np.any(child[1] != noise[1], axis=0)
+    rows, cols = np.nonzero(changed)
+    assert (rows.min(), rows.max(), cols.min(), cols.max()) == (8, 15, 16, 23)
+    assert changed.sum() == 8 * 8
+    # A region smaller than a coarse noise cell still changes one cell there.
+    coarse = mutate_noise_region(noise, np.random.default_rng(1), 1.0,
+                                 (0.5, 0.5, 0.51, 0.51), scales=(0,))
+    assert np.any(coarse[0] != noise[0], axis=0).sum() == 1
+    with pytest.raises(MapOperatorError, match='region'):
+        mutate_noise_region(noise, rng, 0.5, (0.5, 0.0, 0.5, 1.0), scales=(1,))
 
 
 def test_noise_crossover_takes_whole_scales():

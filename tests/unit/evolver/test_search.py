@@ -68,3 +68,29 @@ def test_sessgan_runs_the_real_campaign_for_whole_generations(tmp_path):
     assert (search.run_dir / 'metrics_episodes.csv').exists()
     assert log.records[0].origin == 'generation 0 member 0'
     assert log.records[-1].environment.id.startswith('factory-g001-m01-')
+
+
+def test_a_search_draws_the_evaluators_fleet_and_runs_a_methods_own_environment():
+    from sessgan_evolver.screened_search import ScreenedConfig, ScreenedSearch
+    from sessgan_evolver.search_methods import RandomSampling
+    from sessgan_gen.fleet import FleetSpec
+
+    log = EpisodeLog()
+    with InProcessEvaluator('factory', time_limit=0.5, simulate_invalid=False,
+                            observer=log, fleet=FleetSpec(2)) as evaluator:
+        run_search(RandomSampling('factory', 0, batch=3), evaluator, budget=3)
+    feasible = [r.environment for r in log.records if r.environment.feasible]
+    assert feasible and all(environment.robots == 2 for environment in feasible)
+    # A method that builds its Environments (the screened search) has them run as built.
+    method = ScreenedSearch('factory', 1, config=ScreenedConfig(batch=2, reference_maps=2))
+    log = EpisodeLog()
+    with InProcessEvaluator('factory', time_limit=0.5, simulate_invalid=False,
+                            observer=log) as evaluator:
+        proposals = method.ask()
+        method.ask = lambda: proposals  # type: ignore[method-assign]
+        run_search(method, evaluator, budget=2)
+    for proposal, record in zip(proposals, log.records):
+        assert proposal.environment is not None
+        assert record.environment.id == f'screened-e0000{record.index}'
+        assert record.environment.start == proposal.environment.start
+        assert (record.environment.occupancy == proposal.environment.occupancy).all()

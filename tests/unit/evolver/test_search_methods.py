@@ -98,7 +98,8 @@ def test_grid_ga_starts_from_the_cellular_automaton_and_unknown_names_are_refuse
     search = GridGA('factory', 1, GAConfig(population=2))
     proposal = search.ask()[0]
     assert np.array_equal(proposal.cells, search.automaton.one(proposal.map_seed))
-    assert set(METHODS) == {'sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent'}
+    assert set(METHODS) == {'sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent',
+                            'screened'}
     with pytest.raises(SearchMethodError, match='known'):
         make_baseline('sessgan', 'factory', 0)
     with pytest.raises(SearchMethodError, match='population'):

@@ -1,0 +1,409 @@
+"""``screened``: search near failing tests in the generator's latent space, screened cheaply.
+
+What fails is a test: a map *with its start and goal*. In the pilot (factory,
+Nearness-Diagram, 9-10 % of fresh tests fail) a failing test fails again 54 % of the time
+with a new simulator seed, but 12-14 % after the smallest change of its generator noise or
+of its environment seed: either re-draws start and goal, and the failure is gone. Keeping
+the start and goal and changing the map only in detail, a child fails 41-45 % of the time,
+and where the map changed around the fault place the failure is a new distinct fault
+(sessgan_evolver.faults keys it by the map around it). So:
+
+* **Parents**: every test that showed a new distinct fault, with its start and goal. A
+  parent is picked by Thompson sampling on its children's record (new faults / children),
+  so productive lineages get more budget and exhausted ones fade.
+* **Operators** (:class:`Operator`), also by Thompson sampling on their record in this
+  run: the parent's noise mutated only around its fault place (``local``), or on the finest
+  scale everywhere, the parent's start and goal kept (re-certified on the child's map) with
+  its simulator seed; ``RELOCATE`` (the same map, new start and goal) is available.
+* **Exploration**: at least ``exploration`` of all tests are fresh samples of the generator
+  (the best of ``fresh_candidates`` by the screen), so new regions keep being found.
+* **Screen** (cheap work, timed in ``cheap_wall_time``): each candidate's route is certified
+  (the certificate every test gets); candidates without one, children that keep the map
+  around their parent's fault place unchanged (they would show that fault again) and maps
+  less realistic than the generator's own (single-map TPKL above ``tpkl_quantile`` of fresh
+  samples: the realism constraint) are dropped; the rest are ranked by a surrogate of
+  P(valid failure) over route-local features (sessgan_evolver.screening.OnlineLogistic,
+  refitted on this run's episodes; route length until it has seen ``surrogate_warmup``
+  episodes and some failures) times a novelty factor that halves for every known fault
+  place (same coarse cell, same surrounding map) along the route.
+
+Proposals carry the Environment the screen certified, so the robot under test runs exactly
+the start and goal that were screened. Every random choice flows from the method's seed;
+the budget is only the robot under test's episodes (the driver counts proposals).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sessgan_evolver.errors import FaultError, SearchMethodError
+from sessgan_evolver.faults import (
+    FaultKey,
+    FaultRule,
+    is_valid_failure,
+    key_of_failure,
+    place_context,
+)
+from sessgan_evolver.map_operators import NoiseMaps, mutate_noise, mutate_noise_region
+from sessgan_evolver.screening import (
+    FEATURE_NAMES,
+    CertifiedCandidate,
+    FaultArchive,
+    OnlineLogistic,
+    Pose,
+    certify_candidate,
+    certify_route,
+    environment_of,
+    route_features,
+)
+from sessgan_evolver.search_methods import (
+    SEED_BOUND,
+    Evaluated,
+    Proposal,
+    load_pyramid,
+    method_rng,
+)
+from sessgan_gen.environment import Environment
+from sessgan_gen.environment_metrics import tile_pattern_kl
+from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map, tokens_to_occupancy
+from sessgan_gen.track_cleanup import clean_generated_maps
+
+
+@dataclass(frozen=True)
+class Operator:
+    """How a child is made from a parent test."""
+
+    name: str
+    strength: float = 0.0
+    """``mutate_noise`` strength; 0: the parent's map unchanged."""
+    scales: tuple[int, ...] | None = None
+    """Noise scales to mutate (0 the coarsest, -1 the finest); None: drawn, each with
+    probability 0.5 (the finest alone for a local operator)."""
+    keep_route: bool = True
+    """Keep the parent's start and goal (re-certified on the child's map); else draw them
+    from a new environment seed."""
+    new_sim_seed: bool = False
+    """Draw a new simulator seed (agents, sensor noise) instead of the parent's."""
+    local: bool = False
+    """Mutate the noise only around the parent's fault place (its coarse cell and context,
+    ``mutate_noise_region``), so the map changes there and stays the same elsewhere."""
+
+    def validate(self) -> None:
+        if not 0.0 <= self.strength <= 1.0:
+            raise SearchMethodError(f'operator {self.name}: strength must lie in [0, 1], got '
+                                    f'{self.strength}')
+        if self.strength == 0.0 and self.keep_route and not self.new_sim_seed:
+            raise SearchMethodError(f'operator {self.name} would repeat its parent exactly')
+
+
+RELOCATE = Operator('relocate', keep_route=False, new_sim_seed=True)
+"""The same map with a new start, goal and simulator seed."""
+
+DEFAULT_OPERATORS = (
+    Operator('local_0.8', 0.8, local=True),
+    Operator('fine_0.3', 0.3, scales=(-1,)),
+    Operator('fine_0.15', 0.15, scales=(-1,)),
+)
+
+
+@dataclass(frozen=True)
+class ScreenedConfig:
+    """Settings of the ``screened`` search (module docstring)."""
+
+    batch: int = 6
+    """Tests per ask (the method learns after every batch)."""
+    exploration: float = 0.2
+    """Least share of all tests that are fresh samples of the generator."""
+    fresh_candidates: int = 3
+    """Fresh samples screened per exploration test."""
+    child_candidates: int = 3
+    """Candidates screened per child test."""
+    operators: tuple[Operator, ...] = DEFAULT_OPERATORS
+    tpkl_quantile: float = 0.95
+    """Candidates whose single-map TPKL exceeds this quantile of fresh samples' are dropped."""
+    reference_maps: int = 32
+    """Fresh samples that set the TPKL limit."""
+    surrogate_warmup: int = 24
+    """Episodes before the surrogate ranks candidates (route length before)."""
+    retries: int = 4
+    """Extra candidates drawn for a test whose candidates were all dropped."""
+    rule: FaultRule = field(default_factory=FaultRule)
+    """How fault places are keyed (the archive's novelty)."""
+
+    def validate(self) -> None:
+        for name in ('batch', 'fresh_candidates', 'child_candidates', 'reference_maps'):
+            if getattr(self, name) < 1:
+                raise SearchMethodError(f'{name} must be >= 1, got {getattr(self, name)}')
+        for name in ('surrogate_warmup', 'retries'):
+            if getattr(self, name) < 0:
+                raise SearchMethodError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if not 0.0 < self.exploration <= 1.0:
+            raise SearchMethodError(f'exploration must lie in (0, 1], got {self.exploration}')
+        if not 0.0 < self.tpkl_quantile <= 1.0:
+            raise SearchMethodError(f'tpkl_quantile must lie in (0, 1], got '
+                                    f'{self.tpkl_quantile}')
+        if not self.operators:
+            raise SearchMethodError('no operator to make children with')
+        names = [operator.name for operator in self.operators]
+        if len(set(names)) != len(names):
+            raise SearchMethodError(f'operator names must be distinct, got {names}')
+        for operator in self.operators:
+            operator.validate()
+        self.rule.validate()
+
+
+@dataclass
+class Test:
+    """A test the method made: its generator noise, map, seeds, route and lineage."""
+
+    noise: NoiseMaps
+    cells: np.ndarray
+    map_seed: int
+    environment_seed: int
+    sim_seed: int
+    origin: str
+    parent: int | None = None
+    """Index into ``ScreenedSearch.parents`` (None: a fresh sample)."""
+    operator: str = ''
+    route: tuple[Pose, Pose] | None = None
+    """Start and goal to keep (a child's of its parent); None: drawn from the seed."""
+    features: np.ndarray | None = None
+    environment: Environment | None = None
+
+
+@dataclass
+class Parent:
+    """A test that showed a new distinct fault, and its children's record."""
+
+    test: Test
+    key: FaultKey
+    route: tuple[Pose, Pose]
+    """The start and goal it failed with."""
+    children: int = 0
+    new_faults: int = 0
+
+
+@dataclass
+class Record:
+    """Trials and successes (a child with a new distinct fault) of a parent or operator."""
+
+    trials: int = 0
+    successes: int = 0
+
+    def draw(self, rng: np.random.Generator) -> float:
+        return float(rng.beta(1 + self.successes, 1 + self.trials - self.successes))
+
+
+class ScreenedSearch:
+    """``screened``: the module docstring's search, ask/tell."""
+
+    name = 'screened'
+
+    def __init__(self, scenario: str, seed: int, checkpoint: str | bytes | None = None,
+                 config: ScreenedConfig | None = None) -> None:
+        self.config = config or ScreenedConfig()
+        self.config.validate()
+        self.spec = get_scenario(scenario)
+        self.pyramid = load_pyramid(scenario, checkpoint)
+        self.example = load_example_map(scenario).cells
+        self.rng = method_rng(seed, self.name)
+        self.archive = FaultArchive(self.config.rule)
+        self.surrogate = OnlineLogistic(len(FEATURE_NAMES) + 1)
+        self.parents: list[Parent] = []
+        self.operators = {operator.name: operator for operator in self.config.operators}
+        self.operator_records = {name: Record() for name in self.operators}
+        self.asked = 0
+        self.fresh_asked = 0
+        self.told = 0
+        self.screened = 0
+        """Candidates certified and scored (proposed or not)."""
+        self.cheap_wall_time = 0.0
+        """Wall seconds spent screening and learning (never in the robot under test)."""
+        self._pending: list[Test] = []
+        started = time.perf_counter()
+        reference = self._express([seed_noise_maps(self.pyramid, self._seed())
+                                   for _ in range(self.config.reference_maps)])
+        self.tpkl_limit = float(np.quantile([self._tpkl(cells) for cells in reference],
+                                            self.config.tpkl_quantile))
+        self.cheap_wall_time += time.perf_counter() - started
+
+    # ---- ask ---------------------------------------------------------------------------
+
+    def ask(self) -> list[Proposal]:
+        started = time.perf_counter()
+        self._pending = []
+        for _ in range(self.config.batch):
+            explore = (not self.parents or self.fresh_asked
+                       < self.config.exploration * (self.asked + 1))
+            test = (None if explore else self._child_test()) or self._fresh_test()
+            self.fresh_asked += test.parent is None
+            self.asked += 1
+            self._pending.append(test)
+        self.cheap_wall_time += time.perf_counter() - started
+        return [Proposal(test.cells, test.sim_seed, test.map_seed, test.origin,
+                         test.environment_seed, test.environment) for test in self._pending]
+
+    def _seed(self) -> int:
+        return int(self.rng.integers(0, SEED_BOUND))
+
+    def _express(self, noises: Sequence[NoiseMaps]) -> list[np.ndarray]:
+        return list(clean_generated_maps(sample_token_maps_from_noise(self.pyramid, noises),
+                                         self.spec.name))
+
+    def _tpkl(self, cells: np.ndarray) -> float:
+        value = tile_pattern_kl(self.example, [np.asarray(cells)])
+        return value if math.isfinite(value) else math.inf
+
+    def _fresh_test(self) -> Test:
+        def draw(count: int) -> list[Test]:
+            seeds = [self._seed() for _ in range(count)]
+            noises = [seed_noise_maps(self.pyramid, seed) for seed in seeds]
+            return [Test(noise, cells, seed, seed, self._seed(), 'fresh sample')
+                    for noise, cells, seed in zip(noises, self._express(noises), seeds)]
+        # A generator whose samples all fail the screen: run the last like random does.
+        return self._screen(draw, self.config.fresh_candidates) or draw(1)[0]
+
+    def _child_test(self) -> Test | None:
+        draws = [record.draw(self.rng) for record in self._parent_records()]
+        index = int(np.argmax(draws))
+        parent = self.parents[index]
+        names = list(self.operators)
+        operator = self.operators[names[int(np.argmax(
+            [self.operator_records[name].draw(self.rng) for name in names]))]]
+
+        def draw(count: int) -> list[Test]:
+            base = parent.test
+            noises = [self._mutate(parent, operator) for _ in range(count)]
+            maps = self._express(noises) if operator.strength > 0 else [base.cells] * count
+            children = []
+            for noise, cells in zip(noises, maps):
+                environment_seed = (base.environment_seed if operator.keep_route
+                                    else self._seed())
+                sim_seed = self._seed() if operator.new_sim_seed else base.sim_seed
+                children.append(Test(
+                    noise, cells, base.map_seed if operator.strength == 0 else -1,
+                    environment_seed, sim_seed,
+                    f'child of {parent.key.label} by {operator.name}', index, operator.name,
+                    parent.route if operator.keep_route else None))
+            return children
+        test = self._screen(draw, self.config.child_candidates)
+        if test is None:
+            # No child worth an episode: a failed trial of the parent and the operator, and
+            # the slot goes to a fresh sample.
+            parent.children += 1
+            self.operator_records[operator.name].trials += 1
+        return test
+
+    def _mutate(self, parent: Parent, operator: Operator) -> NoiseMaps:
+        noise = parent.test.noise
+        if operator.strength == 0:
+            return noise
+        scales = None if operator.scales is None else tuple(
+            scale % len(noise) for scale in operator.scales)
+        if not operator.local:
+            return mutate_noise(noise, self.rng, operator.strength, scales=scales)
+        rule = self.config.rule
+        height, width = np.shape(parent.test.cells)
+        side = rule.coarse_cells
+        region = (max(0.0, (parent.key.row * side - rule.context_cells) / height),
+                  max(0.0, (parent.key.col * side - rule.context_cells) / width),
+                  min(1.0, ((parent.key.row + 1) * side + rule.context_cells) / height),
+                  min(1.0, ((parent.key.col + 1) * side + rule.context_cells) / width))
+        return mutate_noise_region(noise, self.rng, operator.strength, region,
+                                   scales or (len(noise) - 1,))
+
+    def _parent_records(self) -> list[Record]:
+        return [Record(parent.children, parent.new_faults) for parent in self.parents]
+
+    def _screen(self, draw: Callable[[int], list[Test]], count: int) -> Test | None:
+        """The best of ``count`` candidates from ``draw`` (more when all are dropped; None
+        when every retry is dropped too)."""
+        candidates: list[tuple[Test, CertifiedCandidate]] = []
+        for attempt in range(1 + self.config.retries):
+            kept = []
+            for test in draw(count if attempt == 0 else 1):
+                self.screened += 1
+                occupancy = tokens_to_occupancy(test.cells, self.spec)
+                certified = (certify_candidate(occupancy, self.spec, test.environment_seed)
+                             if test.route is None else
+                             certify_route(occupancy, self.spec, *test.route))
+                if certified.feasible and not self._repeats_parent(test, certified) \
+                        and self._tpkl(test.cells) <= self.tpkl_limit:
+                    test.features = route_features(certified, self.spec)
+                    test.environment = environment_of(certified, self.spec, self.name,
+                                                      test.environment_seed)
+                    kept.append((test, certified))
+            candidates += kept
+            if candidates:
+                break
+        else:
+            return None
+        scores = [self._score(test, certified) for test, certified in candidates]
+        return candidates[int(np.argmax(scores))][0]
+
+    def _repeats_parent(self, test: Test, certified: CertifiedCandidate) -> bool:
+        """Whether a child keeps its parent's start, goal and the map around the parent's
+        fault place: it would most likely show the same fault again."""
+        if test.parent is None or test.route is None:
+            return False
+        key = self.parents[test.parent].key
+        return place_context(certified.occupancy, key.row, key.col,
+                             self.config.rule) == key.context
+
+    def _score(self, test: Test, certified: CertifiedCandidate) -> float:
+        assert test.features is not None
+        novelty = 0.5 ** self.archive.known_places_on(certified)
+        if self.told < self.config.surrogate_warmup or not self.surrogate.trained:
+            # Longer routes expose more (the screening pilot): rank by length in metres.
+            return novelty * float(test.features[0])
+        return novelty * float(self.surrogate.predict(self._row(test))[0])
+
+    @staticmethod
+    def _row(test: Test) -> np.ndarray:
+        assert test.features is not None
+        return np.append(test.features, float(test.parent is not None))
+
+    # ---- tell --------------------------------------------------------------------------
+
+    def tell(self, results: Sequence[Evaluated]) -> None:
+        if len(results) != len(self._pending):
+            raise SearchMethodError(f'told {len(results)} results for {len(self._pending)} '
+                                    'tests asked')
+        started = time.perf_counter()
+        for test, result in zip(self._pending, results):
+            self.told += 1
+            failed = is_valid_failure(result.metrics)
+            if test.features is not None:
+                self.surrogate.add(self._row(test), failed)
+            key = self._fault_key(result) if failed else None
+            new = key is not None and self.archive.add(key)
+            if test.parent is not None:
+                parent = self.parents[test.parent]
+                parent.children += 1
+                parent.new_faults += new
+                record = self.operator_records[test.operator]
+                record.trials += 1
+                record.successes += new
+            if new:
+                assert key is not None
+                start, goal = result.environment.start, result.environment.goal
+                self.parents.append(Parent(test, key, ((start.x, start.y, start.yaw),
+                                                       (goal.x, goal.y, goal.yaw))))
+        self._pending = []
+        self.surrogate.fit()
+        self.cheap_wall_time += time.perf_counter() - started
+
+    def _fault_key(self, result: Evaluated) -> FaultKey | None:
+        try:
+            return key_of_failure(result.environment, result.metrics, result.trace,
+                                  self.config.rule)
+        except FaultError as err:
+            raise SearchMethodError(f'the screened search keys failures by their episode '
+                                    f'trace: {err}') from err

@@ -1,0 +1,277 @@
+"""The screened search: ask/tell, determinism, exploration share, archive novelty, the
+surrogate, route features, and a budget counted in episodes of the robot under test only."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from sessgan_evolver.episode_runner import EpisodeTrace
+from sessgan_evolver.faults import FaultEvent, FaultKey, FaultRule, fault_key
+from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.screened_search import RELOCATE, Operator, ScreenedConfig, ScreenedSearch
+from sessgan_evolver.screening import (
+    FEATURE_NAMES,
+    CertifiedCandidate,
+    FaultArchive,
+    OnlineLogistic,
+    certify_candidate,
+    route_coarse_cells,
+    route_features,
+)
+from sessgan_evolver.search import EpisodeLog, run_search
+from sessgan_evolver.search_methods import (
+    BASELINES,
+    METHODS,
+    Evaluated,
+    SearchMethodError,
+    make_baseline,
+)
+from sessgan_gen.navigation import make_environment
+from sessgan_gen.scenarios import get_scenario
+
+pytestmark = pytest.mark.unit
+torch.set_num_threads(1)
+
+SMALL = ScreenedConfig(batch=4, reference_maps=4, surrogate_warmup=4)
+
+
+def ended_at(x: float, y: float) -> EpisodeTrace:
+    """A two-row trace of a robot that ended at (x, y) (where a stuck failure is keyed)."""
+    poses = np.array([[x, y, 0.0], [x, y, 0.0]])
+    return EpisodeTrace(times=np.array([0.0, 0.05]), poses=poses, twists=np.zeros((2, 3)),
+                        commands=np.zeros((1, 4)), agents=np.zeros((2, 0, 2)))
+
+
+def oracle_results(proposals, fails=lambda environment: environment.route_length > 14.0):
+    """Episodes without simulation: a map fails (stuck at its goal) when ``fails`` says so."""
+    results = []
+    for index, proposal in enumerate(proposals):
+        environment = proposal.environment or make_environment(
+            proposal.cells, 'factory', f'e{index}', seed=proposal.resolved_environment_seed)
+        failed = environment.feasible and fails(environment)
+        results.append(Evaluated(proposal, environment, {
+            'feasible': environment.feasible, 'collisions': 0, 'fault_collisions': 0,
+            'outcome': 'stuck' if failed else 'goal_reached'},
+            ended_at(environment.goal.x, environment.goal.y)))
+    return results
+
+
+def test_screened_is_registered_for_compare_and_the_campaign():
+    assert 'screened' in METHODS and 'screened' in BASELINES
+    assert make_baseline('screened', 'factory', 0).name == 'screened'
+
+
+def test_ask_tell_contract():
+    search = ScreenedSearch('factory', 3, config=SMALL)
+    proposals = search.ask()
+    assert len(proposals) == 4
+    # No failure yet: every test is a fresh sample, each the best of its screened candidates.
+    assert all(p.origin == 'fresh sample' for p in proposals)
+    assert search.screened >= 4 * SMALL.fresh_candidates
+    with pytest.raises(SearchMethodError, match='told 3 results for 4'):
+        search.tell(oracle_results(proposals)[:3])
+    search.tell(oracle_results(proposals))
+    assert search.told == 4 and len(search.surrogate.labels) == 4
+    with pytest.raises(SearchMethodError, match='exploration'):
+        ScreenedConfig(exploration=0.0).validate()
+    with pytest.raises(SearchMethodError, match='no operator'):
+        ScreenedConfig(operators=()).validate()
+    with pytest.raises(SearchMethodError, match='repeat its parent'):
+        ScreenedConfig(operators=(Operator('same'),)).validate()
+
+
+def run_with_oracle(seed: int, batches: int, config: ScreenedConfig = SMALL):
+    search = ScreenedSearch('factory', seed, config=config)
+    asked = []
+    for _ in range(batches):
+        proposals = search.ask()
+        asked.append(proposals)
+        search.tell(oracle_results(proposals))
+    return search, asked
+
+
+def test_same_seed_same_proposals_and_results():
+    first, first_asked = run_with_oracle(5, 4)
+    again, again_asked = run_with_oracle(5, 4)
+    other, other_asked = run_with_oracle(6, 1)
+    flat = [p for batch in first_asked for p in batch]
+    flat_again = [p for batch in again_asked for p in batch]
+    assert [(p.sim_seed, p.environment_seed, p.origin) for p in flat] == \
+        [(p.sim_seed, p.environment_seed, p.origin) for p in flat_again]
+    assert all(np.array_equal(a.cells, b.cells) for a, b in zip(flat, flat_again))
+    assert first.archive.keys == again.archive.keys
+    assert [p.sim_seed for p in other_asked[0]] != [p.sim_seed for p in first_asked[0]]
+
+
+def test_same_seed_same_episodes_through_the_driver():
+    def episodes(seed):
+        log = EpisodeLog()
+        with InProcessEvaluator('factory', time_limit=2.0, simulate_invalid=False,
+                                observer=log) as evaluator:
+            run_search(ScreenedSearch('factory', seed, config=SMALL), evaluator, budget=6)
+        return [(r.environment.seed, r.sim_seed, r.metrics['outcome'], r.metrics['ticks'],
+                 r.fault) for r in log.records]
+    assert episodes(2) == episodes(2)
+
+
+def test_children_of_failures_get_the_budget_and_exploration_keeps_its_share():
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25)
+    # Every feasible map fails, each at its goal: parents from the first batch on.
+    search, asked = run_with_oracle(1, 6, config)
+    flat = [p for batch in asked for p in batch]
+    fresh = sum(p.origin == 'fresh sample' for p in flat)
+    assert fresh >= 0.25 * len(flat)
+    children = sum(p.origin.startswith('child of') for p in flat)
+    assert children and children + fresh == len(flat)
+    # Every child is a trial of its operator (and so is a child slot whose candidates were
+    # all dropped before an episode: it went to a fresh sample).
+    assert sum(r.trials for r in search.operator_records.values()) >= children
+    half, asked = run_with_oracle(1, 6, ScreenedConfig(batch=4, reference_maps=4,
+                                                        exploration=0.5))
+    flat = [p for batch in asked for p in batch]
+    assert sum(p.origin == 'fresh sample' for p in flat) >= 0.5 * len(flat)
+
+
+def test_relocated_children_keep_the_map_and_draw_new_seeds():
+    config = ScreenedConfig(batch=4, reference_maps=4, operators=(RELOCATE,),
+                            exploration=0.25)
+    search, asked = run_with_oracle(4, 3, config)
+    children = [p for batch in asked for p in batch if p.origin.startswith('child')]
+    assert children and all(RELOCATE.name in p.origin for p in children)
+    parents = [parent.test for parent in search.parents]
+    for child in children:
+        # Its parent (a failing test; children that fail are parents too) had this map
+        # with other seeds.
+        assert any(np.array_equal(t.cells, child.cells)
+                   and t.environment_seed != child.environment_seed
+                   and t.sim_seed != child.sim_seed for t in parents)
+
+
+def test_mutated_children_keep_their_parents_start_and_goal_on_a_changed_map():
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25,
+                            operators=(Operator('fine', 0.5, scales=(2,)),))
+    search, asked = run_with_oracle(2, 3, config)
+    children = [p for batch in asked for p in batch if p.origin.startswith('child')]
+    assert children
+    for child in children:
+        assert child.environment is not None and child.environment.feasible
+        start, goal = child.environment.start, child.environment.goal
+        parent = next(parent for parent in search.parents
+                      if parent.route[0][:2] == (start.x, start.y)
+                      and parent.route[1][:2] == (goal.x, goal.y))
+        assert not np.array_equal(parent.test.cells, child.cells)
+        assert child.sim_seed == parent.test.sim_seed
+        # The route is certified on the child's own map, by the placement's rules.
+        assert child.environment.route_length > 0
+        assert child.environment.extra['start_clearance'] >= 0.45
+
+
+def factory_candidate(seed: int = 0) -> CertifiedCandidate:
+    from sessgan_evolver.search_methods import load_pyramid
+    from sessgan_gen.sampling import sample_token_maps
+    from sessgan_gen.token_map import tokens_to_occupancy
+
+    spec = get_scenario('factory')
+    cells = sample_token_maps(load_pyramid('factory', None), [seed])[0]
+    candidate = certify_candidate(tokens_to_occupancy(cells, spec), spec, seed)
+    assert candidate.feasible
+    return candidate
+
+
+def test_archive_knows_a_fault_place_only_with_the_same_surroundings():
+    rule = FaultRule()
+    candidate = factory_candidate()
+    environment = make_environment_of(candidate)
+    row, col = sorted(route_coarse_cells(candidate, rule))[0]
+    # The key sessgan_evolver.faults gives a stuck robot in the middle of that coarse cell.
+    size = get_scenario('factory').cell_size * rule.coarse_cells
+    key = fault_key(environment, FaultEvent('stuck', (col + 0.5) * size, (row + 0.5) * size,
+                                            1.0), rule)
+    archive = FaultArchive(rule)
+    assert archive.known_places_on(candidate) == 0
+    assert archive.add(key) and not archive.add(key)
+    assert archive.known_places_on(candidate) == 1
+    # Change one map cell next to the place: the same spot is another situation now.
+    changed = candidate.occupancy.copy()
+    r, c = row * rule.coarse_cells, col * rule.coarse_cells
+    changed[r, c] = 100 if changed[r, c] == 0 else 0
+    assert archive.known_places_on(CertifiedCandidate(changed, candidate.placement)) == 0
+    # A key elsewhere on the map does not count.
+    far = FaultArchive(rule)
+    far.add(FaultKey('stuck', row + 100, col, key.context))
+    assert far.known_places_on(candidate) == 0
+
+
+def make_environment_of(candidate: CertifiedCandidate):
+    from sessgan_gen.environment import Environment, Pose2D
+
+    placement = candidate.placement
+    assert placement.start is not None and placement.goal is not None
+    return Environment(id='x', scenario='factory', occupancy=candidate.occupancy,
+                       resolution=get_scenario('factory').cell_size,
+                       start=Pose2D(*placement.start), goal=Pose2D(*placement.goal))
+
+
+def test_the_screen_halves_a_candidate_per_known_fault_place_on_its_route():
+    search = ScreenedSearch('factory', 0, config=SMALL)
+    candidate = factory_candidate(3)
+    test = search._fresh_test()
+    test.features = route_features(candidate, search.spec)
+    plain = search._score(test, candidate)
+    rule = search.config.rule
+    for row, col in sorted(route_coarse_cells(candidate, rule))[:2]:
+        from sessgan_evolver.faults import place_context
+        search.archive.add(FaultKey('stuck', row, col,
+                                    place_context(candidate.occupancy, row, col, rule)))
+    assert search._score(test, candidate) == pytest.approx(plain / 4)
+
+
+def test_route_features_of_a_corridor_match_its_geometry():
+    spec = get_scenario('factory')
+    occupancy = np.full((20, 20), 100, dtype=np.int8)
+    occupancy[8:12, 1:19] = 0  # a straight corridor 2 m wide and 9 m long
+    candidate = certify_candidate(occupancy, spec, 0)
+    assert candidate.feasible
+    features = dict(zip(FEATURE_NAMES, route_features(candidate, spec)))
+    points = candidate.placement.certificate.points
+    assert features['route_length'] == pytest.approx(
+        float(np.hypot(*(points[-1] - points[0]))), rel=1e-6)
+    assert features['detour_ratio'] == pytest.approx(1.0, abs=0.02)
+    assert features['sharpest_turn'] < 0.2
+    # 2 m wide: nothing on the route is more than 1 m from a wall, nothing tight.
+    assert 0.45 <= features['bottleneck_clearance'] <= features['mean_clearance'] <= 1.0
+    assert features['tight_share'] == 0.0 and features['tight_passages'] == 0
+    # A 1 m block in the corridor: one tight passage beside it, a bend, a lower bottleneck.
+    occupancy[8:10, 9:11] = 100
+    blocked = dict(zip(FEATURE_NAMES, route_features(certify_candidate(occupancy, spec, 0),
+                                                      spec)))
+    assert blocked['tight_passages'] == 1 and 0 < blocked['tight_share'] < 1
+    assert blocked['turns'] >= 1 and blocked['turning_angle'] > 0
+    assert blocked['bottleneck_clearance'] < features['bottleneck_clearance']
+
+
+def test_the_surrogate_learns_a_toy_rule():
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((300, 3))
+    y = x[:, 0] + 0.5 * x[:, 1] + 0.3 * rng.standard_normal(300) > 1.0
+    model = OnlineLogistic(3)
+    assert np.allclose(model.predict(x[:2]), 0.5)
+    for row, label in zip(x[:200], y[:200]):
+        model.add(row, bool(label))
+    model.fit()
+    p = model.predict(x[200:])
+    positives, negatives = p[y[200:]], p[~y[200:]]
+    auc = float(np.mean(positives[:, None] > negatives[None, :]))
+    assert auc > 0.9
+    assert model.weights[1] > model.weights[2] > abs(model.weights[3])
+
+
+def test_the_budget_is_episodes_of_the_robot_under_test_only():
+    search = ScreenedSearch('factory', 8, config=SMALL)
+    with InProcessEvaluator('factory', time_limit=1.0, simulate_invalid=False) as evaluator:
+        assert run_search(search, evaluator, budget=7) == 7
+        assert evaluator.episodes == 7
+    # Screening certified more maps than were run, and its time is on its own clock.
+    assert search.screened > 7 and search.cheap_wall_time > 0

@@ -275,3 +275,19 @@ def test_the_budget_is_episodes_of_the_robot_under_test_only():
         assert evaluator.episodes == 7
     # Screening certified more maps than were run, and its time is on its own clock.
     assert search.screened > 7 and search.cheap_wall_time > 0
+
+
+def test_a_fresh_test_is_the_environment_make_environment_gives_its_seed():
+    # The screen certifies exactly what every other method's episode gets, so a fresh
+    # sample of the screened search is a random sample's test, only chosen.
+    search = ScreenedSearch('factory', 9, config=SMALL)
+    for proposal in search.ask():
+        assert proposal.origin == 'fresh sample' and proposal.environment is not None
+        drawn = make_environment(proposal.cells, 'factory', proposal.environment.id,
+                                 seed=proposal.resolved_environment_seed)
+        assert drawn.start == proposal.environment.start
+        assert drawn.goal == proposal.environment.goal
+        assert drawn.route_length == proposal.environment.route_length
+        assert drawn.route_min_clearance == proposal.environment.route_min_clearance
+        assert drawn.extra == proposal.environment.extra and drawn.feasible
+        assert (drawn.occupancy == proposal.environment.occupancy).all()

@@ -209,7 +209,9 @@ def gradient_penalty(
     discriminator: nn.Module, real: torch.Tensor, fake: torch.Tensor, weight: float
 ) -> torch.Tensor:
     """WGAN-GP: weight * mean over cells of (|grad D| - 1)^2 on a random real/fake mix."""
-    mix = torch.rand(1, 1, 1, 1, device=real.device)
+    # Drawn on the CPU generator like every other draw of training, whose state the
+    # checkpoint saves: a resumed run on CUDA then continues the same stream.
+    mix = torch.rand(1, 1, 1, 1).to(real.device)
     blend = (mix * real + (1 - mix) * fake).requires_grad_(True)
     score = discriminator(blend)
     (grads,) = torch.autograd.grad(score, blend, grad_outputs=torch.ones_like(score),

@@ -73,17 +73,27 @@ def test_training_sets_noise_amplitudes_and_reports_each_scale():
     assert results[-1]['reconstruction_accuracy'] == pytest.approx(expected)
 
 
-def test_same_seed_same_weights_other_seed_other_weights():
-    first = train(tiny_config()).pyramid.state_dict()
-    second = train(tiny_config()).pyramid.state_dict()
+DEVICES = [
+    'cpu',
+    # CI has no GPU: this case runs wherever CUDA is (the README says where it last ran).
+    pytest.param('cuda', marks=pytest.mark.skipif(not torch.cuda.is_available(),
+                                                  reason='no CUDA device')),
+]
+
+
+@pytest.mark.parametrize('device', DEVICES)
+def test_same_seed_same_weights_other_seed_other_weights(device):
+    first = train(tiny_config(device=device)).pyramid.state_dict()
+    second = train(tiny_config(device=device)).pyramid.state_dict()
     for key in first:
         assert torch.equal(first[key], second[key]), key
-    other = train(tiny_config(seed=8)).pyramid.state_dict()
+    other = train(tiny_config(seed=8, device=device)).pyramid.state_dict()
     assert not torch.equal(first['generators.1.tail.weight'], other['generators.1.tail.weight'])
 
 
-def test_resume_after_a_scale_equals_an_uninterrupted_run(tmp_path):
-    config = tiny_config()
+@pytest.mark.parametrize('device', DEVICES)
+def test_resume_after_a_scale_equals_an_uninterrupted_run(tmp_path, device):
+    config = tiny_config(device=device)
     full = train(config).pyramid.state_dict()
     partial = train(config, stop_after_scale=1)
     path = tmp_path / 'partial.pt'

@@ -202,8 +202,8 @@ def verify_bag_files(path: str | Path) -> str | None:
             raise BagReadError(f'bag {directory} is incomplete: {file} is missing')
         size = file.stat().st_size
         if size != expected['size']:
-            raise BagReadError(f'bag {directory} is corrupt: {file} has {size} bytes, '
-                               f'episode.json recorded {expected["size"]}')
+            raise BagReadError(f'bag {directory} is incomplete or corrupt: {file} has {size} '
+                               f'bytes, episode.json recorded {expected["size"]}')
         digest = sha256_of(file)
         if digest != expected['sha256']:
             raise BagReadError(f'bag {directory} is corrupt: the SHA-256 digest of {file} is '

@@ -7,9 +7,6 @@ import json
 import os
 import socket
 import struct
-import subprocess
-import sys
-import textwrap
 import zlib
 
 import pytest
@@ -30,6 +27,7 @@ from sessgan_sim.bag_recording import (
     remove_stale_staging_directories,
     write_episode_bag,
 )
+from tests.unit.evolver.killed_bag_writer import killed_writer_staging
 from tests.unit.evolver.test_failure_bags import (
     METADATA,
     OCCUPANCY,
@@ -73,33 +71,11 @@ def test_a_symbolic_link_out_of_the_root_is_refused(tmp_path):
 
 # ---- staging directories: removed only with a marker that proves them ours ------------------
 
-KILLED_WRITER = textwrap.dedent("""
-    import os, signal, sys
-    import numpy as np
-    from sessgan_sim.bag_recording import BagRecord, write_episode_bag
-
-    def records():
-        yield BagRecord('/chatter', 'std_msgs/msg/String', 1, b'\\0\\1\\0\\0\\2\\0\\0\\0x\\0')
-        os.kill(os.getpid(), signal.SIGKILL)  # killed mid-write, like a worker
-
-    write_episode_bag(sys.argv[1], records(), {}, np.zeros((2, 2), np.int8), 1.0, (0.0, 0.0))
-""")
-
-
-def killed_writer_staging(directory, episode_id: str = 'g000-m01-s5'):
-    """The staging directory a writer killed in the middle of a bag leaves in ``directory``."""
-    process = subprocess.run([sys.executable, '-c', KILLED_WRITER, str(directory / episode_id)],
-                             capture_output=True, text=True, timeout=120)
-    assert process.returncode == -9, process.stderr
-    found = list(directory.glob(f'{episode_id}.tmp-*'))
-    assert len(found) == 1 and (found[0] / STAGING_MARKER).is_file(), found
-    return found[0]
-
-
 def test_only_marked_staging_directories_of_dead_writers_are_removed(tmp_path):
     record = tmp_path / 'run'
     record.mkdir()
     stale = killed_writer_staging(record)
+    assert (stale / STAGING_MARKER).is_file()  # the writer's first file
     # The issue's victim: named like a staging directory of a dead pid, but nobody's bag.
     victim = record / 'victim.tmp-999999'
     victim.mkdir()

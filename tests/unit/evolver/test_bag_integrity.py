@@ -151,6 +151,18 @@ def flip_middle(path, count: int = 64) -> None:
     path.write_bytes(bytes(data))
 
 
+def flip_inside_a_scan(path, count: int = 64) -> None:
+    """Flip ``count`` bytes amid the ranges of the first /scan message (lengths and headers
+    intact: without CRCs every message still decodes, one with wrong ranges)."""
+    scan = next(record.data for record in serialized_records() if record.topic == '/scan')
+    data = bytearray(path.read_bytes())
+    start = data.find(scan) + len(scan) // 2 - count // 2
+    assert start > 0
+    for index in range(start, start + count):
+        data[index] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
 @pytest.fixture
 def bag(tmp_path):
     return write_episode_bag(tmp_path / 'g003-m07-s12', serialized_records(), EPISODE, OCCUPANCY,
@@ -186,7 +198,7 @@ def test_without_digests_the_chunk_crcs_still_catch_the_corruption(bag, capsys):
     (bag / 'episode.json').write_text(json.dumps(episode))
     assert 'records no file digests' in verify_bag_files(bag)
     assert check_bag_complete(bag) == len(serialized_records())
-    flip_middle(bag / 'g003-m07-s12.mcap')
+    flip_inside_a_scan(bag / 'g003-m07-s12.mcap')
     with pytest.raises(BagReadError, match='checksum mismatch'):
         check_bag_complete(bag)
     assert replay_cli.main([str(bag)]) == 2

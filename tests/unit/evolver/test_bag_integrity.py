@@ -247,3 +247,15 @@ def test_chunk_crc_is_the_crc_of_the_chunk_records(bag):
     records_length = struct.unpack_from('<Q', body, 32 + compression_length)[0]
     records = body[40 + compression_length:40 + compression_length + records_length]
     assert struct.unpack_from('<I', body, 24)[0] == zlib.crc32(records)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_digests_survive_reading_and_catch_flipped_bytes_in_either_storage(tmp_path, storage):
+    bag = write_episode_bag(tmp_path / 'episode', serialized_records(), EPISODE, OCCUPANCY,
+                            RESOLUTION, ORIGIN, storage=storage)
+    assert check_bag_complete(bag) == len(serialized_records())
+    assert verify_bag_files(bag) is None  # reading the bag changed none of its files
+    storage_file = next(path for path in bag.iterdir() if path.suffix in ('.mcap', '.db3'))
+    flip_middle(storage_file)
+    with pytest.raises(BagReadError, match=f'SHA-256 digest of {storage_file} is'):
+        verify_bag_files(bag)

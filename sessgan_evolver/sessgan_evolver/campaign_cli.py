@@ -122,7 +122,7 @@ class RosEvaluator:
         self.pool = pool if pool is not None else WorkerPool(supervisor)
         self.generator_process: ChildProcess | None = None
         self.config = config
-        self.record_directory = record_directory
+        self.record_directory = record_directory  # relative to the simulators' bags root
         self.controller = controller
         self.log = log
         self.action_client_class = ActionClient
@@ -427,9 +427,11 @@ def metrics_dict(msg) -> dict:
 
 
 def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: CampaignConfig,
-                controller: str, generator_running: bool) -> ChildProcess | None:
+                controller: str, generator_running: bool,
+                bags_root: Path = Path('bags')) -> ChildProcess | None:
     """Start the generator (unless one runs) and, without ``config.external``, a simulator +
-    controller pair per worker; returns the generator process started, if any."""
+    controller pair per worker (writing failure bags under ``bags_root``); returns the
+    generator process started, if any."""
     generator = None
     if not generator_running:
         # No checkpoint parameter: the campaign sends every member's weights itself.
@@ -458,7 +460,7 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
             (f'simulator_w{worker}', [
                 'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
                 '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}',
-                *simulator_args]),
+                '-p', f'bags_root:={Path(bags_root).resolve()}', *simulator_args]),
             # A fleet's robots each get a controller of their own (/w0/r0, /w0/r1, ...).
             *((f'{controller}_{robot_namespace[1:].replace("/", "_")}', [
                 'ros2', 'run', 'sessgan_controllers', controller, '--ros-args', *placement,
@@ -503,13 +505,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     node = rclpy.create_node('sessgan_evolver')
     supervisor = ProcessSupervisor(campaign.store.run_dir / 'logs')
     try:
-        evaluator = RosEvaluator(node, config, campaign.bags_dir, controller, supervisor, log)
+        # Goals name bags/<run>/ relative to the simulators' bags root (they write nowhere else).
+        evaluator = RosEvaluator(node, config, Path(run_name), controller, supervisor, log)
         generator_running = evaluator.generator.wait_for_service(timeout_sec=1.0)
         if not config.external:
             evaluator.allowed = {f'/w{i}/evaluate' for i in range(config.workers)}
             evaluator.wait_until_absent(sorted(evaluator.allowed), timeout=15.0)
         evaluator.generator_process = start_graph(
-            supervisor, evaluator.pool, config, controller, generator_running)
+            supervisor, evaluator.pool, config, controller, generator_running,
+            campaign.bags_dir.parent)
         log(f'run {run_name}: {config.generations} generations x {config.population} members x '
             f'{config.maps_per_member} maps, scenario {config.scenario}, controller '
             f'{controller}, ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')

@@ -32,7 +32,7 @@ class EpisodeFacts:
     """Every parameter of the worker that ran it."""
 
 
-def write_failure_bag(record_directory: str, environment, config, metrics,
+def write_failure_bag(record_directory: str | Path, environment, config, metrics,
                       recording: Recording, facts: EpisodeFacts, log) -> str:
     """Write ``<record_directory>/<environment id>/``; returns its path, or '' when it could
     not be written (the reason goes to ``log.error``). ``config``: the resolved episode
@@ -68,10 +68,11 @@ def write_failure_bag(record_directory: str, environment, config, metrics,
     return str(path)
 
 
-def remove_partial_bags(record_directory: str, log) -> None:
+def remove_partial_bags(record_directory: str | Path, log) -> None:
     """Remove the ``<id>.tmp-<pid>`` staging directories a killed worker left behind in
-    ``record_directory`` (missing directories are fine)."""
-    if not record_directory or not Path(record_directory).is_dir():
+    ``record_directory``: only those whose marker proves them a dead writer's of this host
+    (``remove_stale_staging_directories``; missing directories are fine)."""
+    if not str(record_directory) or not Path(record_directory).is_dir():
         return
     try:
         removed = remove_stale_staging_directories(record_directory)

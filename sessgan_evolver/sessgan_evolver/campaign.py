@@ -65,6 +65,20 @@ MAX_EPISODE_TIMEOUT = 7 * 86400.0
 """Wall seconds: the longest --episode-timeout accepted (a week; 0 derives it)."""
 
 
+def check_controller(scenario: str, controller: str) -> None:
+    """CampaignError unless ``controller`` ('' = the scenario's) is a built-in controller that
+    drives the scenario's robot (or a robot of its own that the simulators then host)."""
+    name = controller or get_scenario(scenario).controller
+    try:
+        spec = get_controller(name)
+    except UnknownControllerError as err:
+        raise CampaignError(str(err)) from err
+    robot = spec.robot_in(get_scenario(scenario).robot)
+    if not spec.drives(robot):
+        raise CampaignError(f'controller {name!r} does not drive the {robot} robot of the '
+                            f'{scenario} scenario')
+
+
 @dataclass(frozen=True)
 class CampaignConfig:
     """What a campaign does; the CLI fills it from its arguments (defaults in brackets)."""
@@ -161,7 +175,7 @@ class CampaignConfig:
                                 f'{self.episode_timeout}')
         check_harness_tries(self.harness_tries)
         if not self.external:
-            self.check_controller()
+            check_controller(self.scenario, self.controller)
         if self.seed_schedule not in SEED_SCHEDULES:
             raise CampaignError(f'seed schedule must be one of {", ".join(SEED_SCHEDULES)}, '
                                 f'got {self.seed_schedule!r}')
@@ -178,19 +192,6 @@ class CampaignConfig:
                                 'external workers')
         self.algorithm_config().validate()
         self.fitness.validate()
-
-    def check_controller(self) -> None:
-        """CampaignError unless the controller to start exists and drives the scenario's
-        robot (or a robot of its own that the simulators then host)."""
-        name = self.controller or get_scenario(self.scenario).controller
-        try:
-            spec = get_controller(name)
-        except UnknownControllerError as err:
-            raise CampaignError(str(err)) from err
-        robot = spec.robot_in(get_scenario(self.scenario).robot)
-        if not spec.drives(robot):
-            raise CampaignError(f'controller {name!r} does not drive the {robot} robot of the '
-                                f'{self.scenario} scenario')
 
     def algorithm_config(self) -> GeneticAlgorithmConfig:
         operators = dataclasses.replace(

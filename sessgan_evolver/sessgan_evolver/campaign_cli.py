@@ -503,6 +503,9 @@ def run_campaign(argv: list[str]) -> int:
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
+    except OSError as err:  # the run directory cannot be made
+        print(f'error: {err}', file=sys.stderr)
+        return 1
 
     # SIGINT and SIGTERM raise KeyboardInterrupt (run_command), so the children are stopped.
     if config.in_process:
@@ -530,7 +533,8 @@ def run_campaign(argv: list[str]) -> int:
         log('interrupted: stopping every process this campaign started '
             f'(continue later with --resume --run {run_name})')
         return INTERRUPTED_STATUS
-    except HarnessFailureError as err:
+    except (HarnessFailureError, OSError) as err:
+        # OSError: the run directory cannot be written (a full disk): nothing more can be.
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')
         return 1
     except (SessganEvolverError, SessganGenError) as err:
@@ -563,7 +567,7 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
     except KeyboardInterrupt:
         log(f'interrupted (continue later with --resume --run {run_name} --in-process)')
         return INTERRUPTED_STATUS
-    except HarnessFailureError as err:
+    except (HarnessFailureError, OSError) as err:
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name} '
             '--in-process')
         return 1

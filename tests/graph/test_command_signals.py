@@ -15,7 +15,7 @@ import pytest
 
 pytestmark = pytest.mark.graph
 
-PROBE = '''
+PROBE = """
 import os, signal, sys, threading
 import rclpy
 from sessgan_gen.ros_spin import init_rclpy, run_command
@@ -35,7 +35,7 @@ def body():
         rclpy.try_shutdown()
 
 sys.exit(run_command(body, 'probe: interrupted'))
-'''
+"""
 
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])

@@ -195,3 +195,21 @@ def test_a_full_disk_leaves_no_half_written_bag(tmp_path, monkeypatch):
     assert any(row['bag_error'] for row in rows(result.run_dir / 'metrics_episodes.csv'))
     bags = tmp_path / 'bags' / 'full'
     assert not bags.exists() or list(bags.iterdir()) == []
+
+
+def test_a_run_directory_that_cannot_be_written_stops_the_campaign_cleanly(
+        tmp_path, monkeypatch, capsys):
+    from sessgan_evolver.run_store import RunStore
+
+    def no_space(self, kind, row):
+        raise OSError(errno.ENOSPC, 'No space left on device')
+
+    monkeypatch.setattr(RunStore, 'append_row', no_space)
+    status = campaign_cli.main([
+        '--in-process', '--scenario', 'factory', '--generations', '1', '--population', '2',
+        '--maps-per-member', '1', '--time-limit', '2', '--run', 'full',
+        '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')])
+    err = capsys.readouterr().err
+    assert status == 1, err
+    assert 'No space left on device' in err and '--resume --run full --in-process' in err
+    assert 'Traceback' not in err

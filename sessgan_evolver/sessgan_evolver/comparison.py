@@ -260,8 +260,8 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     label = f'{method}-seed{seed}'
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                             simulate_invalid=False, observer=episode_log,
-                            mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+                            mission=config.mission(), fleet=config.fleet(),
+                            log=log) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
         if method == 'sessgan':
@@ -331,7 +331,7 @@ def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Pat
     summaries: dict[str, FreshSeedSummary] = {}
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                             simulate_invalid=False, mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+                            fleet=config.fleet(), log=log) as evaluator:
         for run in runs:
             if run.source is None or run.source_key in summaries:
                 continue

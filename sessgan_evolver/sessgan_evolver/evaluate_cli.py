@@ -175,7 +175,8 @@ def evaluate(arguments: list[str]) -> int:
     try:
         with InProcessEvaluator(scenario, args.controller, args.time_limit,
                                 simulate_invalid=args.simulate_invalid,
-                                mission=mission, fleet=fleet) as evaluator:
+                                mission=mission, fleet=fleet,
+                                log=lambda line: print(line, file=sys.stderr)) as evaluator:
             for source in sources:
                 progress.start(source.label, len(plan.pairs))
                 result = evaluate_source(source, plan, evaluator, rule,

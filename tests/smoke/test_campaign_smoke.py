@@ -18,7 +18,8 @@ pytestmark = pytest.mark.smoke
 # Small but real: two workers, three generations, each episode at most 20 sim seconds.
 TINY = ['--scenario', 'factory', '--generations', '3', '--population', '3',
         '--maps-per-member', '1', '--workers', '2', '--time-limit', '20', '--seed', '5']
-IGNORED_COLUMNS = {'wall_time', 'bag_path'}
+IGNORED_COLUMNS = {'wall_time', 'bag_path', 'harness_reruns'}
+"""Columns that differ between runs with the same results (harness re-runs are no result)."""
 
 
 def campaign(tmp_path: Path, run: str, *extra: str) -> list[str]:
@@ -118,6 +119,8 @@ def test_a_worker_process_killed_mid_episode_is_restarted_and_the_episode_rerun(
     assert 'gave no result within' not in log, 'the death was noticed only at the timeout'
     rows = episode_rows(tmp_path / 'runs' / 'disturbed')
     assert 'controller_unresponsive' not in {row['outcome'] for row in rows}
+    with open(tmp_path / 'runs' / 'disturbed' / 'metrics_generations.csv') as handle:
+        assert sum(int(row['harness_reruns']) for row in csv.DictReader(handle)) >= 1
     assert rows == episode_rows(straight)
     for kind in ('members', 'generations'):  # fitness, and what evolution made of it
         assert episode_rows(tmp_path / 'runs' / 'disturbed', kind) == \

@@ -12,6 +12,7 @@ episode and member rows -> tell -> generation row -> checkpoint g+1.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,6 +21,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from sessgan_controllers.errors import UnknownControllerError
+from sessgan_controllers.registry import get_controller
 from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import CampaignError
@@ -31,6 +34,7 @@ from sessgan_evolver.fitness import (
     tpkl_reference_from,
 )
 from sessgan_evolver.genome import Genome
+from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, check_harness_tries
 from sessgan_evolver.operators import OperatorConfig
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
@@ -45,6 +49,8 @@ from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 from sessgan_sim.bag_recording import BagStorage
+from sessgan_sim.episode import check_time_limit
+from sessgan_sim.errors import InvalidConfigError
 
 SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
 
@@ -55,6 +61,22 @@ with 10 % walls: 21 us); more than twice that covers a busy host."""
 EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND = 1e-5
 """Wall seconds per map cell and sim second of time limit added for stepping: the 1024 x 1024
 map took 5.6 wall s per sim second (5.3 us a cell); about twice that."""
+MAX_EPISODE_TIMEOUT = 7 * 86400.0
+"""Wall seconds: the longest --episode-timeout accepted (a week; 0 derives it)."""
+
+
+def check_controller(scenario: str, controller: str) -> None:
+    """CampaignError unless ``controller`` ('' = the scenario's) is a built-in controller that
+    drives the scenario's robot (or a robot of its own that the simulators then host)."""
+    name = controller or get_scenario(scenario).controller
+    try:
+        spec = get_controller(name)
+    except UnknownControllerError as err:
+        raise CampaignError(str(err)) from err
+    robot = spec.robot_in(get_scenario(scenario).robot)
+    if not spec.drives(robot):
+        raise CampaignError(f'controller {name!r} does not drive the {robot} robot of the '
+                            f'{scenario} scenario')
 
 
 @dataclass(frozen=True)
@@ -82,6 +104,10 @@ class CampaignConfig:
     episode_timeout: float = 0.0
     """[max(30, 2 x time limit), plus 50 us + 10 us x time limit per map cell] Wall seconds
     before an episode is retried elsewhere."""
+    harness_tries: int = DEFAULT_HARNESS_TRIES
+    """[3] Tries of an episode the test harness ends (a silent controller, a dead process, a
+    cancelled episode): each is run again, never recorded; an episode the harness ends on
+    every try stops the run (1..20)."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
     seed_schedule: str = 'per-generation'
@@ -138,6 +164,18 @@ class CampaignConfig:
         for name in ('generations', 'population', 'maps_per_member', 'workers'):
             if getattr(self, name) < 1:
                 raise CampaignError(f'{name} must be >= 1, got {getattr(self, name)}')
+        try:
+            check_time_limit(self.time_limit, 'time_limit')
+        except InvalidConfigError as err:
+            raise CampaignError(str(err)) from err
+        if not (math.isfinite(self.episode_timeout)
+                and 0.0 <= self.episode_timeout <= MAX_EPISODE_TIMEOUT):
+            raise CampaignError(f'episode_timeout must lie in [0, {MAX_EPISODE_TIMEOUT:.0f}] '
+                                f'wall seconds (0: derived from the time limit), got '
+                                f'{self.episode_timeout}')
+        check_harness_tries(self.harness_tries)
+        if not self.external:
+            check_controller(self.scenario, self.controller)
         if self.seed_schedule not in SEED_SCHEDULES:
             raise CampaignError(f'seed schedule must be one of {", ".join(SEED_SCHEDULES)}, '
                                 f'got {self.seed_schedule!r}')
@@ -232,6 +270,12 @@ class EpisodeJob:
 class Evaluator(Protocol):
     """How the loop reaches the generator and the simulators."""
 
+    @property
+    def harness_reruns(self) -> int:
+        """Episodes run again so far because the test harness, not the controller, ended
+        them (sessgan_evolver.harness): never results, shown so a user sees the harness
+        struggled."""
+
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
         """Environments of a member's weights (checkpoint bytes), one per seed."""
@@ -239,7 +283,9 @@ class Evaluator(Protocol):
     def evaluate(self, jobs: Sequence[EpisodeJob],
                  on_result: Callable[[EpisodeJob, dict], None]) -> None:
         """Run every job (in parallel where possible), calling ``on_result(job, metrics)``
-        as each finishes; metrics is a dict of EpisodeMetrics fields."""
+        as each finishes; metrics is a dict of EpisodeMetrics fields (``bag_error``: why
+        the failure bag of a failure was lost, '' if none was). An episode the harness ended
+        is run again, not passed on (HarnessFailureError when it never gets a result)."""
 
 
 @dataclass
@@ -337,10 +383,17 @@ class Campaign:
 
             def on_result(job: EpisodeJob, metrics: dict) -> None:
                 results[job.key] = metrics
+                if metrics.get('bag_error'):
+                    self.log(f'WARNING: failure bag LOST for episode {job.environment.id}: '
+                             f'{metrics["bag_error"]} (its metrics are recorded; bag_error in '
+                             'metrics_episodes.csv)')
                 progress.update(len(results), f'collisions so far '
                                 f'{sum(m["collisions"] for m in results.values())}')
 
+            reruns_before = evaluator.harness_reruns
             evaluator.evaluate(jobs, on_result)
+            harness_reruns = evaluator.harness_reruns - reruns_before
+            lost_bags = sum(bool(metrics.get('bag_error')) for metrics in results.values())
             missing = [job.key for job in jobs if job.key not in results]
             if missing:
                 raise CampaignError(f'generation {generation}: no result for episodes {missing}')
@@ -373,6 +426,7 @@ class Campaign:
             history = {digest: values for digest, values in history.items()
                        if digest in survivors}
             summary = generation_summary(generation, fitnesses)
+            summary.update(harness_reruns=harness_reruns, lost_bags=lost_bags)
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
             done = generation + 1
@@ -384,7 +438,8 @@ class Campaign:
                 f'fitness {summary["best_fitness"]:.3f} | {done}/{config.generations} '
                 f'generations, {60 / per_generation:.1f}/min, elapsed '
                 f'{format_duration(elapsed)}, ETA '
-                f'{format_duration(per_generation * (config.generations - done))}')
+                f'{format_duration(per_generation * (config.generations - done))}'
+                + harness_note(harness_reruns, lost_bags))
             if done < config.generations:
                 self.store.save_checkpoint(done, algorithm.state_dict(),
                                            {'tpkl_reference': tpkl_reference,
@@ -406,6 +461,25 @@ class Campaign:
         # The first map of up to four members: enough for the report's figure.
         np.save(path, np.stack([maps[0] for maps in token_maps[:4]]))
 
+    def harness_notes(self) -> list[str]:
+        """The report's lines on harness re-runs and lost failure bags of the whole run."""
+        generations = self.store.read_rows('generation')
+        reruns = sum(int(row.get('harness_reruns') or 0) for row in generations)
+        lost = [row for row in self.store.read_rows('episode') if row.get('bag_error')]
+        notes = []
+        if reruns:
+            notes.append(f'Harness re-runs: {reruns} episodes were ended by the test harness '
+                         '(a silent controller, a dead process, a cancelled episode), not by '
+                         'the controller, and run again; none of them is a result (the '
+                         '`harness_reruns` column of metrics_generations.csv says when).')
+        if lost:
+            notes.append(f'**WARNING: {len(lost)} failure bags were lost** (their metrics are '
+                         'recorded; see the `bag_error` column of metrics_episodes.csv): '
+                         + '; '.join(f'{row.get("environment_id")}: {row.get("bag_error")}'
+                                     for row in lost[:5])
+                         + ('; ...' if len(lost) > 5 else ''))
+        return notes
+
     def write_report(self, last_population: list[list[np.ndarray]]) -> Path:
         maps_by_generation = {}
         for generation in report_generations(self.config.generations - 1):
@@ -425,10 +499,22 @@ class Campaign:
                 'mean': float(np.mean(list(unique.values())))}
         notes = [f'Failure bags: `{self.bags_dir}` (replay one with '
                  '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+        notes += self.harness_notes()
         return write_report(self.store.run_dir, maps_by_generation, tpkl_table, uniqueness_table,
                             title=f'SESS-GAN campaign {self.store.run_name} '
                                   f'({self.config.scenario})',
                             token_names=self.scenario.token_names, notes=notes)
+
+
+def harness_note(harness_reruns: int, lost_bags: int) -> str:
+    """The console line's note of what went wrong around the episodes ('' when nothing)."""
+    parts = []
+    if harness_reruns:
+        parts.append(f'harness re-runs {harness_reruns} (episodes the harness, not the '
+                     'controller, ended: run again)')
+    if lost_bags:
+        parts.append(f'WARNING: {lost_bags} failure bags lost')
+    return ''.join(f' | {part}' for part in parts)
 
 
 def fmt(value: float | None) -> str:

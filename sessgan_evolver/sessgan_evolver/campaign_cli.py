@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 import time
 from collections import deque
@@ -21,7 +20,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError, EpisodeJob
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import HarnessFailureError, SessganEvolverError
+from sessgan_evolver.harness import HarnessRetries
 from sessgan_evolver.process_supervisor import (
     ChildProcess,
     ProcessSupervisor,
@@ -33,7 +33,9 @@ from sessgan_evolver.process_supervisor import (
 from sessgan_gen.config_cli import build_parser, config_from_namespace
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
 from sessgan_gen.scenarios import get_scenario
+from sessgan_sim.metrics import Outcome, is_harness_outcome
 
 if TYPE_CHECKING:  # ROS types, imported where they are used so --help works without ROS
     from rclpy.action import ActionClient
@@ -45,7 +47,6 @@ EVALUATE_TYPE = 'sessgan_interfaces/action/EvaluateEnvironment'
 GENERATOR_NAMESPACE = '/sessgan'
 SIMULATOR_READY_LOG = 'simulator ready'
 """What a simulator logs once its action server is up (a restarted pair waits for it)."""
-CONTROLLER_UNRESPONSIVE = 'controller_unresponsive'
 GENERATOR_TIMEOUT = 120.0
 """Wall seconds the generator may take to answer one request."""
 GOAL_ANSWER_TIMEOUT = 15.0
@@ -135,6 +136,12 @@ class RosEvaluator:
         """Action names of restarted pairs whose new simulator is not ready yet, with the
         monotonic time by which it must be."""
         self.max_attempts = 3
+        """Requests of one member the generator may die on."""
+        self.retries = HarnessRetries(config.harness_tries, log)
+
+    @property
+    def harness_reruns(self) -> int:
+        return self.retries.reruns
 
     def spin(self, seconds: float = 0.02) -> None:
         import rclpy
@@ -323,8 +330,6 @@ class RosEvaluator:
         from action_msgs.msg import GoalStatus
 
         pending = deque(jobs)
-        attempts: dict[tuple[int, int], int] = {}
-        harness_failures: dict[tuple[int, int], int] = {}
         running: dict[str, Running] = {}
         last_discovery = 0.0
         last_worker_seen = time.monotonic()
@@ -348,12 +353,8 @@ class RosEvaluator:
                                     f'{NO_WORKER_TIMEOUT:.0f} s')
             self.spin(0.01)
             for job in self.take_back_from_dead_pairs(running):
-                harness_failures[job.key] = harness_failures.get(job.key, 0) + 1
-                if harness_failures[job.key] >= self.max_attempts:
-                    raise CampaignError(
-                        f'episode {job.environment.id}: a worker process died under it '
-                        f'{harness_failures[job.key]} times; see the logs in '
-                        f'{self.supervisor.log_directory}')
+                self.retries.failed(job.key, job.environment.id, 'a worker process died',
+                                    f'logs in {self.supervisor.log_directory}')
                 pending.appendleft(job)
             for name, state in list(running.items()):
                 retry_reason = None
@@ -374,10 +375,19 @@ class RosEvaluator:
                     if response.status == GoalStatus.STATUS_SUCCEEDED:
                         metrics = metrics_dict(response.result.metrics)
                         pair = self.pair_of(name)
-                        if (metrics['outcome'] == CONTROLLER_UNRESPONSIVE and pair is not None
+                        if (metrics['outcome'] == Outcome.CONTROLLER_UNRESPONSIVE
+                                and pair is not None
                                 and not all(child.alive for child in pair.controllers)):
                             continue  # its controller died: the next loop re-runs it
                         del running[name]
+                        if is_harness_outcome(metrics['outcome']):
+                            # No result: never recorded (sessgan_evolver.harness).
+                            self.retries.failed(state.job.key, state.job.environment.id,
+                                                metrics['outcome'],
+                                                f'worker {name}: {metrics["detail"]}')
+                            pending.appendleft(state.job)
+                            continue
+                        self.retries.succeeded(state.job.key)
                         on_result(state.job, metrics)
                         continue
                     retry_reason = f'ended the goal with status {response.status}'
@@ -389,14 +399,8 @@ class RosEvaluator:
                     self.quarantine[name] = time.monotonic() + 60.0
                 if retry_reason is not None:
                     del running[name]
-                    key = state.job.key
-                    attempts[key] = attempts.get(key, 0) + 1
-                    if attempts[key] >= self.max_attempts:
-                        raise CampaignError(
-                            f'episode {state.job.environment.id} failed {attempts[key]} times; '
-                            f'last: worker {name} {retry_reason}')
-                    self.log(f'worker {name} {retry_reason}: retrying '
-                             f'{state.job.environment.id} on another worker')
+                    self.retries.failed(state.job.key, state.job.environment.id,
+                                        f'worker {name}', retry_reason)
                     pending.appendleft(state.job)
 
 
@@ -417,6 +421,7 @@ def metrics_dict(msg) -> dict:
         'distance_travelled': float(msg.distance_travelled),
         'final_distance_to_goal': float(msg.final_distance_to_goal), 'ticks': int(msg.ticks),
         'wall_time': float(msg.wall_time), 'bag_path': msg.bag_path,
+        'bag_error': msg.bag_error,
         'legs': int(msg.legs), 'legs_completed': int(msg.legs_completed),
         'leg_times': [float(value) for value in msg.leg_times],
         'failed_leg': int(msg.failed_leg),
@@ -472,7 +477,13 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
+    """Exit status: 0 done, 1 failed (a --resume hint when the run can go on), 2 bad
+    settings (nothing written), 130 interrupted (SIGINT or SIGTERM; the --resume hint)."""
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    return run_command(lambda: run_campaign(arguments), 'interrupted')
+
+
+def run_campaign(argv: list[str]) -> int:
     args = parse_args(argv)
     try:
         config = config_from_args(args)
@@ -494,14 +505,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
+    except OSError as err:  # the run directory cannot be made
+        print(f'error: {err}', file=sys.stderr)
+        return 1
 
-    # SIGTERM ends the campaign like Ctrl-C, so the children are stopped too.
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    # SIGINT and SIGTERM raise KeyboardInterrupt (run_command), so the children are stopped.
     if config.in_process:
         return run_in_process(campaign, config, controller, run_name, args.resume, log)
 
     import rclpy
-    rclpy.init(args=['--ros-args'])
+    init_rclpy(['--ros-args'])
     node = rclpy.create_node('sessgan_evolver')
     supervisor = ProcessSupervisor(campaign.store.run_dir / 'logs')
     try:
@@ -523,7 +536,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         log('interrupted: stopping every process this campaign started '
             f'(continue later with --resume --run {run_name})')
-        return 130
+        return INTERRUPTED_STATUS
+    except (HarnessFailureError, OSError) as err:
+        # OSError: the run directory cannot be written (a full disk): nothing more can be.
+        log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')
+        return 1
     except (SessganEvolverError, SessganGenError) as err:
         log(f'error: {err}')
         return 1
@@ -548,11 +565,16 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
                 config.scenario, controller, config.time_limit,
                 record_directory=campaign.bags_dir if config.record_failures else None,
                 bag_storage=config.bag_storage, mission=config.mission(),
-                fleet=config.fleet()) as evaluator:
+                fleet=config.fleet(), harness_tries=config.harness_tries,
+                log=log) as evaluator:
             result = campaign.run(evaluator, resume=resume)
     except KeyboardInterrupt:
         log(f'interrupted (continue later with --resume --run {run_name} --in-process)')
-        return 130
+        return INTERRUPTED_STATUS
+    except (HarnessFailureError, OSError) as err:
+        log(f'error: {err}\nstopped; continue later with --resume --run {run_name} '
+            '--in-process')
+        return 1
     except (SessganEvolverError, SessganGenError) as err:
         log(f'error: {err}')
         return 1

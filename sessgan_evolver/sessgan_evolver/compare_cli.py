@@ -21,6 +21,7 @@ from sessgan_evolver.comparison import CompareConfig, run_comparison
 from sessgan_evolver.errors import SessganEvolverError
 from sessgan_gen.config_cli import field_docs
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 
 
 def _int_tuple(text: str) -> tuple[int, ...]:
@@ -56,6 +57,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = sys.argv[1:] if argv is None else list(argv)
+    return run_command(lambda: compare(arguments))
+
+
+def compare(arguments: list[str]) -> int:
     args = parse_args(arguments)
     torch.set_num_threads(1)
     config = CompareConfig(**{field.name: getattr(args, field.name)
@@ -74,7 +79,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         log('interrupted')
-        return 130
+        return INTERRUPTED_STATUS
     print(f'report: {result.report_path}')
     return 0
 

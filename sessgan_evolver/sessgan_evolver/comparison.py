@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig
+from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig, check_controller
 from sessgan_evolver.errors import CompareError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
 from sessgan_evolver.fault_records import confirm_faults
@@ -63,6 +63,8 @@ from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_sim.episode import check_time_limit
+from sessgan_sim.errors import InvalidConfigError
 
 
 @dataclass(frozen=True)
@@ -141,6 +143,22 @@ class CompareConfig:
         if 'sessgan' in self.methods and self.budget < self.population * self.maps_per_member:
             raise CompareError(f'a budget of {self.budget} pays for no SESS-GAN generation of '
                                f'{self.population} x {self.maps_per_member} episodes')
+        if self.max_fault_records < -1:
+            raise CompareError(f'max_fault_records must be >= -1 (-1: every one), got '
+                               f'{self.max_fault_records}')
+        for name, value in (('search_seeds', min(self.search_seeds)),
+                            ('evaluation_seed', self.evaluation_seed)):
+            if value < 0:
+                raise CompareError(f'{name} must be >= 0, got {value}')
+        try:
+            check_time_limit(self.time_limit, 'time_limit')
+        except InvalidConfigError as err:
+            raise CompareError(str(err)) from err
+        check_controller(self.scenario, self.controller)
+        if self.checkpoint and not Path(self.checkpoint).is_file():
+            raise CompareError(f'checkpoint {self.checkpoint!r} does not exist')
+        if 'sessgan' in self.methods:
+            self.campaign_config(self.search_seeds[0]).validate()
         self.rule().validate()
 
     def rule(self) -> FaultRule:
@@ -242,8 +260,8 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     label = f'{method}-seed{seed}'
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                             simulate_invalid=False, observer=episode_log,
-                            mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+                            mission=config.mission(), fleet=config.fleet(),
+                            log=log) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
         if method == 'sessgan':
@@ -313,7 +331,7 @@ def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Pat
     summaries: dict[str, FreshSeedSummary] = {}
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                             simulate_invalid=False, mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+                            fleet=config.fleet(), log=log) as evaluator:
         for run in runs:
             if run.source is None or run.source_key in summaries:
                 continue

@@ -299,6 +299,7 @@ class EpisodeRunner:
         metrics = result.to_dict()
         metrics['wall_time'] = wall_time
         metrics['bag_path'] = ''
+        metrics['bag_error'] = ''
         episode_trace = None
         if recorders:
             traces = [recorder.finish(list(episode.robot_metrics(index).contacts))

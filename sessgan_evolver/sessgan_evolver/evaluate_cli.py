@@ -20,7 +20,8 @@ from pathlib import Path
 
 import torch
 
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.campaign import check_controller
+from sessgan_evolver.errors import FreshSeedError, SessganEvolverError
 from sessgan_evolver.fault_records import confirm_faults
 from sessgan_evolver.faults import FaultRule
 from sessgan_evolver.fresh_seed import (
@@ -45,7 +46,10 @@ from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 from sessgan_gen.scenarios import get_scenario
+from sessgan_sim.episode import check_time_limit
+from sessgan_sim.errors import InvalidConfigError
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -117,8 +121,26 @@ def build_sources(args: argparse.Namespace, scenario: str) -> list[MapSource]:
     return sources
 
 
+def check_settings(args: argparse.Namespace, scenario: str) -> None:
+    """Raise naming the first option a run cannot work with, before anything is written."""
+    try:
+        check_time_limit(args.time_limit, '--time-limit')
+    except InvalidConfigError as err:
+        raise FreshSeedError(str(err)) from err
+    check_controller(scenario, args.controller)
+    for option, value, least in (('--seed', args.seed, 0), ('--repeats', args.repeats, 0),
+                                 ('--fault-records', args.fault_records, -1)):
+        if value < least:
+            raise FreshSeedError(f'{option} must be >= {least}, got {value}')
+    FaultRule(args.coarse_cells, args.context_cells).validate()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = sys.argv[1:] if argv is None else list(argv)
+    return run_command(lambda: evaluate(arguments))
+
+
+def evaluate(arguments: list[str]) -> int:
     args = parse_args(arguments)
     torch.set_num_threads(1)
     try:
@@ -131,6 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             scenario = run_scenario
         scenario = scenario or 'factory'
         get_scenario(scenario)
+        check_settings(args, scenario)
         mission = MissionSpec(args.mission_stations, args.station_dwell_time).validate()
         fleet = FleetSpec(args.robots).validate(mission.stations)
         runs = list(args.run) + list(args.exclude_run)
@@ -152,7 +175,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with InProcessEvaluator(scenario, args.controller, args.time_limit,
                                 simulate_invalid=args.simulate_invalid,
-                                mission=mission, fleet=fleet) as evaluator:
+                                mission=mission, fleet=fleet,
+                                log=lambda line: print(line, file=sys.stderr)) as evaluator:
             for source in sources:
                 progress.start(source.label, len(plan.pairs))
                 result = evaluate_source(source, plan, evaluator, rule,
@@ -167,7 +191,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                    {'generator': source.label})
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
-        return 130
+        return INTERRUPTED_STATUS
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 1

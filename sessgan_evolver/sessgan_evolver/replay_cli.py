@@ -29,6 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from sessgan_gen.ros_spin import init_rclpy, run_command
+
 EXIT_AS_EXPECTED, EXIT_DIFFERENT, EXIT_ERROR = 0, 1, 2
 
 
@@ -85,7 +87,7 @@ def replay(args, episode) -> int:
 
     topics = read_bag_topics(args.bag)
     recorded_namespace = (episode or {}).get('namespace', '')
-    rclpy.init()
+    init_rclpy()
     node = rclpy.create_node('sessgan_replay')
     try:
         publishers = {}
@@ -188,7 +190,7 @@ def resimulate(args, episode: dict) -> int:
         print(f'note: {note}', file=sys.stderr)
     log_directory = Path(tempfile.mkdtemp(prefix='sessgan-replay-'))
     with ProcessSupervisor(log_directory) as supervisor:
-        rclpy.init()
+        init_rclpy()
         node = rclpy.create_node('sessgan_resimulate')
         try:
             if not args.worker:
@@ -296,7 +298,13 @@ def start_resimulation_graph(supervisor, settings, namespace: str, log_directory
 
 
 def main(argv=None) -> int:
-    args = parse_args(sys.argv[1:] if argv is None else argv)
+    arguments = sys.argv[1:] if argv is None else argv
+    # SIGINT and SIGTERM: a replay stops as expected, a re-simulation exits 130 (run_command).
+    return run_command(lambda: replay_or_resimulate(arguments))
+
+
+def replay_or_resimulate(argv) -> int:
+    args = parse_args(argv)
     from sessgan_evolver.bag_reading import (
         bag_directory,
         check_bag_complete,

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from sessgan_gen.config_cli import parse_config
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.ros_spin import run_command
 
 
 @dataclass
@@ -47,9 +48,9 @@ class ExportConfig:
     """Failure bag directory whose map to export."""
 
 
-def export(config: ExportConfig) -> Path:
-    """Write the map ``config`` names; returns the YAML path. SessganGenError (or ValueError)
-    says what is wrong with the options or the source."""
+def check_options(config: ExportConfig) -> Path:
+    """The YAML path to write, or SessganGenError naming the first option that cannot work;
+    nothing is written."""
     sources = [name for name, given in (('--map-file', config.map_file),
                                         ('--generate', config.generate), ('--bag', config.bag))
                if given]
@@ -62,6 +63,26 @@ def export(config: ExportConfig) -> Path:
     if output.suffix.lower() not in ('.yaml', '.yml'):
         raise SessganGenError(f'--output {output} must name a .yaml file (the PGM goes beside '
                               'it)')
+    for option, value in (('--seed', config.seed), ('--width', config.width),
+                          ('--height', config.height)):
+        if value < 0:
+            raise SessganGenError(f'{option} must be >= 0, got {value}')
+    if config.scenario:
+        from sessgan_gen.scenarios import get_scenario
+
+        get_scenario(config.scenario)
+    for option, path in (('--map-file', config.map_file), ('--checkpoint', config.checkpoint)):
+        if path and not Path(path).is_file():
+            raise SessganGenError(f'{option} {path} does not exist')
+    if config.bag and not (Path(config.bag) / 'map.yaml').is_file():
+        raise SessganGenError(f'{config.bag} is no failure bag: it has no map.yaml')
+    return output
+
+
+def export(config: ExportConfig) -> Path:
+    """Write the map ``config`` names; returns the YAML path. SessganGenError (or ValueError)
+    says what is wrong with the options or the source."""
+    output = check_options(config)
     from sessgan_gen.map_server_io import (
         export_environment,
         export_token_map,
@@ -84,17 +105,25 @@ def export(config: ExportConfig) -> Path:
         export_environment(output, environment)
     else:
         bag = Path(config.bag)
-        if not (bag / 'map.yaml').is_file():
-            raise SessganGenError(f'{bag} is no failure bag: it has no map.yaml')
         loaded = read_map_server(bag / 'map.yaml')
         write_map_server(output, loaded.occupancy, loaded.resolution, loaded.origin)
     return output
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status (0 written, 1 error)."""
+    """Entry point; returns the exit status (0 written, 1 error, 2 bad options: nothing
+    written, 130 interrupted)."""
+    return run_command(lambda: run_export(argv), 'export: interrupted')
+
+
+def run_export(argv: Sequence[str] | None) -> int:
     config = parse_config(ExportConfig, argv, prog='ros2 run sessgan_gen export',
                           description=__doc__.split('\n\n')[0])
+    try:
+        check_options(config)
+    except (SessganGenError, ValueError) as err:
+        print(f'export: error: {err}', file=sys.stderr)
+        return 2
     try:
         output = export(config)
     except (SessganGenError, ValueError, OSError) as err:

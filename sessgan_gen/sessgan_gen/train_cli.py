@@ -16,6 +16,7 @@ from sessgan_gen.checkpoint import load_training_checkpoint, save_checkpoint
 from sessgan_gen.config_cli import parse_config
 from sessgan_gen.errors import CheckpointError, SessganGenError
 from sessgan_gen.progress import ProgressPrinter, format_duration
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_gen.seeding import seed_everything
 from sessgan_gen.training import (
@@ -26,6 +27,7 @@ from sessgan_gen.training import (
     resolve_config,
     same_training,
     training_metadata,
+    validate_config,
 )
 
 
@@ -106,16 +108,26 @@ class TotalEta:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the process exit status (0 success, 1 error, 130 interrupted)."""
+    """Entry point; returns the process exit status (0 success, 1 error, 2 bad options
+    (nothing written), 130 interrupted)."""
+    return run_command(lambda: run_training(argv), 'train: interrupted')
+
+
+def run_training(argv: Sequence[str] | None) -> int:
     config = resolve_config(parse_config(
         TrainConfig, argv, prog='ros2 run sessgan_gen train',
         description='Train a SESS-GAN (TOAD-GAN) generator pyramid on one token map.'))
+    try:
+        validate_config(config)
+    except ValueError as err:
+        print(f'train: error: {err}', file=sys.stderr)
+        return 2
     try:
         return train(config)
     except KeyboardInterrupt:
         print('train: interrupted; run again with --resume to continue from the last '
               'finished scale', file=sys.stderr)
-        return 130
+        return INTERRUPTED_STATUS
     except (SessganGenError, ValueError, OSError) as err:
         print(f'train: error: {err}', file=sys.stderr)
         return 1

@@ -143,7 +143,17 @@ def validate_config(config: TrainConfig) -> None:
         (config.generator_steps >= 1, 'generator_steps must be at least 1'),
         (config.learning_rate > 0, 'learning_rate must be positive'),
         (config.threads >= 0, 'threads must not be negative'),
+        (0.0 <= config.beta1 < 1.0, 'beta1 must lie in [0, 1)'),
+        (0.0 <= config.beta2 < 1.0, 'beta2 must lie in [0, 1)'),
+        (0.0 < config.lr_decay <= 1.0, 'lr_decay must lie in (0, 1]'),
+        (config.gradient_penalty_weight >= 0, 'gradient_penalty_weight must not be negative'),
+        (config.reconstruction_weight >= 0, 'reconstruction_weight must not be negative'),
+        (config.seed >= 0, 'seed must not be negative'),
     ]
+    for field in dataclasses.fields(config):
+        value = getattr(config, field.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f'{field.name} must be a finite number, got {value}')
     for ok, message in checks:
         if not ok:
             raise ValueError(message)

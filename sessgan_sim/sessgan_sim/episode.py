@@ -84,6 +84,26 @@ ROUTE_TIME_FACTOR = 4.0
 START_OVERLAP_TOLERANCE = 1e-4
 """m: a start footprint penetrating an obstacle deeper than this is invalid."""
 
+MAX_TIME_LIMIT = 3600.0
+"""Sim seconds: the longest time limit a user may ask for (30 x the longest scenario default,
+72 000 ticks at 20 Hz). The wall-clock timeout of an episode grows with it, so a limit like
+1e9 s would leave a stalled worker undetected for ever; limits derived from a route or a
+mission's legs are not bounded by it."""
+
+
+def check_time_limit(value: float, name: str = 'time limit') -> float:
+    """``value`` (sim seconds, 0: the default) as a float, or InvalidConfigError naming
+    ``name`` when it is not a number in [0, MAX_TIME_LIMIT]."""
+    try:
+        limit = float(value)
+    except (TypeError, ValueError) as err:
+        raise InvalidConfigError(f'{name} must be a number of sim seconds, got {value!r}') \
+            from err
+    if not (math.isfinite(limit) and 0.0 <= limit <= MAX_TIME_LIMIT):
+        raise InvalidConfigError(f'{name} must lie in [0, {MAX_TIME_LIMIT:.0f}] sim seconds '
+                                 f'(0: the scenario default), got {value!r}')
+    return limit
+
 
 @dataclass(frozen=True)
 class EpisodeConfig:

@@ -49,10 +49,27 @@ class Outcome(enum.StrEnum):
     INVALID_ENVIRONMENT = 'invalid_environment'
     CANCELLED = 'cancelled'
     """Cut off by the evaluate client or by the simulator's shutdown: no test result."""
+    HARNESS_ERROR = 'harness_error'
+    """The simulator could not run the episode for a reason of its own (its parameters, the
+    goal's options), not of the map: no test result."""
 
 
 FAILURE_OUTCOMES = frozenset({Outcome.TIMEOUT, Outcome.STUCK})
 """Outcomes that fail a valid test even without a collision: the goal was not reached."""
+
+HARNESS_OUTCOMES = frozenset({Outcome.CONTROLLER_UNRESPONSIVE, Outcome.CANCELLED,
+                              Outcome.HARNESS_ERROR})
+"""Outcomes that say the test harness failed, not the controller under test: a controller
+that sent nothing in time (under load its process may just not have been scheduled), an
+episode cut off, a simulator that could not run it. Such an episode is no result: campaigns,
+evaluate and compare run it again (sessgan_evolver.harness) and never record it, and it is
+no controller failure (no failure bag). A dead simulator or controller process is the other
+harness failure; it has no outcome, the campaign sees the process die."""
+
+
+def is_harness_outcome(outcome: object) -> bool:
+    """True when ``outcome`` (an Outcome or its string) is one of HARNESS_OUTCOMES."""
+    return str(outcome) in HARNESS_OUTCOMES
 
 
 class ContactKind(enum.StrEnum):
@@ -174,10 +191,11 @@ class EpisodeMetrics:
 
 
 def is_controller_failure(metrics: Any) -> bool:
-    """A fault of the controller under test: in a valid test (feasible map), a contact it
-    caused, or the goal not reached (timeout, stuck). Works on EpisodeMetrics and on
+    """A fault of the controller under test: in a valid test (feasible map) that the harness
+    did not cut short (HARNESS_OUTCOMES), a contact it caused, or the goal not reached
+    (timeout, stuck). Works on EpisodeMetrics and on
     anything with the same fields (messages, rows)."""
-    if not metrics.feasible:
+    if not metrics.feasible or is_harness_outcome(metrics.outcome):
         return False
     return metrics.fault_collisions > 0 or str(metrics.outcome) in FAILURE_OUTCOMES
 

@@ -53,7 +53,7 @@ from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from sessgan_sim.bag_recording import record_directory_under
-from sessgan_sim.episode import Episode
+from sessgan_sim.episode import Episode, check_time_limit
 from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
 from sessgan_sim.metrics import Outcome, is_controller_failure
 from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSettings
@@ -156,9 +156,10 @@ class SimulatorNode(Node):
                     record_directory = record_directory_under(self.bags_root,
                                                               request.record_directory)
             except BagWriteError as err:
-                # Refused as an invalid goal (no episode runs), never a controller result.
+                # Refused (no episode runs): the goal's fault, a harness error, never a result.
                 result.metrics = invalid_metrics(request.environment.id,
-                                                 f'refusing the goal: {err}')
+                                                 f'refusing the goal: {err}',
+                                                 Outcome.HARNESS_ERROR)
                 self.get_logger().warning(f'refusing an evaluate goal: {err}')
                 goal_handle.succeed()
                 return result
@@ -220,15 +221,19 @@ class SimulatorNode(Node):
         wall_start = time.monotonic()
         settings = self.settings  # one snapshot for the whole episode
         recording = Recording() if record_directory is not None else None
+        # The goal's options or this simulator's parameters, not the map, are at fault here:
+        # a harness error the client runs again (sessgan_sim.metrics.HARNESS_OUTCOMES).
         try:
+            check_time_limit(time_limit, "the goal's time_limit")
             config = settings.episode_config(robot, time_limit, seed)
             config.validate()
         except (SessganSimError, ValueError) as err:
-            return invalid_metrics(environment.id, str(err))
+            return invalid_metrics(environment.id, str(err), Outcome.HARNESS_ERROR)
         if environment.fleet and (settings.goal_via.uses_action or settings.reset_costmaps):
             return invalid_metrics(environment.id, (
                 "a fleet episode sends each robot's goal on its goal_pose: goal_interface "
-                f'{settings.goal_interface!r} and reset_costmaps serve one robot'))
+                f'{settings.goal_interface!r} and reset_costmaps serve one robot'),
+                Outcome.HARNESS_ERROR)
         episode = self.episode
         observation = episode.reset(environment, config)
         config = episode.config  # resolved: scenario defaults filled in
@@ -300,8 +305,9 @@ class SimulatorNode(Node):
             facts = EpisodeFacts(seed=seed, controller=controller,
                                  namespace=self.get_namespace(),
                                  sim_time_origin_ns=clock.origin_ns, settings=settings)
-            message.bag_path = write_failure_bag(record_directory, environment, config, metrics,
-                                                 recording, facts, self.get_logger())
+            message.bag_path, message.bag_error = write_failure_bag(
+                record_directory, environment, config, metrics, recording, facts,
+                self.get_logger())
         return message
 
     def run_fleet(self, episode: Episode, environment: Environment, clock: EpisodeClock,
@@ -429,10 +435,13 @@ def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetric
     return msg
 
 
-def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
+def invalid_metrics(environment_id: str, detail: str,
+                    outcome: Outcome = Outcome.INVALID_ENVIRONMENT) -> EpisodeMetricsMsg:
+    """The result of an episode that could not start: ``outcome`` invalid_environment (the
+    map's fault) or harness_error (this simulator's or the goal's)."""
     msg = EpisodeMetricsMsg()
     msg.environment_id = environment_id
-    msg.outcome = EpisodeMetricsMsg.OUTCOME_INVALID_ENVIRONMENT
+    msg.outcome = outcome.value
     msg.detail = detail
     msg.legs = 1
     msg.failed_leg = -1

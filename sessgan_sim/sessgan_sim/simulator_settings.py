@@ -26,7 +26,7 @@ from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
 from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
 from sessgan_sim.bag_recording import BagStorage, check_record_subdirectory
-from sessgan_sim.episode import EpisodeConfig
+from sessgan_sim.episode import EpisodeConfig, check_time_limit
 from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
 from sessgan_sim.robots import create_robot, get_robot_class
 from sessgan_sim.sensors import LidarConfig
@@ -202,6 +202,7 @@ class SimulatorSettings:
         for name in ('sim_time_origin', 'time_limit', 'lidar_rate', 'lidar_noise_std',
                      'lidar_range_min', 'stuck_timeout'):
             _not_negative(name, getattr(self, name))
+        check_time_limit(self.time_limit, "parameter 'time_limit'")
         for name in ('collision_limit', 'seed'):
             if getattr(self, name) < 0:
                 raise InvalidConfigError(f'parameter {name!r} must be >= 0, got '

@@ -21,9 +21,14 @@ import time
 from bench_simulator_node import bench_graph, reference_episode, run_episodes, start_worker
 
 from sessgan_evolver.process_supervisor import worker_cores
+from sessgan_gen.ros_spin import run_command
 
 
-def main() -> None:
+def main() -> int:
+    return run_command(measure)
+
+
+def measure() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--episodes', type=int, default=40)
@@ -53,7 +58,8 @@ def main() -> None:
     print(f'{args.episodes} episodes with {args.load} busy loops, '
           f'{"default" if args.default else "batch"} scheduling: {dict(outcomes)}, '
           f'{sum(metrics.ticks for metrics in results)} ticks in {wall:.1f} s')
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
+from sessgan_gen.ros_spin import init_rclpy, run_command
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randrange(10, 100)))
@@ -198,7 +199,7 @@ def bench_graph(prefix: str):
     import rclpy
 
     log_dir = Path(tempfile.mkdtemp(prefix=prefix))
-    rclpy.init()
+    init_rclpy()  # SIGINT and SIGTERM: KeyboardInterrupt, the graph stopped (run_command)
     node = rclpy.create_node('bench_client')
     graph = ProcessSupervisor(log_dir)
     try:
@@ -210,7 +211,11 @@ def bench_graph(prefix: str):
         shutil.rmtree(log_dir, ignore_errors=True)
 
 
-def main() -> None:
+def main() -> int:
+    return run_command(measure)
+
+
+def measure() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--episodes', type=int, default=6)
@@ -258,7 +263,8 @@ def main() -> None:
                   f'{rate_two:.1f} episodes/min (x{rate_two / rate_one:.2f}), each worker and '
                   f'its controller on its own core; a busy loop on both cores against one: '
                   f'x{cpu_scaling(graph, cores):.2f}')
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -4,7 +4,9 @@ It imports nothing from SESS-GAN, proving that any stack plugs into the simulato
 topic contract (scan, odom, goal_pose in; cmd_vel out). Policy: turn toward the goal, drive
 forward when facing it, slow down near obstacles ahead. ``--nan`` sends NaN velocities instead
 (a broken controller), ``--silent`` never answers, ``--blind`` drives straight ahead whatever
-the scan says (a faulty controller that must fail a valid test).
+the scan says (a faulty controller that must fail a valid test), ``--mute-first-scan`` leaves
+the first scan it gets unanswered and then drives as usual (a controller that missed one tick,
+as a starved process does: its episode ends controller_unresponsive, the next ones do not).
 """
 
 import math
@@ -25,6 +27,7 @@ class GoToGoal(Node):
         self.behaviour = behaviour
         self.goal = None
         self.pose = None
+        self.scans = 0
         self.cmd_publisher = self.create_publisher(Twist, 'cmd_vel', 10)
         self.create_subscription(PoseStamped, 'goal_pose', self.on_goal, 10)
         self.create_subscription(Odometry, 'odom', self.on_odom, 10)
@@ -39,7 +42,9 @@ class GoToGoal(Node):
         self.pose = (msg.pose.pose.position.x, msg.pose.pose.position.y, yaw)
 
     def on_scan(self, msg: LaserScan) -> None:
-        if self.behaviour == 'silent':
+        self.scans += 1
+        if self.behaviour == 'silent' or (self.behaviour == 'mute-first-scan'
+                                          and self.scans == 1):
             return
         cmd = Twist()
         if self.behaviour == 'nan':
@@ -61,8 +66,8 @@ class GoToGoal(Node):
 
 
 def main() -> None:
-    behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind') if flag in sys.argv),
-                     'go')
+    behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind', '--mute-first-scan')
+                      if flag in sys.argv), 'go')
     rclpy.init(args=sys.argv)
     node = GoToGoal(behaviour)
     try:

@@ -163,7 +163,8 @@ def test_a_client_cannot_write_or_delete_outside_the_bags_root(node_processes, r
                                                               tmp_path):
     """Issue 19: a goal's record_directory '/…/outside' made the simulator write a bag there
     and delete a foreign 'victim.tmp-999999/'. Now absolute and escaping record directories
-    are refused (invalid_environment, nothing runs), and inside the root only a killed
+    are refused (harness_error: the goal's fault, never a result; nothing runs), and inside
+    the root only a killed
     writer's marked staging directory is removed, never an unmarked one."""
     from tests.unit.evolver.killed_bag_writer import killed_writer_staging
 
@@ -187,7 +188,7 @@ def test_a_client_cannot_write_or_delete_outside_the_bags_root(node_processes, r
     for unsafe in (str(outside), '../outside', 'run/../../outside', str(root / 'run')):
         metrics, _ = evaluate(ros_node, '/rooted', environment_msg(room(), 'factory', 'room'),
                               record_directory=unsafe, time_limit=20.0, timeout=30)
-        assert metrics.outcome == 'invalid_environment', (unsafe, metrics.outcome)
+        assert metrics.outcome == 'harness_error', (unsafe, metrics.outcome)
         assert 'refusing the goal' in metrics.detail and 'bags root' in metrics.detail, \
             metrics.detail
         assert not metrics.bag_path and metrics.ticks == 0

@@ -33,9 +33,10 @@ class EpisodeFacts:
 
 
 def write_failure_bag(record_directory: str | Path, environment, config, metrics,
-                      recording: Recording, facts: EpisodeFacts, log) -> str:
-    """Write ``<record_directory>/<environment id>/``; returns its path, or '' when it could
-    not be written (the reason goes to ``log.error``). ``config``: the resolved episode
+                      recording: Recording, facts: EpisodeFacts, log) -> tuple[str, str]:
+    """Write ``<record_directory>/<environment id>/``; returns (its path, ''), or ('', why)
+    when it could not be written (a full disk, ...: the reason also goes to ``log.error``,
+    and the client gets it as the result's bag_error). ``config``: the resolved episode
     config."""
     metadata = {
         'environment_id': environment.id, 'scenario': environment.scenario,
@@ -61,11 +62,11 @@ def write_failure_bag(record_directory: str | Path, environment, config, metrics
             metadata, environment.occupancy, environment.resolution, environment.origin,
             storage=facts.settings.bag_storage, overwrite=True)
     except (BagWriteError, OSError, ValueError) as err:
-        log.error(f'cannot write the failure bag of {environment.id!r} in {record_directory}: '
-                  f'{err}')
-        return ''
+        reason = f'cannot write the failure bag of {environment.id!r} in {record_directory}: {err}'
+        log.error(reason)
+        return '', reason
     log.info(f'failure bag written: {path}')
-    return str(path)
+    return str(path), ''
 
 
 def remove_partial_bags(record_directory: str | Path, log) -> None:

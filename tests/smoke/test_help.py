@@ -25,6 +25,8 @@ EXECUTABLES = [
                                      '20 % above the reference is free', '--method METHOD',
                                      '--budget BUDGET']),
     ('sessgan_evolver', 'replay', ['--resimulate', '--rate']),
+    ('sessgan_evolver', 'evaluate', ['--external', '--fault-records']),
+    ('sessgan_evolver', 'compare', ['--external', '--no-external', '--budget']),
     ('sessgan_gen', 'train', ['--iterations', '(default:']),
     ('sessgan_gen', 'report', ['--samples', '(default: 100)']),
 ]

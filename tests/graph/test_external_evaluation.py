@@ -1,7 +1,7 @@
-"""evaluate --external and compare --external against a stack that runs in its own process,
-as a Nav2 user runs theirs: a simulator and tests/graph/external_controller.py (--blind: it
-drives straight ahead whatever it sees, so valid maps end in failures) under /w0, started
-here; the commands start nothing and use what is up, like campaign --external."""
+"""evaluate, compare and campaign --method with --external against a stack that runs in its
+own process, as a Nav2 user runs theirs: a simulator and tests/graph/external_controller.py
+(--blind: it drives straight ahead whatever it sees, so valid maps end in failures) under /w0,
+started here; the commands start nothing and use what is up, like campaign --external."""
 
 from __future__ import annotations
 
@@ -82,3 +82,21 @@ def test_evaluate_and_compare_run_on_the_external_stack(external_stack, tmp_path
     assert '# Fault finding: factory, external' in report
     assert 'on the external workers' in report
     assert list((tmp_path / 'compare' / 'faults' / 'random-seed0').glob('*/fault.png'))
+
+
+def test_a_method_campaign_runs_on_the_external_stack(external_stack, tmp_path):
+    """campaign --external --method random: no generator, no worker started; its faults are
+    placed from the external worker's failure bags."""
+    ran = command(external_stack, 'campaign', '--external', *SHORT, '--method', 'random',
+                  '--budget', '3', '--run', 'ext', '--runs-root', str(tmp_path / 'runs'),
+                  '--bags-root', str(tmp_path / 'bags'))
+    assert ran.returncode == 0, ran.stderr[-4000:]
+    assert 'worker found: /w0/evaluate' in ran.stderr
+    episodes = read_csv(tmp_path / 'runs' / 'ext' / 'metrics_episodes.csv')
+    assert len(episodes) == 3
+    failures = [row for row in episodes if row['fault']]
+    assert failures, 'no failure: the test checks nothing'
+    assert all(row['fault'] != '?' and Path(row['bag_path']).is_dir() for row in failures)
+    assert not list((tmp_path / 'runs' / 'ext' / 'logs').glob('*.log')), 'it started a process'
+    done = next(line for line in ran.stderr.splitlines() if '[campaign] done in' in line)
+    assert f'{len(failures)} valid failures' in done

@@ -31,6 +31,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from sessgan_evolver.errors import ReportError, RunStoreError  # noqa: E402
 from sessgan_evolver.fault_tally import FaultTally  # noqa: E402
@@ -297,12 +298,13 @@ def plot_faults_found(generation_rows: Sequence[Mapping[str, Any]], path: str | 
     """Two panels: valid failures and distinct faults so far against episodes so far;
     mean fault risk and the paper's mean risk per generation."""
     rows = _sorted_rows(generation_rows)
-    episodes = _column(rows, 'episodes_so_far')
+    # From the origin: nothing is found before the first episode.
+    episodes = [0.0] + _column(rows, 'episodes_so_far')
     figure, axes = plt.subplots(1, 2, figsize=(11, 3.6))
-    axes[0].plot(episodes, _column(rows, 'valid_failures_so_far'), marker='o', markersize=3,
-                 label='valid failures')
-    axes[0].plot(episodes, _column(rows, 'distinct_faults_so_far'), marker='o', markersize=3,
-                 label='distinct faults')
+    axes[0].plot(episodes, [0.0] + _column(rows, 'valid_failures_so_far'), marker='o',
+                 markersize=3, label='valid failures')
+    axes[0].plot(episodes, [0.0] + _column(rows, 'distinct_faults_so_far'), marker='o',
+                 markersize=3, label='distinct faults')
     axes[0].set_xlabel('Episodes of the robot under test')
     axes[0].set_ylabel('Found so far')
     axes[0].legend(fontsize='small')
@@ -312,6 +314,7 @@ def plot_faults_found(generation_rows: Sequence[Mapping[str, Any]], path: str | 
     axes[1].plot(generations, _column(rows, 'mean_risk_score'), marker='.', markersize=3,
                  linestyle='--', label="risk (paper's, all collisions)")
     axes[1].set_xlabel('Generation')
+    axes[1].xaxis.set_major_locator(MaxNLocator(integer=True))
     axes[1].set_ylabel('Mean over feasible maps')
     axes[1].legend(fontsize='small')
     for axis in axes:

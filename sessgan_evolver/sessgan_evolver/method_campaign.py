@@ -7,8 +7,9 @@ work); every proposal becomes an Environment with the validity certificate
 the in-process runner), with the same failure bags. The budget is the campaign's episodes;
 a last batch that would overrun is cut short and not told. Each asked batch is one
 'generation' of the run directory: its episode rows, then its generation row (the same
-summary as the weight evolution's), so report, metrics CSV/JSONL and ``evaluate --run``
-read it like any campaign.
+summary as the weight evolution's), so the report and the metrics CSV/JSONL read like any
+campaign's; ``evaluate --exclude-run`` keeps its seeds out of a fresh-seed evaluation
+(``evaluate --run`` refuses it: it evolves no generator weights).
 
 **Resume is exact, by replay**: a method's state is its seed and everything it was told, so
 ``--resume`` builds the method afresh, asks again batch by batch and tells it the recorded

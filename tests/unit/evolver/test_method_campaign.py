@@ -23,8 +23,10 @@ from sessgan_evolver.campaign_cli import (
     report_result,
 )
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
+from sessgan_evolver.errors import FreshSeedError
 from sessgan_evolver.fault_tally import UNPLACED, FaultTally, FaultTracker, key_from_bag
 from sessgan_evolver.faults import FaultRule, key_of_failure
+from sessgan_evolver.fresh_seed import campaign_sources, used_seeds
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.method_campaign import MethodCampaign
 from sessgan_evolver.run_store import RunStore
@@ -126,6 +128,17 @@ def test_an_interrupted_method_campaign_resumes_with_identical_rows(tmp_path):
     assert any('resuming' in line and 'batch 1' in line for line in logged), logged
     assert episode_rows(resumed.run_dir) == episode_rows(straight.run_dir)
     assert resumed.generations == straight.generations
+
+
+def test_evaluate_refuses_a_method_run_as_a_generator_but_excludes_its_seeds(tmp_path):
+    result = MethodCampaign(method_config(), 'run', tmp_path / 'runs', tmp_path / 'bags',
+                            log=lambda _: None).run(ScriptedEvaluator())
+    with pytest.raises(FreshSeedError, match='latent campaign: it evolves no generator'):
+        campaign_sources(result.run_dir)
+    map_seeds, sim_seeds = used_seeds([result.run_dir])
+    rows = episode_rows(result.run_dir)
+    assert map_seeds == {row['map_seed'] for row in rows}
+    assert sim_seeds == {row['sim_seed'] for row in rows}
 
 
 def test_resume_refuses_a_run_whose_maps_the_method_does_not_propose(tmp_path):

@@ -68,16 +68,22 @@ def test_evaluate_and_compare_run_on_the_external_stack(external_stack, tmp_path
     assert (record / 'fault.png').stat().st_size > 0
     assert 'on the external workers' in (tmp_path / 'evaluate' / 'summary.md').read_text()
 
-    compared = command(external_stack, 'compare', '--external', *SHORT, '--methods', 'random',
-                       '--search-seeds', '0', '--budget', '3', '--fresh-episodes', '2',
+    # sessgan too: a generation of 2 members x 1 map goes to the worker as one batch.
+    compared = command(external_stack, 'compare', '--external', *SHORT, '--methods',
+                       'random,sessgan', '--search-seeds', '0', '--budget', '2',
+                       '--population', '2', '--maps-per-member', '1', '--fresh-episodes', '2',
                        '--repeats', '1', '--max-fault-records', '1', '--output',
                        str(tmp_path / 'compare'))
     assert compared.returncode == 0, compared.stderr[-4000:]
-    (run,) = read_csv(tmp_path / 'compare' / 'runs.csv')
-    assert int(run['episodes']) == 3
+    runs = read_csv(tmp_path / 'compare' / 'runs.csv')
+    assert [run['method'] for run in runs] == ['random', 'sessgan']
+    assert [int(run['episodes']) for run in runs] == [2, 2]
+    run = runs[0]
     assert int(run['valid_failures']) >= 1
     assert int(run['confirmed_faults']) >= 1  # re-run on the worker, same fault
     assert int(run['confirmed_faults']) <= int(run['distinct_faults'])
+    fresh = read_csv(tmp_path / 'compare' / 'fresh_seed.csv')
+    assert len(fresh) == 2 and all(int(row['maps']) == 2 for row in fresh)
     report = (tmp_path / 'compare' / 'report.md').read_text()
     assert '# Fault finding: factory, external' in report
     assert 'on the external workers' in report

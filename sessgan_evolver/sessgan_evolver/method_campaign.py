@@ -11,6 +11,10 @@ summary as the weight evolution's), so the report and the metrics CSV/JSONL read
 campaign's; ``evaluate --exclude-run`` keeps its seeds out of a fresh-seed evaluation
 (``evaluate --run`` refuses it: it evolves no generator weights).
 
+Each batch's generation row also says how long its cheap work took (``cheap_wall_time``:
+asking, certificates, TPKL, telling; wall seconds) beside its episodes
+(``episodes_wall_time``).
+
 **Resume is exact, by replay**: a method's state is its seed and everything it was told, so
 ``--resume`` builds the method afresh, asks again batch by batch and tells it the recorded
 results of every complete batch (checking that it proposes the recorded maps, by seeds and
@@ -166,7 +170,9 @@ class MethodCampaign:
         first_episode = tally.episodes
         progress = ProgressPrinter()
         last_maps: list[np.ndarray] = []
+        cheap_total = 0.0
         while tally.episodes < budget:
+            cheap_start = time.perf_counter()
             proposals = self.method.ask()
             if not proposals:
                 raise CampaignError(f'method {config.method!r} proposed no test')
@@ -182,6 +188,7 @@ class MethodCampaign:
                 finite = [t for t in tpkls if math.isfinite(t)]
                 tpkl_reference = float(np.mean(finite)) if finite else None
             self.save_sample_maps(batch, [np.asarray(p.cells) for p in cut])
+            cheap = time.perf_counter() - cheap_start
             results: dict[tuple[int, int], dict] = {}
             progress.start(f'batch {batch}', len(jobs))
 
@@ -190,7 +197,9 @@ class MethodCampaign:
                 progress.update(len(results), f'collisions so far '
                                 f'{sum(m["collisions"] for m in results.values())}')
 
+            episodes_start = time.perf_counter()
             evaluator.evaluate(jobs, on_result)
+            episodes_wall = time.perf_counter() - episodes_start
             missing = [job.key for job in jobs if job.key not in results]
             if missing:
                 raise CampaignError(f'batch {batch}: no result for episodes {missing}')
@@ -208,9 +217,13 @@ class MethodCampaign:
                 told.append(Evaluated(proposal, job.environment, metrics))
                 breakdowns.append(member_fitness([metrics], tpkl, tpkl_reference, None,
                                                  config.fitness))
+            tell_start = time.perf_counter()
             if len(cut) == len(proposals):
                 self.method.tell(told)
-            summary = {**generation_summary(batch, breakdowns), **tally.columns()}
+            cheap += time.perf_counter() - tell_start
+            cheap_total += cheap
+            summary = {**generation_summary(batch, breakdowns), **tally.columns(),
+                       'cheap_wall_time': cheap, 'episodes_wall_time': episodes_wall}
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
             per_episode = elapsed / max(tally.episodes - first_episode, 1)
@@ -219,6 +232,7 @@ class MethodCampaign:
                 f'{fmt(summary["mean_fault_risk_score"])}, risk '
                 f'{fmt(summary["mean_risk_score"])}, feasible {summary["feasible_fraction"]:.0%}'
                 f', TPKL {fmt(summary["mean_tpkl"])} | {tally.episodes}/{budget} episodes, '
+                f'cheap work {cheap_total / max(elapsed, 1e-9):.0%} of the wall time, '
                 f'elapsed {format_duration(elapsed)}, ETA '
                 f'{format_duration(per_episode * (budget - tally.episodes))}')
             last_maps = [np.asarray(p.cells) for p in cut]

@@ -26,6 +26,7 @@ from sessgan_controllers.registry import get_controller
 from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import CampaignError
+from sessgan_evolver.fault_tally import FaultTally, FaultTracker
 from sessgan_evolver.fitness import (
     FitnessConfig,
     generation_summary,
@@ -38,6 +39,7 @@ from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, check_harness_tries
 from sessgan_evolver.operators import OperatorConfig
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
+from sessgan_evolver.search_methods import METHODS
 from sessgan_evolver.seeding import SeedStream, shared_seeds
 from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
 from sessgan_gen.environment import Environment
@@ -53,6 +55,13 @@ from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
 
 SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
+
+SESSGAN_METHOD = 'sessgan'
+"""The paper's weight evolution (this module's Campaign); every other method of
+search_methods.METHODS runs as a sessgan_evolver.method_campaign.MethodCampaign."""
+DEFAULT_METHOD = SESSGAN_METHOD
+"""What the ``campaign`` command (and ``./sessgan demo``) runs without --method: the best
+measured. A CampaignConfig built in code defaults to sessgan, the Campaign class's method."""
 
 EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
 """Wall seconds per map cell added to the default episode timeout for building the world: a
@@ -85,6 +94,13 @@ class CampaignConfig:
 
     scenario: str = 'factory'
     """[factory] Scenario: factory, racetrack or drone."""
+    method: str = SESSGAN_METHOD
+    """Search method: sessgan (the paper's evolution of generator weights) or an ask/tell
+    method of compare (random, latent, grid_ga, cellular_automaton, ...), each run through
+    the same workers, budget, failure bags and metrics."""
+    budget: int = 0
+    """[0: generations x population x maps per member] Episodes of the robot under test
+    (the budget); sessgan runs the whole generations it pays for."""
     generations: int = 30
     """[30] Generations to evaluate (generation 0 is the mutated pre-trained generator)."""
     population: int = 12
@@ -153,6 +169,17 @@ class CampaignConfig:
 
     def validate(self) -> None:
         get_scenario(self.scenario)
+        if self.method not in METHODS:
+            raise CampaignError(f'method must be one of {", ".join(METHODS)}, got '
+                                f'{self.method!r}')
+        if self.budget < 0:
+            raise CampaignError(f'budget must be >= 0 (0: generations x population x maps '
+                                f'per member), got {self.budget}')
+        if (self.method == SESSGAN_METHOD and self.budget
+                and self.budget < self.population * self.maps_per_member):
+            raise CampaignError(f'a budget of {self.budget} episodes pays for no sessgan '
+                                f'generation ({self.population} members x '
+                                f'{self.maps_per_member} maps)')
         try:
             self.mission()
         except InvalidMissionError as err:
@@ -202,6 +229,18 @@ class CampaignConfig:
             tournament_size=min(self.tournament_size, self.population),
             crossover_probability=self.crossover_probability, seed=self.seed,
             operators=operators)
+
+    def resolved_budget(self) -> int:
+        """Episodes of the robot under test the campaign may run."""
+        return self.budget or self.generations * self.population * self.maps_per_member
+
+    def with_budget_generations(self) -> CampaignConfig:
+        """sessgan: this config with as many whole generations as ``budget`` pays for
+        (unchanged without a budget)."""
+        if not self.budget or self.method != SESSGAN_METHOD:
+            return self
+        return dataclasses.replace(
+            self, generations=self.budget // (self.population * self.maps_per_member))
 
     def resolved_seed_pool(self) -> int:
         return self.seed_pool or 4 * self.maps_per_member
@@ -307,6 +346,10 @@ class Campaign:
         kept in config.json beside the config. Bad settings or an unreadable checkpoint raise
         before anything is written."""
         config.validate()
+        if config.method != SESSGAN_METHOD:
+            raise CampaignError(f'method {config.method!r} runs as a MethodCampaign '
+                                '(sessgan_evolver.method_campaign), not as the weight evolution')
+        config = config.with_budget_generations()
         self.config = config
         self.invocation = dict(invocation or {})
         scenario = get_scenario(config.scenario)
@@ -357,6 +400,9 @@ class Campaign:
         progress = ProgressPrinter()
         last_tokens: list[list[np.ndarray]] = []
         first_generation = algorithm.generation
+        tracker = FaultTracker()
+        tracker.attach(evaluator)
+        tally = FaultTally.from_rows(self.store.read_rows('episode'))
         while algorithm.generation < config.generations:
             generation = algorithm.generation
             self.store.save_checkpoint(generation, algorithm.state_dict(),
@@ -403,10 +449,12 @@ class Campaign:
                 episodes = [results[(member, k)] for k in range(config.maps_per_member)]
                 for job in jobs[member * config.maps_per_member:(member + 1) *
                                 config.maps_per_member]:
+                    fault = tracker.label_of(job.environment, results[job.key])
+                    tally.add(fault)
                     self.store.append_episode({
                         'generation': generation, 'member': member, 'map': job.index,
                         'environment_id': job.environment.id, 'map_seed': job.environment.seed,
-                        'sim_seed': job.seed, **results[job.key]})
+                        'sim_seed': job.seed, **results[job.key], 'fault': fault})
                 breakdown = member_fitness(
                     episodes, tpkls[member], tpkl_reference,
                     map_diversity(token_maps[member]), config.fitness)
@@ -425,15 +473,17 @@ class Campaign:
             survivors = {genome.digest() for genome in algorithm.ask()}
             history = {digest: values for digest, values in history.items()
                        if digest in survivors}
-            summary = generation_summary(generation, fitnesses)
-            summary.update(harness_reruns=harness_reruns, lost_bags=lost_bags)
+            summary = {**generation_summary(generation, fitnesses), **tally.columns(),
+                       'harness_reruns': harness_reruns, 'lost_bags': lost_bags}
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
             done = generation + 1
             per_generation = elapsed / (done - first_generation)
             self.log(
-                f'generation {generation}: mean risk {fmt(summary["mean_risk_score"])}, '
-                f'collisions {fmt(summary["mean_collisions"])}, feasible '
+                f'generation {generation}: {tally.line()} | fault risk '
+                f'{fmt(summary["mean_fault_risk_score"])}, risk '
+                f'{fmt(summary["mean_risk_score"])}, collisions '
+                f'{fmt(summary["mean_collisions"])}, feasible '
                 f'{summary["feasible_fraction"]:.0%}, TPKL {fmt(summary["mean_tpkl"])}, best '
                 f'fitness {summary["best_fitness"]:.3f} | {done}/{config.generations} '
                 f'generations, {60 / per_generation:.1f}/min, elapsed '

@@ -19,9 +19,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError, EpisodeJob
+from sessgan_evolver.campaign import (
+    DEFAULT_METHOD,
+    SESSGAN_METHOD,
+    Campaign,
+    CampaignConfig,
+    CampaignError,
+    EpisodeJob,
+)
 from sessgan_evolver.errors import HarnessFailureError, SessganEvolverError
 from sessgan_evolver.harness import HarnessRetries
+from sessgan_evolver.method_campaign import MethodCampaign
 from sessgan_evolver.process_supervisor import (
     ChildProcess,
     ProcessSupervisor,
@@ -73,6 +81,8 @@ def campaign_parser() -> argparse.ArgumentParser:
                         help='directory of the failure bag directories')
     parser.add_argument('--resume', action='store_true',
                         help='continue a killed run from its last completed generation')
+    # The command's default method is the best measured; a CampaignConfig in code: sessgan.
+    parser.set_defaults(method=DEFAULT_METHOD)
     return parser
 
 
@@ -500,8 +510,8 @@ def run_campaign(argv: list[str]) -> int:
         print(f'[campaign] {message}', file=sys.stderr, flush=True)
 
     try:
-        campaign = Campaign(config, run_name, args.runs_root, args.bags_root, log,
-                            invocation=invocation_of(args, argv))
+        campaign = make_campaign(config, run_name, args.runs_root, args.bags_root, log,
+                                 invocation_of(args, argv))
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
@@ -520,17 +530,20 @@ def run_campaign(argv: list[str]) -> int:
     try:
         # Goals name bags/<run>/ relative to the simulators' bags root (they write nowhere else).
         evaluator = RosEvaluator(node, config, Path(run_name), controller, supervisor, log)
-        generator_running = evaluator.generator.wait_for_service(timeout_sec=1.0)
+        # Ask/tell methods make their maps in this process: no generator node.
+        needs_generator = config.method == SESSGAN_METHOD
+        generator_running = (not needs_generator
+                             or evaluator.generator.wait_for_service(timeout_sec=1.0))
         if not config.external:
             evaluator.allowed = {f'/w{i}/evaluate' for i in range(config.workers)}
             evaluator.wait_until_absent(sorted(evaluator.allowed), timeout=15.0)
         evaluator.generator_process = start_graph(
             supervisor, evaluator.pool, config, controller, generator_running,
             campaign.bags_dir.parent)
-        log(f'run {run_name}: {config.generations} generations x {config.population} members x '
-            f'{config.maps_per_member} maps, scenario {config.scenario}, controller '
-            f'{controller}, ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
-        evaluator.wait_for_generator(timeout=120.0)
+        log(f'run {run_name}: {plan_of(campaign.config)}, scenario {config.scenario}, '
+            f'controller {controller}, ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
+        if needs_generator:
+            evaluator.wait_for_generator(timeout=120.0)
         evaluator.wait_for_workers(1 if config.external else config.workers, timeout=120.0)
         result = campaign.run(evaluator, resume=args.resume)
     except KeyboardInterrupt:
@@ -552,14 +565,14 @@ def run_campaign(argv: list[str]) -> int:
     return 0
 
 
-def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, run_name: str,
-                   resume: bool, log: Callable[[str], None]) -> int:
+def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
+                   controller: str, run_name: str, resume: bool,
+                   log: Callable[[str], None]) -> int:
     """The campaign with sessgan_evolver.in_process's evaluator: no ROS at all."""
     from sessgan_evolver.in_process import InProcessEvaluator
 
-    log(f'run {run_name}: {config.generations} generations x {config.population} members x '
-        f'{config.maps_per_member} maps, scenario {config.scenario}, controller {controller}, '
-        'in process')
+    log(f'run {run_name}: {plan_of(campaign.config)}, scenario {config.scenario}, controller '
+        f'{controller}, in process')
     try:
         with InProcessEvaluator(
                 config.scenario, controller, config.time_limit,
@@ -582,11 +595,37 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
     return 0
 
 
+def make_campaign(config: CampaignConfig, run_name: str, runs_root: Path, bags_root: Path,
+                  log: Callable[[str], None], invocation: dict[str, Any]
+                  ) -> Campaign | MethodCampaign:
+    """The weight evolution for sessgan, else the ask/tell method's campaign."""
+    if config.method == SESSGAN_METHOD:
+        return Campaign(config, run_name, runs_root, bags_root, log, invocation=invocation)
+    return MethodCampaign(config, run_name, runs_root, bags_root, log, invocation=invocation)
+
+
+def plan_of(config: CampaignConfig) -> str:
+    """What the campaign will run, for its first log line."""
+    if config.method == SESSGAN_METHOD:
+        return (f'sessgan, {config.generations} generations x {config.population} members x '
+                f'{config.maps_per_member} maps')
+    return f'{config.method}, {config.resolved_budget()} episodes'
+
+
 def report_result(result: Any, log: Callable[[str], None]) -> None:
+    """The last lines: failures and faults found first, then the risks."""
     first, last = result.generations[0], result.generations[-1]
-    log(f'done in {result.wall_time / 60:.1f} min: mean risk '
-        f'{first["mean_risk_score"] or 0:.3f} (generation 0) -> '
-        f'{last["mean_risk_score"] or 0:.3f} (generation {last["generation"]})')
+    episodes = int(last.get('episodes_so_far') or 0)
+    failures = int(last.get('valid_failures_so_far') or 0)
+    faults = int(last.get('distinct_faults_so_far') or 0)
+    unplaced = int(last.get('unplaced_failures_so_far') or 0)
+    per = 1.0 / episodes if episodes else 0.0
+    log(f'done in {result.wall_time / 60:.1f} min: {failures} valid failures '
+        f'({failures * per:.3f}/episode), {faults} distinct faults ({faults * per:.3f}/episode)'
+        + (f' + {unplaced} unplaced' if unplaced else '') + f' in {episodes} episodes; '
+        f'fault risk {first["mean_fault_risk_score"] or 0:.3f} (generation 0) -> '
+        f'{last["mean_fault_risk_score"] or 0:.3f} (generation {last["generation"]}); risk '
+        f'{first["mean_risk_score"] or 0:.3f} -> {last["mean_risk_score"] or 0:.3f}')
     print(f'report: {result.report_path}')
     print(f'failure bags: {result.bags_dir}')
 

@@ -1,7 +1,8 @@
 """`ros2 run sessgan_evolver compare`: every search method side by side at equal budget.
 
 Runs SESS-GAN and the baselines (random, grid_ga, cellular_automaton, latent) on one scenario
-and controller, in process, once per search seed; confirms and counts distinct faults,
+and controller, in process (or, with --external, on the simulators and stack already running
+under /w0, /w1, ...), once per search seed; confirms and counts distinct faults,
 evaluates the final generators on fresh seeds and writes <output>/report.md, compare.png,
 failing_maps.png and CSV files (sessgan_evolver.comparison says how everything is counted).
 """
@@ -47,6 +48,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         elif field.name == 'search_seeds':
             parser.add_argument(flag, type=_int_tuple, default=default,
                                 help=docs.get(field.name, '') + ' Comma-separated.')
+        elif isinstance(default, bool):
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
+                                help=docs.get(field.name, ''))
         else:
             parser.add_argument(flag, type=type(default), default=default,
                                 help=docs.get(field.name, ''))

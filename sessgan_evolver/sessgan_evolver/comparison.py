@@ -30,6 +30,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,9 +55,10 @@ from sessgan_evolver.fresh_seed import (
     summary_table,
     write_csv,
 )
-from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.in_process import EpisodeObserver, InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
+from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
 from sessgan_gen.fleet import FleetSpec
@@ -115,6 +117,12 @@ class CompareConfig:
     """[1] Robots under test on every map of every method (a fleet episode: robots r1, r2,
     ... drawn beside the map's own start and goal, each route certified), 1..8; 1: one
     robot."""
+    external: bool = False
+    """[False] Run every episode (and every confirming re-run) on the evaluate action servers
+    already running, e.g. your own stack under /w0, /w1 (as campaign --external), instead of
+    in process; --controller then only names it. Their failure bags (in <their
+    bags_root>/external/<output folder name>/<method-seed>) must be readable on this
+    machine."""
 
     def validate(self) -> None:
         get_scenario(self.scenario)
@@ -184,6 +192,28 @@ class CompareConfig:
 
     def ga_config(self) -> GAConfig:
         return GAConfig(population=self.population)
+
+    def controller_label(self) -> str:
+        if self.external:
+            return self.controller or 'external'
+        return self.controller or get_scenario(self.scenario).controller
+
+
+def open_evaluator(config: CompareConfig, output: Path, label: str,
+                   observer: EpisodeObserver | None = None,
+                   log: Callable[[str], None] = print) -> AbstractContextManager[Any]:
+    """Where ``compare`` runs its episodes: in process, or with ``external`` on the graph's
+    workers (sessgan_evolver.worker_episodes; their bags under <their bags_root>/external/
+    <output folder name>/<label>).
+    Maps without a certified route are not simulated."""
+    if config.external:
+        return worker_evaluator(config.scenario, external_record_subdirectory(output, label),
+                                output / 'logs' / label, config.controller,
+                                config.time_limit, config.mission(), config.fleet(),
+                                simulate_invalid=False, observer=observer, log=log)
+    return InProcessEvaluator(config.scenario, config.controller, config.time_limit,
+                              simulate_invalid=False, observer=observer,
+                              mission=config.mission(), fleet=config.fleet(), log=log)
 
 
 @dataclass
@@ -258,10 +288,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     rule = config.rule()
     episode_log = EpisodeLog(rule)
     label = f'{method}-seed{seed}'
-    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, observer=episode_log,
-                            mission=config.mission(), fleet=config.fleet(),
-                            log=log) as evaluator:
+    with open_evaluator(config, output, label, episode_log, log) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
         if method == 'sessgan':
@@ -329,9 +356,7 @@ def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Pat
     used_sims = {int(r.sim_seed) for run in runs for r in run.records}
     plan = fresh_seed_plan(config.evaluation_seed, config.fresh_episodes, used_maps, used_sims)
     summaries: dict[str, FreshSeedSummary] = {}
-    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, mission=config.mission(),
-                            fleet=config.fleet(), log=log) as evaluator:
+    with open_evaluator(config, output, 'fresh', log=log) as evaluator:
         for run in runs:
             if run.source is None or run.source_key in summaries:
                 continue
@@ -433,7 +458,7 @@ def plot_comparison(config: CompareConfig, runs: Sequence[MethodRun], path: Path
     axes.flat[-1].text(0.0, 0.5, _settings_text(config), fontsize='small', va='center',
                        transform=axes.flat[-1].transAxes)
     figure.suptitle(f'Fault finding on {config.scenario} against '
-                    f'{config.controller or get_scenario(config.scenario).controller}: mean ± '
+                    f'{config.controller_label()}: mean ± '
                     f'std over search seeds {list(config.search_seeds)} (dots: runs)')
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -453,14 +478,12 @@ def _settings_text(config: CompareConfig) -> str:
             f'fault cells {config.coarse_cells} (+{config.context_cells} context)')
 
 
-def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method: int = 4
-                   ) -> list[tuple[str, list[FaultScene]]]:
+def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method: int = 4,
+                   output: Path | None = None) -> list[tuple[str, list[FaultScene]]]:
     """Up to ``per_method`` confirmed distinct faults per method (seeds in turn), re-run
     with a trace for the picture."""
     rows = []
-    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+    with open_evaluator(config, output or Path('.'), 'scenes') as evaluator:
         for method in config.methods:
             method_runs = [r for r in runs if r.figures.method == method]
             if not method_runs:
@@ -476,7 +499,8 @@ def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method:
             for run, entry in picked:
                 record = run.records[entry.first]
                 episode = evaluator.runner.run(record.environment, record.sim_seed, trace=True)
-                assert episode.trace is not None
+                if episode.trace is None:
+                    continue  # an external stack that did not fail again: nothing to draw
                 scene = scene_from_run(record.environment, episode.trace, episode.metrics,
                                        entry.key, config.rule())
                 scene.caption = (f'seed {run.figures.search_seed}: '
@@ -490,7 +514,7 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
                  fresh: dict[str, FreshSeedSummary], output: Path, command: str,
                  wall_time: float) -> Path:
     plot_comparison(config, runs, output / 'compare.png')
-    write_scene_grid(example_scenes(config, runs), output / 'failing_maps.png')
+    write_scene_grid(example_scenes(config, runs, output=output), output / 'failing_maps.png')
     write_csv(output / 'runs.csv', [run.figures.row() for run in runs])
     write_csv(output / 'faults.csv', [
         {'method': run.figures.method, 'search_seed': run.figures.search_seed,
@@ -517,12 +541,14 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
          'fault': record.fault.label if record.fault else '', 'elapsed': record.elapsed,
          'cpu': record.cpu, 'origin': record.origin}
         for run in runs for record in run.records])
-    controller = config.controller or get_scenario(config.scenario).controller
+    controller = config.controller_label()
     lines = [
         f'# Fault finding: {config.scenario}, {controller}', '',
         f'Command: `{command}`', '',
         f'{len(config.search_seeds)} search seeds {list(config.search_seeds)}, '
-        f'{config.budget} episodes per run, in process (lockstep, one core), '
+        f'{config.budget} episodes per run, '
+        + ('on the external workers (one episode at a time), ' if config.external
+           else 'in process (lockstep, one core), ') +
         f'{wall_time / 60:.1f} min in all. Mean ± sample std over the seeds; '
         '`(k/n runs)`: only k of n runs had a value.', '',
         method_table(config, runs), '',

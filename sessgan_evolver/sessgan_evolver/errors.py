@@ -77,3 +77,7 @@ class EpisodeRunnerError(SessganEvolverError):
 
 class SearchMethodError(SessganEvolverError, ValueError):
     """A method name or setting that does not exist or does not fit."""
+
+
+class ExternalWorkerError(SessganEvolverError):
+    """An episode on an external worker gave nothing this process can use."""

@@ -4,7 +4,8 @@ Samples --episodes maps from each generator given (the shipped checkpoint, a cam
 member or final population, your own checkpoints, the cellular-automaton baseline) with seeds
 no campaign used (--run and --exclude-run name the campaigns; their seeds are read from
 their metrics and skipped), runs each map once with the built-in controller in this process
-(lockstep) and writes <output>/summary.md, summary.csv (one row per generator) and
+(lockstep; with --external: on the simulators and stack already running under /w0, /w1, ...,
+as ``campaign --external``) and writes <output>/summary.md, summary.csv (one row per generator) and
 episodes.csv (one row per map): valid maps, failure rate, collisions, risk, TPKL to the
 example map, uniqueness, distinct faults. --fault-records N keeps the first N confirmed
 distinct faults of each generator as a bag with a picture.
@@ -16,7 +17,9 @@ import argparse
 import shlex
 import sys
 from collections.abc import Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -41,6 +44,7 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
@@ -89,6 +93,12 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         help='robots under test on every fresh map (a fleet episode: robots '
                              "r1, r2, ... beside the map's own start and goal, each route "
                              f'certified; 1..{MAX_ROBOTS}; default 1: one robot)')
+    parser.add_argument('--external', action='store_true',
+                        help='run every episode on the evaluate action servers already running '
+                             '(your stack under /w0, /w1, ..., as campaign --external) instead '
+                             'of in process; --controller then only names it. Their failure '
+                             'bags (in <their bags_root>/external/<output folder name>/) must '
+                             'be readable on this machine')
     parser.add_argument('--simulate-invalid', action='store_true',
                         help='also simulate maps without a certified route')
     parser.add_argument('--fault-records', type=int, default=0,
@@ -135,6 +145,22 @@ def check_settings(args: argparse.Namespace, scenario: str) -> None:
     FaultRule(args.coarse_cells, args.context_cells).validate()
 
 
+def open_evaluator(args: argparse.Namespace, scenario: str, mission: MissionSpec,
+                   fleet: FleetSpec, output: Path) -> AbstractContextManager[Any]:
+    """In process, or with --external on the graph's workers (sessgan_evolver
+    .worker_episodes)."""
+    def log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    if args.external:
+        return worker_evaluator(
+            scenario, external_record_subdirectory(output), output / 'logs', args.controller,
+            args.time_limit, mission, fleet, simulate_invalid=args.simulate_invalid, log=log)
+    return InProcessEvaluator(scenario, args.controller, args.time_limit,
+                              simulate_invalid=args.simulate_invalid, mission=mission,
+                              fleet=fleet, log=log)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = sys.argv[1:] if argv is None else list(argv)
     return run_command(lambda: evaluate(arguments))
@@ -173,10 +199,7 @@ def evaluate(arguments: list[str]) -> int:
     summaries, rows = [], []
     progress = ProgressPrinter()
     try:
-        with InProcessEvaluator(scenario, args.controller, args.time_limit,
-                                simulate_invalid=args.simulate_invalid,
-                                mission=mission, fleet=fleet,
-                                log=lambda line: print(line, file=sys.stderr)) as evaluator:
+        with open_evaluator(args, scenario, mission, fleet, output) as evaluator:
             for source in sources:
                 progress.start(source.label, len(plan.pairs))
                 result = evaluate_source(source, plan, evaluator, rule,
@@ -198,12 +221,15 @@ def evaluate(arguments: list[str]) -> int:
     table = summary_table(summaries)
     write_csv(output / 'summary.csv', summary_rows(summaries))
     write_csv(output / 'episodes.csv', rows, EPISODE_COLUMNS)
-    controller = args.controller or get_scenario(scenario).controller
+    controller = args.controller or ('external' if args.external
+                                     else get_scenario(scenario).controller)
     (output / 'summary.md').write_text(
         f'# Fresh-seed evaluation: {scenario}, {controller}\n\n'
         f'Command: `ros2 run sessgan_evolver evaluate {shlex.join(arguments)}`\n\n'
         f'{len(plan.pairs)} fresh (map, simulator) seed pairs from evaluation seed '
-        f'{args.seed}, disjoint from the {len(runs)} runs given; failure rate = valid '
+        f'{args.seed}, disjoint from the {len(runs)} runs given, '
+        + ('on the external workers' if args.external else 'in process (lockstep)')
+        + '; failure rate = valid '
         'failures / valid maps; collisions and risk: means over valid maps.\n\n'
         f'{table}\n', encoding='utf-8')
     print(table)

@@ -186,6 +186,12 @@ def campaign_sources(run_dir: str | Path, member: str = 'best') -> list[PyramidS
     store = open_run(run_dir)
     config = store.read_config()['config']
     scenario = str(config['scenario'])
+    method = str(config.get('method') or 'sessgan')
+    if method != 'sessgan':
+        raise FreshSeedError(
+            f'run {store.run_dir} is a {method} campaign: it evolves no generator weights to '
+            'evaluate; evaluate the generator it sampled (--shipped or --checkpoint) and pass '
+            'the run as --exclude-run so its seeds are not reused')
     generation = last_evaluated_generation(store)
     rows = [row for row in store.read_rows('member') if int(row['generation']) == generation]
     state = store.load_checkpoint(generation)['algorithm']

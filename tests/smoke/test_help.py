@@ -22,8 +22,11 @@ EXECUTABLES = [
     ('sessgan_controllers', 'race_controller', ['goal_tolerance (double) = ']),
     ('sessgan_evolver', 'campaign', ['--fitness-tpkl-tolerance', '--generations GENERATIONS',
                                      '(default: 30)', '--mode', '--external',
-                                     '20 % above the reference is free']),
+                                     '20 % above the reference is free', '--method METHOD',
+                                     '--budget BUDGET']),
     ('sessgan_evolver', 'replay', ['--resimulate', '--rate']),
+    ('sessgan_evolver', 'evaluate', ['--external', '--fault-records']),
+    ('sessgan_evolver', 'compare', ['--external', '--no-external', '--budget']),
     ('sessgan_gen', 'train', ['--iterations', '(default:']),
     ('sessgan_gen', 'report', ['--samples', '(default: 100)']),
 ]

@@ -53,9 +53,11 @@ class WorkerEvaluator:
     def __init__(self, scenario: str, run_jobs: JobRunner, record_directory: str,
                  controller: str = 'external', simulate_invalid: bool = True,
                  observer: EpisodeObserver | None = None, mission: MissionSpec | None = None,
-                 fleet: FleetSpec | None = None) -> None:
+                 fleet: FleetSpec | None = None,
+                 count_harness_reruns: Callable[[], int] = lambda: 0) -> None:
         self.scenario = scenario
         self.run_jobs = run_jobs
+        self.count_harness_reruns = count_harness_reruns
         self.record_directory = record_directory
         """Relative to each worker's bags_root."""
         self.controller = controller
@@ -67,6 +69,11 @@ class WorkerEvaluator:
         self.episodes = 0
         """Episodes run so far (simulated or not), re-runs excluded."""
         self.reruns = 0
+
+    @property
+    def harness_reruns(self) -> int:
+        """Episodes the workers ran again after a harness outcome (never results)."""
+        return self.count_harness_reruns()
 
     @property
     def runner(self) -> WorkerEvaluator:
@@ -208,7 +215,8 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
             f'{os.environ.get("ROS_DOMAIN_ID", "0")}; failure bags in <their bags_root>/'
             f'{record_directory}')
         yield WorkerEvaluator(scenario, ros.evaluate, record_directory, label,
-                              simulate_invalid, observer, mission, fleet)
+                              simulate_invalid, observer, mission, fleet,
+                              lambda: ros.harness_reruns)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

@@ -21,10 +21,13 @@ SHORT = ['--scenario', 'factory', '--time-limit', '15']
 
 
 @pytest.fixture
-def external_stack(node_processes):
-    """A lockstep simulator and the blind external controller under /w0."""
+def external_stack(node_processes, tmp_path):
+    """A lockstep simulator (its bags under tmp_path/worker_bags) and the blind external
+    controller under /w0."""
     simulator = node_processes.start(['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args',
-                                      '-r', '__ns:=/w0'], name='simulator')
+                                      '-r', '__ns:=/w0', '-p',
+                                      f'bags_root:={tmp_path / "worker_bags"}'],
+                                     name='simulator')
     node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
                           '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'], name='external')
     simulator.wait_for_output('simulator ready', timeout=120.0)
@@ -53,6 +56,8 @@ def test_evaluate_and_compare_run_on_the_external_stack(external_stack, tmp_path
     assert len(episodes) == 3 and int(summary['maps']) == 3
     failures = [row for row in episodes if row['valid_failure'] == 'True']
     assert failures and int(summary['valid_failures']) == len(failures)
+    # The worker wrote them under its own bags_root, in the subdirectory the command named.
+    assert list((tmp_path / 'worker_bags' / 'external' / 'evaluate').glob('*/episode.json'))
     # Fault keys come from the worker's bags: the first contact the robot caused, else where
     # it ended (stuck, timeout).
     for row in failures:

@@ -21,16 +21,20 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import os
 import random
 import re
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
+from sessgan_evolver.process_supervisor import ChildProcess, ProcessSupervisor, worker_cores
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randrange(10, 100)))
@@ -39,18 +43,29 @@ HERE = Path(__file__).resolve().parent
 TIMING = re.compile(r'\(x([\d.]+) real time\); per tick ms: physics=([\d.]+) sensors=([\d.]+) '
                     r'metrics=([\d.]+) messaging=([\d.]+)')
 REFERENCE_PARAMETERS = ['-p', 'lidar_beams:=360', '-p', 'control_rate:=20.0']
+EPISODE_TIMEOUT = 120.0
+"""Wall seconds any one wait may take (a server to come up, an episode to be accepted or
+answered; a reference episode takes about half a second): a loaded machine slows it, a lost
+goal never ends."""
+FLOOR_TIMEOUT = 300.0
+"""Wall seconds the floor's ticks may take."""
 
 
 def measure_floor(graph: ProcessSupervisor, core: int, ticks: int) -> float:
     """Lockstep ticks per second of bare rclpy with the reference messages, on ``core``, as
     batch processes (like the campaign's workers)."""
     script = str(HERE / 'lockstep_floor.py')
-    ns = ['--ros-args', '-r', '__ns:=/floor']
-    graph.start('floor_controller', [sys.executable, script, '--role', 'controller', *ns],
-                core=core, batch=True)
-    sim = graph.start('floor_sim', [sys.executable, script, '--role', 'sim', '--ticks',
-                                    str(ticks), *ns], core=core, batch=True)
-    sim.process.wait(timeout=300)
+    number = next(_worker_numbers)
+    ns = ['--ros-args', '-r', f'__ns:=/floor{number}']
+    graph.start(f'floor_controller{number}', [sys.executable, script, '--role', 'controller',
+                                              *ns], core=core, batch=True)
+    sim = graph.start(f'floor_sim{number}', [sys.executable, script, '--role', 'sim', '--ticks',
+                                             str(ticks), *ns], core=core, batch=True)
+    try:
+        sim.process.wait(timeout=FLOOR_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        sys.exit(f'the lockstep floor did not finish {ticks} ticks within {FLOOR_TIMEOUT:.0f} '
+                 f's:\n{sim.log_tail()}')
     found = re.search(r'ticks_per_second=([\d.]+)', sim.log_tail())
     graph.stop_all()
     if not found:
@@ -58,54 +73,118 @@ def measure_floor(graph: ProcessSupervisor, core: int, ticks: int) -> float:
     return float(found.group(1))
 
 
-def start_worker(graph: ProcessSupervisor, index: int, sim_core: int, controller_core: int,
-                 batch: bool = True) -> Path:
-    """A simulator worker /bench<index> and its ND controller; returns the simulator's log."""
-    args = ['--ros-args', '-r', f'__ns:=/bench{index}']
-    simulator = graph.start(f'sim{index}', ['ros2', 'run', 'sessgan_sim', 'simulator', *args,
-                                            *REFERENCE_PARAMETERS], core=sim_core, batch=batch)
-    graph.start(f'ctl{index}', ['ros2', 'run', 'sessgan_controllers', 'nearness_diagram', *args,
-                                '-p', 'use_sim_time:=true'], core=controller_core, batch=batch)
-    return simulator.log_path
+_worker_numbers = itertools.count()
 
 
-def run_episodes(node, namespaces: list[str], environment_msg, episodes: int,
-                 results: list | None = None, expect: str | None = 'goal_reached') -> float:
+@dataclass
+class Worker:
+    """A simulator worker and its ND controller, in a namespace of their own."""
+
+    namespace: str
+    simulator: ChildProcess
+    controller: ChildProcess
+
+    def death(self) -> str | None:
+        """Why one of the pair is no longer running, with its log; None while both run."""
+        for child in (self.simulator, self.controller):
+            if not child.alive:
+                return (f'the {child.name} process of {self.namespace} '
+                        f'{child.exit_description()}:\n{child.log_tail()}')
+        return None
+
+
+def start_worker(graph: ProcessSupervisor, sim_core: int, controller_core: int,
+                 batch: bool = True) -> Worker:
+    """A simulator worker and its ND controller in a fresh namespace /bench<n>: a client never
+    meets a server of an earlier measurement that discovery still lists after it stopped (a
+    goal sent to that one is never answered)."""
+    number = next(_worker_numbers)
+    namespace = f'/bench{number}'
+    args = ['--ros-args', '-r', f'__ns:={namespace}']
+    simulator = graph.start(f'sim{number}', ['ros2', 'run', 'sessgan_sim', 'simulator', *args,
+                                             *REFERENCE_PARAMETERS], core=sim_core, batch=batch)
+    controller = graph.start(f'ctl{number}', ['ros2', 'run', 'sessgan_controllers',
+                                              'nearness_diagram', *args, '-p',
+                                              'use_sim_time:=true'],
+                             core=controller_core, batch=batch)
+    return Worker(namespace, simulator, controller)
+
+
+def run_episodes(node, workers: list[Worker], environment_msg, episodes: int,
+                 results: list | None = None, expect: str | None = 'goal_reached',
+                 timeout: float = EPISODE_TIMEOUT) -> float:
     """Run ``episodes`` reference episodes (seeds ``episodes`` down to 1) spread over the
     workers; return wall seconds. Each episode's metrics go to ``results``; an outcome other
-    than ``expect`` ends the benchmark."""
+    than ``expect`` ends the benchmark, and so does a wait longer than ``timeout`` wall
+    seconds (for a server, a goal's acceptance or its result) or a worker process that died:
+    the message names what was awaited."""
     import rclpy
     from rclpy.action import ActionClient
 
     from sessgan_interfaces.action import EvaluateEnvironment
 
-    clients = [ActionClient(node, EvaluateEnvironment, f'{ns}/evaluate') for ns in namespaces]
-    for client in clients:
-        if not client.wait_for_server(timeout_sec=60):
-            sys.exit('a simulator worker did not come up')
-    remaining = episodes
-    running: dict[int, list] = {}
-    start = time.monotonic()
-    while remaining or running:
-        for index, client in enumerate(clients):
-            if index not in running and remaining:
-                goal = EvaluateEnvironment.Goal(environment=environment_msg, seed=remaining)
-                running[index] = [client.send_goal_async(goal), None]
-                remaining -= 1
-        rclpy.spin_once(node, timeout_sec=0.01)
-        for index, state in list(running.items()):
-            if state[1] is None and state[0].done():
-                state[1] = state[0].result().get_result_async()
-            if state[1] is not None and state[1].done():
-                metrics = state[1].result().result.metrics
-                if expect is not None and metrics.outcome != expect:
-                    sys.exit(f'a reference episode ended {metrics.outcome!r}, not {expect}')
-                if results is not None:
-                    results.append(metrics)
-                del running[index]
-    for client in clients:
-        client.destroy()
-    return time.monotonic() - start
+    clients = [ActionClient(node, EvaluateEnvironment, f'{worker.namespace}/evaluate')
+               for worker in workers]
+    try:
+        for worker, client in zip(workers, clients):
+            deadline = time.monotonic() + timeout
+            while not client.wait_for_server(timeout_sec=0.5):
+                check_worker(worker)
+                if time.monotonic() > deadline:
+                    sys.exit(f'the evaluate server {worker.namespace}/evaluate did not come up '
+                             f'within {timeout:.0f} s')
+        remaining = episodes
+        running: dict[int, Pending] = {}
+        start = time.monotonic()
+        while remaining or running:
+            for index, client in enumerate(clients):
+                if index not in running and remaining:
+                    goal = EvaluateEnvironment.Goal(environment=environment_msg, seed=remaining)
+                    running[index] = Pending(remaining, client.send_goal_async(goal),
+                                             time.monotonic() + timeout)
+                    remaining -= 1
+            rclpy.spin_once(node, timeout_sec=0.01)
+            for index, pending in list(running.items()):
+                worker = workers[index]
+                if pending.result is None and pending.acceptance.done():
+                    goal_handle = pending.acceptance.result()
+                    if not goal_handle.accepted:
+                        sys.exit(f'{worker.namespace}/evaluate rejected the episode of seed '
+                                 f'{pending.seed}')
+                    pending.result = goal_handle.get_result_async()
+                if pending.result is not None and pending.result.done():
+                    metrics = pending.result.result().result.metrics
+                    if expect is not None and metrics.outcome != expect:
+                        sys.exit(f'a reference episode ended {metrics.outcome!r}, not {expect}')
+                    if results is not None:
+                        results.append(metrics)
+                    del running[index]
+                    continue
+                check_worker(worker)
+                if time.monotonic() > pending.deadline:
+                    awaited = 'the result' if pending.result is not None else 'acceptance'
+                    sys.exit(f'no answer from {worker.namespace}/evaluate within {timeout:.0f} '
+                             f's: waited for {awaited} of the episode of seed {pending.seed}')
+        return time.monotonic() - start
+    finally:
+        for client in clients:
+            client.destroy()
+
+
+@dataclass
+class Pending:
+    """An episode sent to a worker: its seed, the goal's acceptance, then its result."""
+
+    seed: int
+    acceptance: Any
+    deadline: float
+    result: Any = None
+
+
+def check_worker(worker: Worker) -> None:
+    death = worker.death()
+    if death is not None:
+        sys.exit(death)
 
 
 def episode_timings(log: Path, skip: int) -> list[tuple[float, ...]]:
@@ -171,15 +250,15 @@ def cpu_scaling(graph: ProcessSupervisor, cores: list[int]) -> float:
 
 
 def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_core: int,
-                 controller_core: int, batch: bool) -> tuple[float, list[tuple[float, ...]]]:
+                 controller_core: int, batch: bool, timeout: float = EPISODE_TIMEOUT
+                 ) -> tuple[float, list[tuple[float, ...]]]:
     """Wall seconds of ``episodes`` reference episodes on one worker, and the node's timings."""
-    log = start_worker(graph, 0, sim_core, controller_core, batch)
-    run_episodes(node, ['/bench0'], message, 1)  # warm-up: imports, discovery, first build
-    wall = run_episodes(node, ['/bench0'], message, episodes)
+    worker = start_worker(graph, sim_core, controller_core, batch)
+    # The warm-up: imports, discovery, the first build.
+    run_episodes(node, [worker], message, 1, timeout=timeout)
+    wall = run_episodes(node, [worker], message, episodes, timeout=timeout)
     graph.stop_all()
-    timings = episode_timings(log, 1)
-    log.unlink()  # logs are appended to: the next measurement starts a fresh one
-    return wall, timings
+    return wall, episode_timings(worker.simulator.log_path, 1)
 
 
 def reference_episode():
@@ -215,6 +294,9 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--episodes', type=int, default=6)
     parser.add_argument('--floor-ticks', type=int, default=3000)
+    parser.add_argument('--timeout', type=float, default=EPISODE_TIMEOUT,
+                        help='wall seconds any one wait may take before the benchmark stops, '
+                             'naming what it waited for')
     args = parser.parse_args()
 
     environment, message = reference_episode()
@@ -232,7 +314,8 @@ def main() -> None:
               f'{floor_ms:.3f} ms per tick, at most x{50.0 / floor_ms:.0f} real time')
         compute_ms = controller_compute_ms(environment)
 
-        single, rows = measure_pair(graph, node, message, args.episodes, first, first, True)
+        single, rows = measure_pair(graph, node, message, args.episodes, first, first, True,
+                                   args.timeout)
         physics, sensors, metrics, rest = (mean(rows, i) for i in range(1, 5))
         messaging = max(0.0, rest - compute_ms)
         print('simulator + controller on one core, batch scheduling (as campaigns run them):')
@@ -242,16 +325,19 @@ def main() -> None:
               f'(x{messaging / floor_ms:.2f} the floor)')
         print(f'  physics + sensors alone: x{50.0 / (physics + sensors):.1f} real time '
               f'(+ metrics: x{50.0 / (physics + sensors + metrics):.1f})')
-        _, rows = measure_pair(graph, node, message, args.episodes, first, first, False)
+        _, rows = measure_pair(graph, node, message, args.episodes, first, first, False,
+                               args.timeout)
         print(f'same, default scheduling: {factor(rows)}')
         if two_cores:
-            _, rows = measure_pair(graph, node, message, args.episodes, cores[0], cores[1], True)
+            _, rows = measure_pair(graph, node, message, args.episodes, cores[0], cores[1], True,
+                                   args.timeout)
             print(f'simulator and controller on two cores: {factor(rows)}')
 
-            start_worker(graph, 0, cores[0], cores[0])
-            start_worker(graph, 1, cores[1], cores[1])
-            run_episodes(node, ['/bench0', '/bench1'], message, 2)
-            double = run_episodes(node, ['/bench0', '/bench1'], message, 2 * args.episodes)
+            workers = [start_worker(graph, cores[0], cores[0]),
+                       start_worker(graph, cores[1], cores[1])]
+            run_episodes(node, workers, message, 2, timeout=args.timeout)
+            double = run_episodes(node, workers, message, 2 * args.episodes,
+                                  timeout=args.timeout)
             rate_one = args.episodes / single * 60.0
             rate_two = 2 * args.episodes / double * 60.0
             print(f'throughput: 1 worker {rate_one:.1f} episodes/min, 2 workers '

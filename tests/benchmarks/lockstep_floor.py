@@ -26,6 +26,8 @@ from sensor_msgs.msg import LaserScan
 
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)  # the sim's
+ANSWER_TIMEOUT = 30.0
+"""Wall seconds a tick waits for its answer (best effort: a lost one would wait forever)."""
 
 
 def controller() -> None:
@@ -81,10 +83,14 @@ def sim(ticks: int) -> None:
         scan.header.frame_id = 'base_scan'
         scan.ranges = array.array('f', [5.0]) * 360
         scan_publisher.publish(scan)
+        deadline = time.monotonic() + ANSWER_TIMEOUT
         while commands.handle.take_message(Twist, False) is None:
+            if time.monotonic() > deadline:
+                raise SystemExit(f'no cmd_vel answer to tick {index} within '
+                                 f'{ANSWER_TIMEOUT:.0f} s')
             wait_set.clear_entities()
             wait_set.add_subscription(commands.handle)
-            wait_set.wait(2_000_000_000)
+            wait_set.wait(1_000_000_000)
 
     for index in range(100):  # warm-up
         tick(index)

@@ -43,10 +43,10 @@ def measure() -> int:
     try:
         with bench_graph('sessgan-load-') as (node, graph):
             core = worker_cores(1)[0] or 0
-            start_worker(graph, 0, core, core, batch=not args.default)
+            worker = start_worker(graph, core, core, batch=not args.default)
             results: list = []
             start = time.monotonic()
-            run_episodes(node, ['/bench0'], message, args.episodes, results, expect=None)
+            run_episodes(node, [worker], message, args.episodes, results, expect=None)
             wall = time.monotonic() - start
     finally:
         for process in busy:

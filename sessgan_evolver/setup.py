@@ -23,6 +23,7 @@ setup(
             'replay = sessgan_evolver.replay_cli:main',
             'evaluate = sessgan_evolver.evaluate_cli:main',
             'compare = sessgan_evolver.compare_cli:main',
+            'suite = sessgan_evolver.suite_cli:main',
         ],
     },
 )

@@ -72,3 +72,7 @@ class EpisodeRunnerError(SessganEvolverError):
 
 class SearchMethodError(SessganEvolverError, ValueError):
     """A method name or setting that does not exist or does not fit."""
+
+
+class SuiteError(SessganEvolverError):
+    """A regression suite that cannot be read or run as given (names the entry)."""

@@ -40,6 +40,7 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.regression_suite import write_suite_of_bags_below
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
@@ -184,6 +185,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         f'{table}\n', encoding='utf-8')
     print(table)
     print(f'summary: {output / "summary.md"}')
+    suite = write_suite_of_bags_below(output / 'suite.yaml', output.name, output / 'faults',
+                                      {'source': 'evaluate: confirmed distinct faults',
+                                       'controller': controller})
+    if suite is not None:
+        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
     return 0
 
 

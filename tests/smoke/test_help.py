@@ -24,6 +24,8 @@ EXECUTABLES = [
                                      '(default: 30)', '--mode', '--external',
                                      '20 % above the reference is free']),
     ('sessgan_evolver', 'replay', ['--resimulate', '--rate']),
+    ('sessgan_evolver', 'suite', ['--retries', '--record {all,failures,none}', '--external',
+                                  '(default: runs/suite-<suite name>)']),
     ('sessgan_gen', 'train', ['--iterations', '(default:']),
     ('sessgan_gen', 'report', ['--samples', '(default: 100)']),
 ]

@@ -10,6 +10,7 @@ it started on exit, Ctrl-C or SIGTERM.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import sys
@@ -420,7 +421,17 @@ def metrics_dict(msg) -> dict:
         'legs': int(msg.legs), 'legs_completed': int(msg.legs_completed),
         'leg_times': [float(value) for value in msg.leg_times],
         'failed_leg': int(msg.failed_leg),
+        'success': bool(msg.success),
+        # NaN (not reached, no route) becomes None, as EpisodeMetrics.to_dict writes it.
+        **{name: finite_or_none(getattr(msg, name)) for name in (
+            'time_to_goal', 'path_length_ratio', 'mean_clearance', 'linear_jerk',
+            'angular_jerk', 'mean_speed')},
     }
+
+
+def finite_or_none(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
 
 
 # ---- processes ---------------------------------------------------------------------------

@@ -442,13 +442,17 @@ class ScenarioProgress:
 # ---- reports ----------------------------------------------------------------------------
 
 
-def _number(value: Any) -> str:
+def _number(value: Any, short: bool = False) -> str:
+    """A metric as text: bools as 0/1, floats in full (``short``: 4 significant digits),
+    non-finite and missing values empty."""
     if isinstance(value, bool):
         return str(int(value))
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        return f'{value:.6g}' if math.isfinite(value) else ''
+        if not math.isfinite(value):
+            return ''
+        return f'{value:.4g}' if short else repr(value)
     return '' if value is None else str(value)
 
 
@@ -560,8 +564,9 @@ def markdown_summary(suite: str, progresses: Sequence[ScenarioProgress], elapsed
             progress.entry.name, progress.verdict.value,
             ' '.join(a.kind.value for a in progress.attempts) or '-',
             rep.outcome if rep else '-', _number(metrics.get('fault_collisions')),
-            _number(metrics.get('time_to_goal')), _number(metrics.get('path_length_ratio')),
-            _number(metrics.get('min_clearance')), (rep.bag_path if rep else '') or '-'))
+            _number(metrics.get('time_to_goal'), True),
+            _number(metrics.get('path_length_ratio'), True),
+            _number(metrics.get('min_clearance'), True), (rep.bag_path if rep else '') or '-'))
             + ' |')
     return '\n'.join(lines) + '\n'
 

@@ -233,6 +233,11 @@ def test_the_recorded_fault_fails_again_and_a_fixed_controller_passes(failure_ba
     # In process, lockstep: exact, the same episode as recorded.
     assert int(props['fault_collisions']) == recorded['fault_collisions']
     assert int(props['ticks']) == recorded['ticks']
+    # The standard navigation metrics are properties: reached, but with a fault collision.
+    assert props['success'] == '0' and float(props['time_to_goal']) > 0
+    assert float(props['path_length']) == pytest.approx(recorded['distance_travelled'])
+    assert float(props['path_length_ratio']) > 0.9 and float(props['linear_jerk']) > 0
+    assert float(props['min_clearance']) == 0.0 < float(props['mean_clearance'])  # it touched
     assert props['bag'] and (Path(props['bag']) / 'episode.json').is_file()
     rows = list(csv.DictReader((failed / 'scenarios.csv').open()))
     assert rows[0]['verdict'] == 'fail' and rows[0]['name'] == name

@@ -227,8 +227,10 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
             goal.time_limit = float(episode.get('time_limit') or 0.0)
             goal.robot = str(episode.get('robot') or '')
             goal.controller = str(episode.get('controller') or 'external')
-            goal.record_directory = (f'suite-{safe_name(output.name)}'
-                                     if args.record != 'none' else '')
+            # A directory per attempt: the simulator names a bag after the environment.
+            goal.record_directory = (
+                f'suite-{safe_name(output.name)}/{safe_name(progresses[job.member].entry.name)}'
+                f'/attempt-{job.index}' if args.record != 'none' else '')
             return goal
 
     def log(message: str) -> None:

@@ -284,3 +284,23 @@ def test_ctrl_c_reports_what_ran(failure_bag, tmp_path, monkeypatch):
     assert (counts['tests'], counts['failures'], counts['skipped']) == ('2', '1', '1')
     assert cases['first']['verdict'] == 'fail' and cases['second']['verdict'] == 'not_run'
     assert 'Interrupted' in (output / 'summary.md').read_text()
+
+
+def test_a_campaign_keeps_its_failure_bags_as_a_suite(failure_bag, tmp_path, capsys):
+    import shutil
+
+    from sessgan_evolver.campaign import CampaignResult
+    from sessgan_evolver.campaign_cli import report_result
+
+    run_dir, bags_dir = tmp_path / 'runs' / 'r', tmp_path / 'bags' / 'r'
+    run_dir.mkdir(parents=True)
+    generations = [{'generation': 0, 'mean_risk_score': 0.0}]
+    report_result(CampaignResult(run_dir, bags_dir, run_dir / 'report.md', generations, 1.0),
+                  print)
+    assert not (run_dir / 'suite.yaml').exists()  # no bag, no (empty) suite
+    shutil.copytree(failure_bag, bags_dir / 'g0-m0-k0')
+    report_result(CampaignResult(run_dir, bags_dir, run_dir / 'report.md', generations, 1.0),
+                  print)
+    suite = load_suite(run_dir / 'suite.yaml')
+    assert [entry.bag.resolve() for entry in suite.entries] == [(bags_dir / 'g0-m0-k0').resolve()]
+    assert 'regression suite:' in capsys.readouterr().out

@@ -1,0 +1,80 @@
+"""`suite --external` against a controller running as its own process beside a simulator:
+a faulty controller fails the suite (every attempt, exit 1, a bag per failure), the fixed one
+passes it (exit 0)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+import pytest
+
+from tests.graph.test_simulator_graph import EXTERNAL_CONTROLLER, room, start_simulator
+
+pytestmark = pytest.mark.graph
+
+
+def room_bag(directory: Path) -> Path:
+    """A bag of an empty room (no agents), recorded in process."""
+    from sessgan_evolver.in_process import InProcessEvaluator
+    from sessgan_gen.navigation import make_environment
+    from sessgan_sim.simulator_settings import SimulatorSettings
+
+    environment = make_environment(room(), 'factory', 'room')
+    with InProcessEvaluator('factory', 'nearness_diagram', time_limit=60.0,
+                            settings=SimulatorSettings(dummy_agents=0)) as evaluator:
+        run = evaluator.runner.run(environment, 1, trace=True, keep_scans=True)
+        return evaluator.write_bag(directory / 'room', environment, 1, run, 'test')
+
+
+def start_external(node_processes, *behaviour: str):
+    return node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), *behaviour,
+                                 '--ros-args', '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'],
+                                name='external' + ''.join(behaviour))
+
+
+def suite(*options: str) -> subprocess.CompletedProcess:
+    return subprocess.run(['ros2', 'run', 'sessgan_evolver', 'suite', *options],
+                          capture_output=True, text=True, timeout=400)
+
+
+def junit_case(junit: Path) -> tuple[dict[str, str], dict[str, str]]:
+    suite_element = ElementTree.parse(junit).getroot().find('testsuite')
+    assert suite_element is not None
+    case = suite_element.find('testcase')
+    assert case is not None
+    return dict(suite_element.attrib), {p.get('name') or '': p.get('value') or ''
+                                        for p in case.iter('property')}
+
+
+def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, tmp_path):
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
+    blind = start_external(node_processes, '--blind')
+
+    failed = suite(str(bag), '--external', '--retries', '1', '--output',
+                   str(tmp_path / 'blind'))
+    assert failed.returncode == 1, failed.stdout + failed.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'blind' / 'junit.xml')
+    assert (counts['tests'], counts['failures'], counts['errors']) == ('1', '1', '0')
+    assert props['verdict'] == 'fail' and props['attempts'] == '2', props
+    assert props['attempt_outcomes'].count('fail:') == 2, props
+    assert Path(props['bag']).is_dir() and Path(props['bag']).is_relative_to(tmp_path / 'sim')
+    assert len(list((tmp_path / 'sim').rglob('episode.json'))) == 2  # a bag per attempt
+
+    os.killpg(blind.process.pid, signal.SIGINT)
+    blind.process.wait(timeout=15)
+    start_external(node_processes)
+    fixed = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'fixed'))
+    assert fixed.returncode == 0, fixed.stdout + fixed.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'fixed' / 'junit.xml')
+    assert (counts['tests'], counts['failures']) == ('1', '0')
+    assert props['verdict'] == 'pass' and props['attempt_outcomes'] == (
+        'pass:goal_reached pass:goal_reached'), props
+    # The straight line of an empty room is shorter than the certified route's grid steps.
+    assert props['success'] == '1' and float(props['path_length_ratio']) > 0.5
+    assert not (tmp_path / 'sim' / 'suite-fixed').exists()  # --record failures

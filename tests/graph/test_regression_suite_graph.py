@@ -1,6 +1,7 @@
 """`suite --external` against a controller running as its own process beside a simulator:
 a faulty controller fails the suite (every attempt, exit 1, a bag per failure), the fixed one
-passes it (exit 0)."""
+passes it (exit 0), one that fails every other episode is flaky, and a silent one is a harness
+error (exit 3), never a pass or a fail."""
 
 from __future__ import annotations
 
@@ -78,3 +79,34 @@ def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, 
     # The straight line of an empty room is shorter than the certified route's grid steps.
     assert props['success'] == '1' and float(props['path_length_ratio']) > 0.5
     assert not (tmp_path / 'sim' / 'suite-fixed').exists()  # --record failures
+
+
+def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error(
+        node_processes, tmp_path):
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'controller_timeout:=1.0',
+                    f'bags_root:={tmp_path / "sim"}')
+    alternating = start_external(node_processes, '--alternate')
+    flaky = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'flaky'),
+                  '--record', 'none')
+    assert flaky.returncode == 0, flaky.stdout + flaky.stderr[-3000:]  # flaky is no failure
+    counts, props = junit_case(tmp_path / 'flaky' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '0')
+    assert props['verdict'] == 'flaky', props
+    outcomes = props['attempt_outcomes'].split()
+    assert len(outcomes) == 2 and 'pass:goal_reached' in outcomes, props
+    assert sum(outcome.startswith('fail:') for outcome in outcomes) == 1, props
+    case = ElementTree.parse(tmp_path / 'flaky' / 'junit.xml').getroot().find('.//testcase')
+    assert case is not None and len(case.findall('flakyFailure')) == 1
+
+    os.killpg(alternating.process.pid, signal.SIGINT)
+    alternating.process.wait(timeout=15)
+    start_external(node_processes, '--silent')
+    silent = suite(str(bag), '--external', '--harness-tries', '2', '--output',
+                   str(tmp_path / 'silent'))
+    assert silent.returncode == 3, silent.stdout + silent.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'silent' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '1')
+    assert props['verdict'] == 'error' and props['attempt_outcomes'] == (
+        'harness:controller_unresponsive harness:controller_unresponsive'), props
+    assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))

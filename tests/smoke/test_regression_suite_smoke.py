@@ -61,3 +61,39 @@ def test_confirmed_faults_fail_the_suite_and_a_controller_that_avoids_them_passe
     refused = run(['suite', str(broken), '--output', 'ci-broken'], tmp_path)
     assert refused.returncode == 2 and scenarios[0]['name'] in refused.stderr, refused.stderr
     assert not (tmp_path / 'ci-broken').exists()
+
+
+def test_ctrl_c_stops_the_suite_and_reports_what_ran(ros_workspace, tmp_path):
+    import os
+    import signal
+    import sys
+    import time
+
+    from sessgan_evolver.in_process import InProcessEvaluator
+    from sessgan_gen.navigation import make_environment
+    from sessgan_gen.token_map import load_example_map
+
+    environment = make_environment(load_example_map('factory').cells, 'factory', 'example')
+    with InProcessEvaluator('factory', 'nearness_diagram',
+                            record_directory=tmp_path / 'bags') as evaluator:
+        bag = evaluator.run_environment(environment, 0).metrics['bag_path']
+    assert bag
+    count = 40  # far more than run before the signal
+    suite_file = tmp_path / 'suite.yaml'
+    suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
+        {'name': f'n{index:02d}', 'bag': bag} for index in range(count)]}))
+    process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
+                                str(suite_file), '--output', 'out', '--record', 'none'],
+                               cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, start_new_session=True)
+    time.sleep(10.0)
+    os.killpg(process.pid, signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    counts, verdicts = junit_counts(tmp_path / 'out' / 'junit.xml')
+    ran = count - int(counts['skipped'])
+    assert 0 < int(counts['skipped']) and int(counts['failures']) == ran, counts
+    # Every scenario that ran reproduced its fault (exit 1); none ran: interrupted (130).
+    assert process.returncode == (1 if ran else 130), stdout + stderr[-2000:]
+    assert 'interrupted' in stderr and 'Traceback' not in stderr, stderr[-2000:]
+    assert list(verdicts.values()).count('not_run') == count - ran
+    assert 'Interrupted' in (tmp_path / 'out' / 'summary.md').read_text()

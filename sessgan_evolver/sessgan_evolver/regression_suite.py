@@ -22,6 +22,7 @@ import csv
 import enum
 import io
 import math
+import os
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -261,17 +262,15 @@ def load_suite_source(source: Path) -> Suite:
 def suite_document(name: str, bags: Sequence[Path], directory: Path,
                    metadata: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The YAML document of a suite of ``bags`` for a file in ``directory`` (bag paths
-    relative to it where they are below it)."""
+    relative to it)."""
     entries = []
     names = unique_names(Path(bag).name for bag in bags)
     for bag, entry_name in zip(bags, names):
         entry = entry_from_bag(Path(bag), entry_name)
         metrics = entry.episode.get('metrics') or {}
-        try:
-            relative = Path(bag).resolve().relative_to(directory.resolve())
-            bag_text = relative.as_posix()
-        except ValueError:
-            bag_text = str(Path(bag).resolve())
+        # Relative to the suite file (with '..' where needed), so the file and its bags can
+        # be moved or committed together.
+        bag_text = Path(os.path.relpath(Path(bag).resolve(), directory.resolve())).as_posix()
         entries.append({
             'name': entry_name, 'bag': bag_text, 'scenario': entry.scenario,
             'environment_id': entry.environment_id,

@@ -226,7 +226,7 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
             episode = progresses[job.member].entry.episode
             goal.time_limit = float(episode.get('time_limit') or 0.0)
             goal.robot = str(episode.get('robot') or '')
-            goal.controller = str(episode.get('controller') or 'external')
+            goal.controller = 'external'  # stored with the bag: not the recorded controller
             # A directory per attempt: the simulator names a bag after the environment.
             goal.record_directory = (
                 f'suite-{safe_name(output.name)}/{safe_name(progresses[job.member].entry.name)}'

@@ -275,19 +275,26 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(arguments)
+    runner = InProcessRunner(args.record, Path())
     try:
         suite: Suite = load_suite_source(args.source)
         prepared: list[PreparedEntry] = []
         if not args.external:
             for entry in suite.entries:
                 item, notes = prepare_in_process(entry, args.controller)
+                try:  # a controller that cannot drive the recorded robot, ...
+                    runner.evaluator(item)
+                except SessganEvolverError as err:
+                    raise SuiteError(f'scenario {entry.name} ({entry.bag}): {err}') from err
                 prepared.append(item)
                 for note in notes:
                     print(f'note: {note}', file=sys.stderr)
     except (SessganEvolverError, SessganGenError) as err:
+        runner.close()
         print(f'error: {err}', file=sys.stderr)
         return EXIT_USAGE
     output = args.output or Path('runs') / f'suite-{safe_name(suite.name)}'
+    runner.bags_directory = output / 'bags'
     if not args.external and args.retries:
         print('note: in-process lockstep episodes are exact: each scenario runs once '
               '(--retries applies to --external)', file=sys.stderr)
@@ -306,7 +313,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     started = time.monotonic()
     interrupted = False
     status = None
-    runner = InProcessRunner(args.record, output / 'bags')
     try:
         if args.external:
             run_external(progresses, args, output, report)

@@ -190,6 +190,18 @@ def test_bad_suites_are_refused_naming_the_entry(failure_bag, tmp_path, document
     assert not output.exists()  # nothing half-written
 
 
+def test_a_controller_that_cannot_drive_the_recorded_robot_is_refused(failure_bag, tmp_path,
+                                                                     capsys):
+    output = tmp_path / 'out'
+    assert suite_cli.main([str(failure_bag), '--controller', 'race_controller', '--output',
+                           str(output)]) == 2
+    assert f'scenario {failure_bag.name}' in capsys.readouterr().err
+    assert not output.exists()
+    assert suite_cli.main([str(failure_bag), '--controller', 'no_such', '--output',
+                           str(output)]) == 2
+    assert 'not a built-in one' in capsys.readouterr().err
+
+
 def test_an_empty_bag_directory_and_a_missing_source_are_refused(tmp_path):
     with pytest.raises(SuiteError, match='holds no failure bag'):
         load_suite_source(tmp_path)

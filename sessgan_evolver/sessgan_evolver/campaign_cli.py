@@ -578,9 +578,9 @@ def report_result(result: Any, log: Callable[[str], None]) -> None:
         f'{last["mean_risk_score"] or 0:.3f} (generation {last["generation"]})')
     print(f'report: {result.report_path}')
     print(f'failure bags: {result.bags_dir}')
-    from sessgan_evolver.regression_suite import write_suite_of_bags_below
+    from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 
-    suite = write_suite_of_bags_below(result.run_dir / 'suite.yaml', result.run_dir.name,
+    suite = write_suite_of_bags_below(result.run_dir / SUITE_FILE, result.run_dir.name,
                                       result.bags_dir, {'source': 'campaign failure bags'})
     if suite is not None:
         print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')

@@ -40,7 +40,7 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
-from sessgan_evolver.regression_suite import write_suite_of_bags_below
+from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
@@ -185,7 +185,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f'{table}\n', encoding='utf-8')
     print(table)
     print(f'summary: {output / "summary.md"}')
-    suite = write_suite_of_bags_below(output / 'suite.yaml', output.name, output / 'faults',
+    suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
                                       {'source': 'evaluate: confirmed distinct faults',
                                        'controller': controller})
     if suite is not None:

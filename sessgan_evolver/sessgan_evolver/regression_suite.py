@@ -247,8 +247,13 @@ def load_suite(path: Path) -> Suite:
     return Suite(str(document.get('name') or path.stem), tuple(entries), path)
 
 
+SUITE_FILE = 'suite.yaml'
+"""The name campaign, compare and evaluate give the suite file in their output folder."""
+
+
 def load_suite_source(source: Path) -> Suite:
-    """A suite file, a directory of bags, or one bag (a suite of one)."""
+    """A suite file, a folder holding one (a campaign run, an evaluate or compare output), a
+    directory of bags, or one bag (a suite of one)."""
     source = Path(source)
     if not source.exists():
         raise SuiteError(f'{source} does not exist (give a suite file or a directory of bags)')
@@ -256,6 +261,8 @@ def load_suite_source(source: Path) -> Suite:
         return load_suite(source)
     if (source / 'metadata.yaml').is_file():
         return Suite(source.name, (entry_from_bag(source),), source)
+    if (source / SUITE_FILE).is_file():
+        return load_suite(source / SUITE_FILE)
     return suite_from_bag_directory(source)
 
 

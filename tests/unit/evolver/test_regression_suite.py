@@ -316,6 +316,7 @@ def test_a_campaign_keeps_its_failure_bags_as_a_suite(failure_bag, tmp_path, cap
     suite = load_suite(run_dir / 'suite.yaml')
     assert [entry.bag.resolve() for entry in suite.entries] == [(bags_dir / 'g0-m0-k0').resolve()]
     assert 'regression suite:' in capsys.readouterr().out
+    assert load_suite_source(run_dir).entries == suite.entries  # the run folder names it
     # Relative to the file, so the run and bag folders can move together.
     document = yaml.safe_load((run_dir / 'suite.yaml').read_text())
     assert document['scenarios'][0]['bag'] == '../../bags/r/g0-m0-k0'

@@ -37,6 +37,7 @@ from sessgan_evolver.regression_suite import (
     EXIT_HARNESS,
     EXIT_USAGE,
     Attempt,
+    AttemptKind,
     ScenarioProgress,
     Suite,
     SuiteEntry,
@@ -96,7 +97,13 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def safe_name(text: str) -> str:
-    return ''.join(c if c.isalnum() or c in '-_.' else '_' for c in text)[:120] or 'scenario'
+    """``text`` as a directory name a simulator accepts in a record directory (a letter or
+    digit, then letters, digits, '.', '_' or '-'; sessgan_sim.bag_recording)."""
+    name = ''.join(c if c.isascii() and (c.isalnum() or c in '-_.') else '_' for c in text)
+    while '..' in name:
+        name = name.replace('..', '.')
+    name = name.lstrip('-_.')
+    return name[:100] or 'scenario'
 
 
 # ---- in process --------------------------------------------------------------------------
@@ -171,7 +178,7 @@ class InProcessRunner:
         kind = classify(metrics)
         bag = ''
         if run.trace is not None and (self.record == 'all' or (
-                self.record == 'failures' and kind.value == 'fail')):
+                self.record == 'failures' and kind is AttemptKind.FAIL)):
             directory = (self.bags_directory / safe_name(prepared.entry.name)
                          / f'attempt-{number}')
             bag = str(evaluator.write_bag(directory, prepared.environment, prepared.seed, run,

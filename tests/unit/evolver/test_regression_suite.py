@@ -320,3 +320,11 @@ def test_a_campaign_keeps_its_failure_bags_as_a_suite(failure_bag, tmp_path, cap
     # Relative to the file, so the run and bag folders can move together.
     document = yaml.safe_load((run_dir / 'suite.yaml').read_text())
     assert document['scenarios'][0]['bag'] == '../../bags/r/g0-m0-k0'
+
+
+@pytest.mark.parametrize('text', ['ci', '000-collision_static-r2c1', '_x', '../..', 'ü b/c',
+                                  '.hidden', 'x' * 300, '', 'a..b', 'a...b'])
+def test_record_directory_names_are_ones_a_simulator_accepts(text):
+    from sessgan_gen.environment import check_environment_id
+
+    check_environment_id(suite_cli.safe_name(text))  # raises for a name it would refuse

@@ -110,3 +110,31 @@ def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error
     assert props['verdict'] == 'error' and props['attempt_outcomes'] == (
         'harness:controller_unresponsive harness:controller_unresponsive'), props
     assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))
+
+
+def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, tmp_path):
+    import time
+
+    import yaml
+
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
+    start_external(node_processes)
+    count = 40  # far more than run before the signal
+    suite_file = tmp_path / 'suite.yaml'
+    suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
+        {'name': f'n{index:02d}', 'bag': str(bag)} for index in range(count)]}))
+    process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
+                                str(suite_file), '--external', '--output', str(tmp_path / 'out')],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    time.sleep(15.0)
+    os.killpg(process.pid, signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stdout + stderr[-3000:]  # every one that ran passed
+    assert 'interrupted' in stderr and 'Traceback' not in stderr, stderr[-3000:]
+    root = ElementTree.parse(tmp_path / 'out' / 'junit.xml').getroot()
+    suite_element = root.find('testsuite')
+    assert suite_element is not None
+    skipped = int(suite_element.get('skipped') or 0)
+    assert 0 < skipped < count and suite_element.get('failures') == '0', suite_element.attrib

@@ -328,3 +328,29 @@ def test_record_directory_names_are_ones_a_simulator_accepts(text):
     from sessgan_gen.environment import check_environment_id
 
     check_environment_id(suite_cli.safe_name(text))  # raises for a name it would refuse
+
+
+def test_mission_and_fleet_bags_rerun_exactly_in_process(tmp_path):
+    from sessgan_gen.fleet import FleetSpec
+    from sessgan_gen.missions import MissionSpec
+
+    cells = load_example_map('factory').cells
+    environments = [
+        make_environment(cells, 'factory', 'mission', seed=0, mission=MissionSpec(1, 2.0)),
+        make_environment(cells, 'factory', 'fleet', seed=3, fleet=FleetSpec(2))]
+    recorded = {}
+    # Three seconds are too short for either: a timeout (a failure) whose trajectory
+    # depends on the stations and on every robot.
+    with InProcessEvaluator('factory', 'reference_navigator', time_limit=3.0) as evaluator:
+        for environment in environments:
+            run = evaluator.runner.run(environment, 1, trace=True, keep_scans=True)
+            evaluator.write_bag(tmp_path / 'bags' / environment.id, environment, 1, run)
+            recorded[environment.id] = run.metrics
+    assert suite_cli.main([str(tmp_path / 'bags'), '--output', str(tmp_path / 'out'),
+                           '--record', 'none']) == 1
+    _, cases = read_junit(tmp_path / 'out')
+    assert set(cases) == {'mission', 'fleet'}
+    for name, props in cases.items():
+        assert props['verdict'] == 'fail' and props['outcome'] == recorded[name]['outcome']
+        assert int(props['ticks']) == recorded[name]['ticks']
+        assert float(props['path_length']) == recorded[name]['distance_travelled']

@@ -10,6 +10,7 @@ it started on exit, Ctrl-C or SIGTERM.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -435,7 +436,17 @@ def metrics_dict(msg) -> dict:
         'legs': int(msg.legs), 'legs_completed': int(msg.legs_completed),
         'leg_times': [float(value) for value in msg.leg_times],
         'failed_leg': int(msg.failed_leg),
+        'success': bool(msg.success),
+        # NaN (not reached, no route) becomes None, as EpisodeMetrics.to_dict writes it.
+        **{name: finite_or_none(getattr(msg, name)) for name in (
+            'time_to_goal', 'path_length_ratio', 'mean_clearance', 'linear_jerk',
+            'angular_jerk', 'mean_speed')},
     }
+
+
+def finite_or_none(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
 
 
 # ---- processes ---------------------------------------------------------------------------
@@ -628,6 +639,12 @@ def report_result(result: Any, log: Callable[[str], None]) -> None:
         f'{first["mean_risk_score"] or 0:.3f} -> {last["mean_risk_score"] or 0:.3f}')
     print(f'report: {result.report_path}')
     print(f'failure bags: {result.bags_dir}')
+    from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
+
+    suite = write_suite_of_bags_below(result.run_dir / SUITE_FILE, result.run_dir.name,
+                                      result.bags_dir, {'source': 'campaign failure bags'})
+    if suite is not None:
+        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
 
 
 if __name__ == '__main__':

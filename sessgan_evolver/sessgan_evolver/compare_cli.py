@@ -20,6 +20,7 @@ import torch
 
 from sessgan_evolver.comparison import CompareConfig, run_comparison
 from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_gen.config_cli import field_docs
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
@@ -85,6 +86,10 @@ def compare(arguments: list[str]) -> int:
         log('interrupted')
         return INTERRUPTED_STATUS
     print(f'report: {result.report_path}')
+    suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
+                                      {'source': 'compare: confirmed distinct faults'})
+    if suite is not None:
+        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
     return 0
 
 

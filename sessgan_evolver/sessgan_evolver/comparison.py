@@ -67,6 +67,7 @@ from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
+from sessgan_sim.metrics import navigation_columns
 
 
 @dataclass(frozen=True)
@@ -537,6 +538,7 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
          'collisions': record.metrics.get('collisions'),
          'risk_score': record.metrics.get('risk_score'),
          'fault_risk_score': record.metrics.get('fault_risk_score'),
+         **navigation_columns(record.metrics),
          'valid_failure': record.valid_failure,
          'fault': record.fault.label if record.fault else '', 'elapsed': record.elapsed,
          'cpu': record.cpu, 'origin': record.origin}

@@ -81,3 +81,7 @@ class SearchMethodError(SessganEvolverError, ValueError):
 
 class ExternalWorkerError(SessganEvolverError):
     """An episode on an external worker gave nothing this process can use."""
+
+
+class SuiteError(SessganEvolverError):
+    """A regression suite that cannot be read or run as given (names the entry)."""

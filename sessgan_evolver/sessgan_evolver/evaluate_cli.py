@@ -45,6 +45,7 @@ from sessgan_evolver.fresh_seed import (
 )
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
+from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
@@ -234,6 +235,11 @@ def evaluate(arguments: list[str]) -> int:
         f'{table}\n', encoding='utf-8')
     print(table)
     print(f'summary: {output / "summary.md"}')
+    suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
+                                      {'source': 'evaluate: confirmed distinct faults',
+                                       'controller': controller})
+    if suite is not None:
+        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
     return 0
 
 

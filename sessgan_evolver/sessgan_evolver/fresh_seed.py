@@ -44,6 +44,7 @@ from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.token_map import load_example_map
 from sessgan_gen.track_cleanup import clean_generated_maps
+from sessgan_sim.metrics import NAVIGATION_COLUMNS, navigation_columns
 
 
 class MapSource(Protocol):
@@ -309,7 +310,8 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
 EPISODE_COLUMNS = ('generator', 'index', 'environment_id', 'map_seed', 'sim_seed', 'feasible',
                    'route_length', 'route_min_clearance', 'outcome', 'fault_collisions',
                    'collisions', 'proximity_time', 'simulation_time', 'risk_score',
-                   'fault_risk_score', 'valid_failure', 'fault', 'wall_time')
+                   'fault_risk_score', *NAVIGATION_COLUMNS, 'valid_failure', 'fault',
+                   'wall_time')
 
 
 def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
@@ -330,6 +332,7 @@ def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
             'simulation_time': metrics.get('simulation_time'),
             'risk_score': metrics.get('risk_score'),
             'fault_risk_score': metrics.get('fault_risk_score'),
+            **navigation_columns(metrics),
             'valid_failure': record.valid_failure,
             'fault': record.fault.label if record.fault else '',
             'wall_time': metrics.get('wall_time')})

@@ -696,6 +696,13 @@ class Episode:
         done = self.done
         results = [StepResult(self._observation(each, each.scan_updated), done, each.outcome)
                    for each in records]
+        # Standard navigation metrics: one O(1) update per robot, from the odometry twist just
+        # read for the observation (sessgan_sim.metrics.NavigationAccumulator).
+        for index, each in enumerate(running):
+            twist = results[each.index].observation.twist
+            each.recorder.navigation.add(config.control_period,
+                                         0.0 if touching[index] else clearances[index],
+                                         twist.vx, twist.vy, twist.wz)
         self._latest = [result.observation for result in results]
         finished = clock()
         profile = self.profile
@@ -745,7 +752,7 @@ class Episode:
             simulation_time=record.ticks * record.config.control_period,
             feasible=bool(record.environment.feasible),
             distance_to_goal=self._distance_to_goal(record), outcome=record.outcome,
-            detail=detail)
+            detail=detail, route_length=self._route_length(record))
         mission = record.mission
         if mission is None:
             return snapshot
@@ -759,6 +766,15 @@ class Episode:
             leg_times=mission.leg_times, failed_leg=failed)
 
     # --- internals ------------------------------------------------------------------------
+
+    @staticmethod
+    def _route_length(record: _Record) -> float:
+        """m, the certified route of this robot (r0: the environment's, else its fleet
+        entry's); 0 without one."""
+        environment = record.environment
+        if record.index == 0:
+            return float(environment.route_length or 0.0)
+        return float(environment.fleet[record.index - 1].route_length or 0.0)
 
     def _fleet_outcome(self) -> tuple[Outcome | None, int]:
         """The episode's outcome and the index of the robot it comes from (-1: every robot

@@ -28,6 +28,7 @@ reason, and no episode runs.
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 import time
 from pathlib import Path
@@ -432,7 +433,15 @@ def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetric
     msg.legs_completed = int(metrics.legs_completed)
     msg.leg_times = [float(value) for value in metrics.leg_times]
     msg.failed_leg = int(metrics.failed_leg)
+    for name in NAVIGATION_FIELDS:
+        setattr(msg, name, float(getattr(metrics, name)))
+    msg.success = bool(metrics.success)
     return msg
+
+
+NAVIGATION_FIELDS = ('time_to_goal', 'path_length_ratio', 'mean_clearance', 'linear_jerk',
+                     'angular_jerk', 'mean_speed')
+"""EpisodeMetrics' float navigation fields, copied as they are (NaN: not reached / none)."""
 
 
 def invalid_metrics(environment_id: str, detail: str,
@@ -445,6 +454,7 @@ def invalid_metrics(environment_id: str, detail: str,
     msg.detail = detail
     msg.legs = 1
     msg.failed_leg = -1
+    msg.time_to_goal = msg.path_length_ratio = msg.mean_clearance = math.nan
     return msg
 
 

@@ -27,6 +27,8 @@ EXECUTABLES = [
     ('sessgan_evolver', 'replay', ['--resimulate', '--rate']),
     ('sessgan_evolver', 'evaluate', ['--external', '--fault-records']),
     ('sessgan_evolver', 'compare', ['--external', '--no-external', '--budget']),
+    ('sessgan_evolver', 'suite', ['--retries', '--record {all,failures,none}', '--external',
+                                  '(default: runs/suite-<suite name>)']),
     ('sessgan_gen', 'train', ['--iterations', '(default:']),
     ('sessgan_gen', 'report', ['--samples', '(default: 100)']),
 ]

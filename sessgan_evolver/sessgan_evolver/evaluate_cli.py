@@ -44,8 +44,8 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
-from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
+from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec

@@ -150,6 +150,10 @@ class RosEvaluator:
         """Requests of one member the generator may die on."""
         self.retries = HarnessRetries(config.harness_tries, log)
 
+    rerun_harness_outcomes = True
+    """Run a harness outcome again here (never told); False: tell it, for a caller that
+    judges harness outcomes itself (``suite``)."""
+
     @property
     def harness_reruns(self) -> int:
         return self.retries.reruns
@@ -391,7 +395,7 @@ class RosEvaluator:
                                 and not all(child.alive for child in pair.controllers)):
                             continue  # its controller died: the next loop re-runs it
                         del running[name]
-                        if is_harness_outcome(metrics['outcome']):
+                        if self.rerun_harness_outcomes and is_harness_outcome(metrics['outcome']):
                             # No result: never recorded (sessgan_evolver.harness).
                             self.retries.failed(state.job.key, state.job.environment.id,
                                                 metrics['outcome'],
@@ -634,9 +638,10 @@ def report_result(result: Any, log: Callable[[str], None]) -> None:
     log(f'done in {result.wall_time / 60:.1f} min: {failures} valid failures '
         f'({failures * per:.3f}/episode), {faults} distinct faults ({faults * per:.3f}/episode)'
         + (f' + {unplaced} unplaced' if unplaced else '') + f' in {episodes} episodes; '
-        f'fault risk {first["mean_fault_risk_score"] or 0:.3f} (generation 0) -> '
-        f'{last["mean_fault_risk_score"] or 0:.3f} (generation {last["generation"]}); risk '
-        f'{first["mean_risk_score"] or 0:.3f} -> {last["mean_risk_score"] or 0:.3f}')
+        f'fault risk {first.get("mean_fault_risk_score") or 0:.3f} (generation 0) -> '
+        f'{last.get("mean_fault_risk_score") or 0:.3f} (generation {last["generation"]}); '
+        f'risk {first.get("mean_risk_score") or 0:.3f} -> '
+        f'{last.get("mean_risk_score") or 0:.3f}')
     print(f'report: {result.report_path}')
     print(f'failure bags: {result.bags_dir}')
     from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below

@@ -228,6 +228,8 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
                             record_failures=args.record != 'none')
 
     class SuiteEvaluator(RosEvaluator):
+        rerun_harness_outcomes = False  # every attempt is judged (classify)
+
         def goal_for(self, job):
             goal = super().goal_for(job)
             episode = progresses[job.member].entry.episode

@@ -35,15 +35,21 @@ from sessgan_evolver.operators import OperatorConfig
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
 from sessgan_evolver.seeding import SeedStream, shared_seeds
-from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    checkpoint_bytes,
+    default_checkpoint_path,
+    load_checkpoint,
+    training_map,
+)
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
-from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
+from sessgan_gen.environment_sampler import resolve_sample_size
+from sessgan_gen.errors import InvalidFleetError, InvalidMissionError, SamplingRequestError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_sim.bag_recording import BagStorage
 
 SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
@@ -123,10 +129,18 @@ class CampaignConfig:
     robots: int = 1
     """[1] Robots under test on every map (a fleet episode: robots r1, r2, ... drawn beside
     the map's own start and goal, each route certified), 1..8; 1: one robot."""
+    width: int = 0
+    """[0: the checkpoint's] Width of every map in cells; by default the generator serves
+    maps of the size of the map it learned (your facility's)."""
+    height: int = 0
+    """[0: the checkpoint's] Height of every map in cells."""
     fitness: FitnessConfig = field(default_factory=FitnessConfig)
 
     def validate(self) -> None:
         get_scenario(self.scenario)
+        if self.width < 0 or self.height < 0:
+            raise CampaignError(f'width and height must be >= 0 (0: the checkpoint map size), got '
+                                f'{self.width}x{self.height}')
         try:
             self.mission()
         except InvalidMissionError as err:
@@ -265,9 +279,15 @@ class Campaign:
         self.invocation = dict(invocation or {})
         scenario = get_scenario(config.scenario)
         self.scenario = scenario
-        self.example = load_example_map(scenario.name).cells
         checkpoint = config.checkpoint or str(default_checkpoint_path(scenario.name))
         self.pyramid, self.metadata = load_checkpoint(checkpoint, scenario=scenario.name)
+        # TPKL (fitness penalty, report) is measured against the map the generator learned.
+        self.example = training_map(self.metadata)
+        try:
+            self.size = resolve_sample_size(self.pyramid, self.metadata,
+                                            (config.height, config.width), scenario.name)
+        except SamplingRequestError as err:
+            raise CampaignError(str(err)) from err
         self.template = {k: v.clone() for k, v in self.pyramid.state_dict().items()}
         self.store = RunStore(runs_root, run_name)  # creates the run directory
         self.bags_dir = Path(bags_root).resolve() / run_name

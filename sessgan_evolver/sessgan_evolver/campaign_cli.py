@@ -205,7 +205,8 @@ class RosEvaluator:
 
         request = GenerateEnvironments.Request(
             scenario=self.config.scenario, seeds=[int(s) for s in seeds],
-            generation=generation, member=member)
+            generation=generation, member=member, height=self.config.height,
+            width=self.config.width)
         request.weights = weights
         for attempt in range(1, self.max_attempts + 1):
             future = self.generator.call_async(request)
@@ -544,7 +545,7 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
                 config.scenario, controller, config.time_limit,
                 record_directory=campaign.bags_dir if config.record_failures else None,
                 bag_storage=config.bag_storage, mission=config.mission(),
-                fleet=config.fleet()) as evaluator:
+                fleet=config.fleet(), size=(config.height, config.width)) as evaluator:
             result = campaign.run(evaluator, resume=resume)
     except KeyboardInterrupt:
         log(f'interrupted (continue later with --resume --run {run_name} --in-process)')

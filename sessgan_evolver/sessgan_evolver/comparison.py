@@ -57,12 +57,13 @@ from sessgan_evolver.fresh_seed import (
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
+from sessgan_gen.checkpoint import checkpoint_training_map
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import occupancy_to_tokens
 
 
 @dataclass(frozen=True)
@@ -271,7 +272,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     first = min(confirmed, key=lambda entry: entry.first, default=None)
     episodes = len(records)
     tokens = _example_tokens(records, faults, config.scenario)
-    example = load_example_map(config.scenario).cells
+    example = checkpoint_training_map(config.scenario, config.checkpoint or None)
     figures = RunFigures(
         method=method, search_seed=seed, episodes=episodes,
         valid_maps=sum(bool(r.metrics.get('feasible')) for r in records),
@@ -300,7 +301,8 @@ def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None,
         label = 'shipped generator' if not config.checkpoint else config.checkpoint
         return PyramidSource(label, config.scenario, config.checkpoint or None), 'pyramid:base'
     if method == 'cellular_automaton':
-        return AutomatonSource(config.scenario), 'cellular_automaton'
+        reference = checkpoint_training_map(config.scenario, config.checkpoint or None)
+        return AutomatonSource(config.scenario, reference=reference), 'cellular_automaton'
     return None, ''
 
 

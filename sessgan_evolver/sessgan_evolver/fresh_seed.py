@@ -38,7 +38,12 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.run_store import RunStore
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord
 from sessgan_evolver.seeding import SeedStream, shared_seeds
-from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    checkpoint_bytes,
+    default_checkpoint_path,
+    load_checkpoint,
+    training_map,
+)
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
@@ -50,6 +55,8 @@ class MapSource(Protocol):
     """Something that turns seeds into token maps."""
 
     label: str
+    reference: np.ndarray
+    """The token map its TPKL is measured against: the map the generator learned."""
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         """Token maps (len(seeds), height, width), map i from seeds[i] alone."""
@@ -65,6 +72,7 @@ class PyramidSource:
         self.scenario = scenario
         source = checkpoint or default_checkpoint_path(scenario)
         self.pyramid, self.metadata = load_checkpoint(source, scenario=scenario)
+        self.reference = training_map(self.metadata)
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         """The maps the generator node would serve for ``seeds`` (the scenario's
@@ -82,6 +90,7 @@ class PopulationSource:
             raise FreshSeedError('a population needs at least one member')
         self.label = label
         self.members = list(members)
+        self.reference = self.members[0].reference
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         count = len(self.members)
@@ -94,9 +103,14 @@ class PopulationSource:
 class AutomatonSource:
     """The BARN-style cellular automaton (sessgan_evolver.cellular_automaton)."""
 
-    def __init__(self, scenario: str, label: str = 'cellular automaton') -> None:
+    def __init__(self, scenario: str, label: str = 'cellular automaton',
+                 reference: np.ndarray | None = None) -> None:
+        """``reference``: the map its TPKL is measured against (default: the scenario's
+        example map); give the training map of the generators it is compared with."""
         self.label = label
         self.generator = CellularAutomatonGenerator(scenario)
+        self.reference = (load_example_map(scenario).cells if reference is None
+                          else np.asarray(reference))
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         return self.generator.maps([int(s) for s in seeds])
@@ -241,7 +255,7 @@ class FreshSeedSummary:
     mean_fault_risk: float | None
     """Fault risk score, mean over valid maps."""
     tpkl: float
-    """Of all its maps to the example map, nats."""
+    """Of all its maps to the map its generator learned (``MapSource.reference``), nats."""
     uniqueness: float
     """Mean of the 8x8 and 16x16 uniqueness of all its maps, percent."""
     distinct_faults: int
@@ -282,7 +296,7 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
     records = log.records
     valid = [record for record in records if record.metrics.get('feasible')]
     failures = [record for record in valid if record.valid_failure]
-    example = load_example_map(evaluator.scenario).cells
+    example = source.reference
     token_maps = [np.asarray(m) for m in maps]
     faults = group_faults([record.fault for record in records])
     summary = FreshSeedSummary(

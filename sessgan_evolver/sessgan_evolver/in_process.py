@@ -58,9 +58,13 @@ class InProcessEvaluator:
                  record_directory: str | Path | None = None, bag_storage: str = 'mcap',
                  simulate_invalid: bool = True, settings: SimulatorSettings | None = None,
                  observer: EpisodeObserver | None = None,
-                 mission: MissionSpec | None = None, fleet: FleetSpec | None = None) -> None:
+                 mission: MissionSpec | None = None, fleet: FleetSpec | None = None,
+                 size: tuple[int, int] | None = None) -> None:
         """``mission``: the stations every sampled map gets (None: plain episodes);
-        ``fleet``: the robots under test every sampled map gets (None: one)."""
+        ``fleet``: the robots under test every sampled map gets (None: one); ``size``:
+        (height, width) of every sampled map in cells (None or a zero side: the checkpoint's
+        training map's)."""
+        self.size = size
         self.scenario = scenario
         self.mission = (mission or MissionSpec()).validate()
         self.fleet = (fleet or FleetSpec()).validate(self.mission.stations)
@@ -90,8 +94,8 @@ class InProcessEvaluator:
 
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
-        return self.sampler.sample(seeds, weights, self.scenario, generation=generation,
-                                   member=member, mission=self.mission,
+        return self.sampler.sample(seeds, weights, self.scenario, size=self.size,
+                                   generation=generation, member=member, mission=self.mission,
                                    fleet=self.fleet)
 
     def evaluate(self, jobs: Sequence[EpisodeJob],

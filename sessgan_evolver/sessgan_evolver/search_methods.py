@@ -46,7 +46,11 @@ from sessgan_evolver.map_operators import (
     mutate_noise,
     mutate_token_map,
 )
-from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    checkpoint_training_map,
+    default_checkpoint_path,
+    load_checkpoint,
+)
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl
 from sessgan_gen.model import GeneratorPyramid
@@ -56,7 +60,6 @@ from sessgan_gen.sampling import (
     seed_noise_maps,
 )
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
 from sessgan_gen.track_cleanup import clean_generated_maps
 
 SEED_BOUND = 2**32
@@ -213,11 +216,14 @@ class MapSearchGA(Generic[Genotype]):
 
     name = ''
 
-    def __init__(self, scenario: str, seed: int, config: GAConfig | None = None) -> None:
+    def __init__(self, scenario: str, seed: int, config: GAConfig | None = None,
+                 checkpoint: str | bytes | None = None) -> None:
+        """``checkpoint``: the generator compared with (None: the shipped one); its training
+        map is the TPKL reference of the fitness."""
         self.config = config or GAConfig()
         self.config.validate()
         self.spec = get_scenario(scenario)
-        self.example = load_example_map(scenario).cells
+        self.example = checkpoint_training_map(scenario, checkpoint)
         self.rng = method_rng(seed, self.name)
         self.generation = 0
         self.tpkl_reference: float | None = None
@@ -314,9 +320,10 @@ class GridGA(MapSearchGA[np.ndarray]):
     name = 'grid_ga'
 
     def __init__(self, scenario: str, seed: int, config: GAConfig | None = None,
-                 automaton: CellularAutomatonConfig | None = None) -> None:
+                 automaton: CellularAutomatonConfig | None = None,
+                 checkpoint: str | bytes | None = None) -> None:
         self.automaton = CellularAutomatonGenerator(scenario, automaton)
-        super().__init__(scenario, seed, config)
+        super().__init__(scenario, seed, config, checkpoint)
 
     def initial(self, index: int) -> tuple[np.ndarray, int]:
         seed = int(self.rng.integers(0, SEED_BOUND))
@@ -340,7 +347,7 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
     def __init__(self, scenario: str, seed: int, config: GAConfig | None = None,
                  checkpoint: str | bytes | None = None) -> None:
         self.pyramid = load_pyramid(scenario, checkpoint)
-        super().__init__(scenario, seed, config)
+        super().__init__(scenario, seed, config, checkpoint)
 
     def initial(self, index: int) -> tuple[NoiseMaps, int]:
         seed = int(self.rng.integers(0, SEED_BOUND))
@@ -362,7 +369,8 @@ BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None'], 
 
 BASELINES: dict[str, BaselineFactory] = {
     'random': lambda scenario, seed, checkpoint, ga: RandomSampling(scenario, seed, checkpoint),
-    'grid_ga': lambda scenario, seed, checkpoint, ga: GridGA(scenario, seed, ga),
+    'grid_ga': lambda scenario, seed, checkpoint, ga: GridGA(scenario, seed, ga,
+                                                            checkpoint=checkpoint),
     'cellular_automaton': lambda scenario, seed, checkpoint, ga: CellularAutomatonSampling(
         scenario, seed),
     'latent': lambda scenario, seed, checkpoint, ga: LatentEvolution(scenario, seed, ga,

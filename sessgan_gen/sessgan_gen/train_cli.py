@@ -176,7 +176,7 @@ def train(config: TrainConfig) -> int:
         printer.update(done, f'total ETA {format_duration(eta.estimate(scale, done))}')
 
     def checkpoint(pyramid, state: TrainingState) -> None:
-        metadata = training_metadata(scenario, config, pyramid, state, source)
+        metadata = training_metadata(scenario, config, pyramid, state, source, cells)
         save_checkpoint(output, pyramid, metadata, state.to_dict())
         result = state.scale_results[-1]
         print(f'train: scale {state.trained_scales}/{len(shapes)} done in '

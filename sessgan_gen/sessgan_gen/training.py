@@ -30,6 +30,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from sessgan_gen import __version__
+from sessgan_gen.checkpoint import training_map_rows
 from sessgan_gen.downsampling import downsample_pyramid, one_hot
 from sessgan_gen.model import (
     GeneratorPyramid,
@@ -382,13 +383,17 @@ def training_metadata(
     pyramid: GeneratorPyramid,
     state: TrainingState,
     map_source: str,
+    cells: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """The JSON metadata of a (possibly partial) training checkpoint."""
+    """The JSON metadata of a (possibly partial) training checkpoint; ``cells``, the map
+    learned, is stored as ``training_map`` (the reference of every TPKL figure)."""
+    stored = {} if cells is None else {'training_map': training_map_rows(cells, scenario.tokens)}
     return {
         'scenario': scenario.name,
         'tokens': list(scenario.tokens),
         'map_source': map_source,
         'map_shape': list(pyramid.size),
+        **stored,
         'seed': config.seed,
         'training_config': config_dict(config),
         'trained_scales': state.trained_scales,

@@ -342,6 +342,7 @@ class Campaign:
             for member, genome in enumerate(genomes):
                 environments = evaluator.sample(self.weights_of(genome), map_seeds,
                                                 generation, member)
+                self.check_size(environments)
                 token_maps.append([occupancy_to_tokens(env.occupancy, self.scenario)
                                    for env in environments])
                 jobs += [EpisodeJob(generation, member, k, env, sim_seeds[k])
@@ -414,6 +415,17 @@ class Campaign:
         return CampaignResult(self.store.run_dir, self.bags_dir, report_path,
                               self.store.read_rows('generation'),
                               time.monotonic() - wall_start)
+
+    def check_size(self, environments: Sequence[Environment]) -> None:
+        """CampaignError unless every map is of the size this campaign asks for (a generator
+        node started elsewhere, or an evaluator built without the size, would serve others)."""
+        for environment in environments:
+            if tuple(environment.occupancy.shape) != self.size:
+                height, width = self.size
+                raise CampaignError(
+                    f'the generator served {environment.id} at {environment.occupancy.shape[0]}'
+                    f'x{environment.occupancy.shape[1]} cells; the campaign asks for '
+                    f'{height}x{width} (height x width)')
 
     # -- report ---------------------------------------------------------------------------
 

@@ -114,6 +114,11 @@ class CompareConfig:
     """[1] Robots under test on every map of every method (a fleet episode: robots r1, r2,
     ... drawn beside the map's own start and goal, each route certified), 1..8; 1: one
     robot."""
+    width: int = 0
+    """[0: the generator's] Width of every method's maps in cells (by default the size of
+    the map the generator learned)."""
+    height: int = 0
+    """[0: the generator's] Height of every method's maps in cells."""
 
     def validate(self) -> None:
         get_scenario(self.scenario)
@@ -143,6 +148,13 @@ class CompareConfig:
             raise CompareError(f'a budget of {self.budget} pays for no SESS-GAN generation of '
                                f'{self.population} x {self.maps_per_member} episodes')
         self.rule().validate()
+        if self.width < 0 or self.height < 0:
+            raise CompareError(f'width and height must be >= 0 (0: the generator map size), '
+                               f'got {self.width}x{self.height}')
+
+    def map_size(self) -> tuple[int, int] | None:
+        """(height, width) asked for; None: the generator's own."""
+        return (self.height, self.width) if self.height or self.width else None
 
     def rule(self) -> FaultRule:
         return FaultRule(self.coarse_cells, self.context_cells)
@@ -162,7 +174,7 @@ class CompareConfig:
             controller=self.controller, time_limit=self.time_limit,
             seed_schedule=self.seed_schedule, record_failures=False,
             mission_stations=self.mission_stations, station_dwell_time=self.station_dwell_time,
-            robots=self.robots,
+            robots=self.robots, width=self.width, height=self.height,
             fitness=FitnessConfig())
 
     def ga_config(self) -> GAConfig:
@@ -243,8 +255,8 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     label = f'{method}-seed{seed}'
     with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                             simulate_invalid=False, observer=episode_log,
-                            mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+                            mission=config.mission(), fleet=config.fleet(),
+                            size=config.map_size()) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
         if method == 'sessgan':
@@ -254,7 +266,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
             source_key = f'sessgan:{source.label}'
         else:
             searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
-                                     config.ga_config())
+                                     config.ga_config(), config.map_size())
             run_search(searcher, evaluator, config.budget, label)
             source, source_key = _final_source(config, method)
         search_wall = time.perf_counter() - episode_log.started
@@ -297,12 +309,13 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
 
 
 def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None, str]:
+    label = 'shipped generator' if not config.checkpoint else config.checkpoint
+    base = PyramidSource(label, config.scenario, config.checkpoint or None, config.map_size())
     if method in ('random', 'latent'):
-        label = 'shipped generator' if not config.checkpoint else config.checkpoint
-        return PyramidSource(label, config.scenario, config.checkpoint or None), 'pyramid:base'
+        return base, 'pyramid:base'
     if method == 'cellular_automaton':
-        reference = checkpoint_training_map(config.scenario, config.checkpoint or None)
-        return AutomatonSource(config.scenario, reference=reference), 'cellular_automaton'
+        return (AutomatonSource(config.scenario, reference=base.reference, size=base.size),
+                'cellular_automaton')
     return None, ''
 
 

@@ -45,6 +45,8 @@ from sessgan_gen.checkpoint import (
     training_map,
 )
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
+from sessgan_gen.environment_sampler import resolve_sample_size
+from sessgan_gen.errors import SamplingRequestError
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.token_map import load_example_map
@@ -66,19 +68,24 @@ class MapSource(Protocol):
 class PyramidSource:
     """A generator checkpoint (a path, checkpoint bytes, or None for the shipped one)."""
 
-    def __init__(self, label: str, scenario: str, checkpoint: str | Path | bytes | None = None
-                 ) -> None:
+    def __init__(self, label: str, scenario: str, checkpoint: str | Path | bytes | None = None,
+                 size: tuple[int, int] | None = None) -> None:
+        """``size``: (height, width) of its maps; None or a zero side: the map it learned."""
         self.label = label
         self.scenario = scenario
         source = checkpoint or default_checkpoint_path(scenario)
         self.pyramid, self.metadata = load_checkpoint(source, scenario=scenario)
         self.reference = training_map(self.metadata)
+        try:
+            self.size = resolve_sample_size(self.pyramid, self.metadata, size, scenario)
+        except SamplingRequestError as err:
+            raise FreshSeedError(f'{label}: {err}') from err
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         """The maps the generator node would serve for ``seeds`` (the scenario's
         track_cleanup applied, as the sampler does)."""
-        return clean_generated_maps(sample_token_maps(self.pyramid, [int(s) for s in seeds]),
-                                    self.scenario)
+        return clean_generated_maps(
+            sample_token_maps(self.pyramid, [int(s) for s in seeds], self.size), self.scenario)
 
 
 class PopulationSource:
@@ -104,11 +111,13 @@ class AutomatonSource:
     """The BARN-style cellular automaton (sessgan_evolver.cellular_automaton)."""
 
     def __init__(self, scenario: str, label: str = 'cellular automaton',
-                 reference: np.ndarray | None = None) -> None:
+                 reference: np.ndarray | None = None,
+                 size: tuple[int, int] | None = None) -> None:
         """``reference``: the map its TPKL is measured against (default: the scenario's
-        example map); give the training map of the generators it is compared with."""
+        example map); give the training map of the generators it is compared with, and
+        their map ``size`` (height, width; default the scenario's)."""
         self.label = label
-        self.generator = CellularAutomatonGenerator(scenario)
+        self.generator = CellularAutomatonGenerator(scenario, size=size)
         self.reference = (load_example_map(scenario).cells if reference is None
                           else np.asarray(reference))
 
@@ -194,9 +203,11 @@ def last_evaluated_generation(store: RunStore) -> int:
     return max(generations)
 
 
-def campaign_sources(run_dir: str | Path, member: str = 'best') -> list[PyramidSource]:
+def campaign_sources(run_dir: str | Path, member: str = 'best',
+                     size: tuple[int, int] | None = None) -> list[PyramidSource]:
     """Generators of a campaign's last evaluated population: ``member`` is 'best' (the
-    fittest member of that generation), 'final' (every member) or a member index."""
+    fittest member of that generation), 'final' (every member) or a member index; their maps
+    are of ``size`` (height, width), by default of the campaign's."""
     store = open_run(run_dir)
     config = store.read_config()['config']
     scenario = str(config['scenario'])
@@ -227,8 +238,9 @@ def campaign_sources(run_dir: str | Path, member: str = 'best') -> list[PyramidS
     for index in chosen:
         pyramid.load_state_dict(genomes[index].to_state_dict(template))
         weights = checkpoint_bytes(pyramid, metadata)
-        sources.append(PyramidSource(f'{store.run_name} g{generation} m{index}', scenario,
-                                     weights))
+        sources.append(PyramidSource(
+            f'{store.run_name} g{generation} m{index}', scenario, weights,
+            size or (int(config.get('height', 0)), int(config.get('width', 0)))))
     return sources
 
 

@@ -40,9 +40,11 @@ class ExportConfig:
     seed: int = 0
     """Seed of the map --generate samples."""
     width: int = 0
-    """Width in cells of the map --generate samples; 0: the scenario's default."""
+    """Width in cells of the map --generate samples; 0: the size of the map the
+    checkpoint learned (your facility's)."""
     height: int = 0
-    """Height in cells of the map --generate samples; 0: the scenario's default."""
+    """Height in cells of the map --generate samples; 0: the size of the map the
+    checkpoint learned (your facility's)."""
     bag: str = ''
     """Failure bag directory whose map to export."""
 

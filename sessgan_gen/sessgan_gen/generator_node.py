@@ -42,7 +42,7 @@ class GeneratorNode(Node):
         super().__init__('sessgan_gen')
         self.declare_parameter('scenario', 'factory')
         self.declare_parameter('checkpoint', '')  # empty: the scenario's shipped checkpoint
-        self.declare_parameter('width', 0)        # cells; 0: the scenario's default
+        self.declare_parameter('width', 0)        # cells; 0: the checkpoint's map size
         self.declare_parameter('height', 0)
         self.declare_parameter('seed', 0)         # first seed; each publication uses the next
         self.declare_parameter('rate', 0.0)       # Hz; 0 publishes one environment at start

@@ -38,6 +38,7 @@ from sessgan_evolver.seeding import SeedStream, shared_seeds
 from sessgan_gen.checkpoint import (
     checkpoint_bytes,
     default_checkpoint_path,
+    incomplete_warning,
     load_checkpoint,
     training_map,
 )
@@ -53,6 +54,9 @@ from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_sim.bag_recording import BagStorage
 
 SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
+
+FEW_VALID_TESTS = 0.25
+"""A first generation with fewer valid tests than this share gets a loud warning."""
 
 EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
 """Wall seconds per map cell added to the default episode timeout for building the world: a
@@ -281,6 +285,8 @@ class Campaign:
         self.scenario = scenario
         checkpoint = config.checkpoint or str(default_checkpoint_path(scenario.name))
         self.pyramid, self.metadata = load_checkpoint(checkpoint, scenario=scenario.name)
+        if warning := incomplete_warning(self.metadata, f'checkpoint {checkpoint}'):
+            log(f'WARNING: {warning}')
         # TPKL (fitness penalty, report) is measured against the map the generator learned.
         self.example = training_map(self.metadata)
         try:
@@ -406,6 +412,11 @@ class Campaign:
                 f'generations, {60 / per_generation:.1f}/min, elapsed '
                 f'{format_duration(elapsed)}, ETA '
                 f'{format_duration(per_generation * (config.generations - done))}')
+            if generation == first_generation and summary['feasible_fraction'] < FEW_VALID_TESTS:
+                self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '
+                         f'generation {generation} are valid tests (hold a route): episodes '
+                         'on the others find no fault. Check the map the generator learned '
+                         '(mostly wall? passages too narrow for the robot?)')
             if done < config.generations:
                 self.store.save_checkpoint(done, algorithm.state_dict(),
                                            {'tpkl_reference': tpkl_reference,
@@ -415,6 +426,10 @@ class Campaign:
         return CampaignResult(self.store.run_dir, self.bags_dir, report_path,
                               self.store.read_rows('generation'),
                               time.monotonic() - wall_start)
+
+    def has_bags(self) -> bool:
+        """Whether the campaign's bag folder exists and holds a bag."""
+        return self.bags_dir.is_dir() and any(self.bags_dir.iterdir())
 
     def check_size(self, environments: Sequence[Environment]) -> None:
         """CampaignError unless every map is of the size this campaign asks for (a generator
@@ -455,8 +470,12 @@ class Campaign:
             uniqueness_table['last population'] = {
                 **{f'{s}x{s}': v for s, v in unique.items()},
                 'mean': float(np.mean(list(unique.values())))}
-        notes = [f'Failure bags: `{self.bags_dir}` (replay one with '
-                 '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+        # Only point to the bag folder when a failure was recorded into it.
+        notes = ([f'Failure bags: `{self.bags_dir}` (replay one with '
+                  '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+                 if self.has_bags() else
+                 ['No failure bag was written (no failure was found, or failures were not '
+                  'recorded).'])
         return write_report(self.store.run_dir, maps_by_generation, tpkl_table, uniqueness_table,
                             title=f'SESS-GAN campaign {self.store.run_name} '
                                   f'({self.config.scenario})',

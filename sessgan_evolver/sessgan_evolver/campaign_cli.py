@@ -528,8 +528,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         supervisor.stop_all()
         node.destroy_node()
         rclpy.try_shutdown()
-    report_result(result, log)
-    return 0
+    return report_result(result, log)
 
 
 def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, run_name: str,
@@ -553,17 +552,26 @@ def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, 
     except (SessganEvolverError, SessganGenError) as err:
         log(f'error: {err}')
         return 1
-    report_result(result, log)
-    return 0
+    return report_result(result, log)
 
 
-def report_result(result: Any, log: Callable[[str], None]) -> None:
+def report_result(result: Any, log: Callable[[str], None]) -> int:
+    """Print where the results are; the exit status: 1 when no map of the whole campaign was a
+    valid test (its figures measure nothing), else 0."""
     first, last = result.generations[0], result.generations[-1]
     log(f'done in {result.wall_time / 60:.1f} min: mean risk '
         f'{first["mean_risk_score"] or 0:.3f} (generation 0) -> '
         f'{last["mean_risk_score"] or 0:.3f} (generation {last["generation"]})')
     print(f'report: {result.report_path}')
-    print(f'failure bags: {result.bags_dir}')
+    if result.bags_dir.is_dir() and any(result.bags_dir.iterdir()):
+        print(f'failure bags: {result.bags_dir}')
+    else:
+        print('failure bags: none (no failure was recorded)')
+    if not any(row['feasible_fraction'] for row in result.generations):
+        log('error: no map of this campaign was a valid test (none held a route for the '
+            'robot), so it could find no fault: check the map the generator learned')
+        return 1
+    return 0
 
 
 if __name__ == '__main__':

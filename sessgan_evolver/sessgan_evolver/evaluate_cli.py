@@ -40,6 +40,7 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_gen.checkpoint import incomplete_warning
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
@@ -122,6 +123,9 @@ def build_sources(args: argparse.Namespace, scenario: str) -> list[MapSource]:
         sources.append(PyramidSource(str(checkpoint), scenario, checkpoint, size))
     if args.shipped or not sources:
         sources.insert(0, PyramidSource('shipped generator', scenario, None, size))
+    for source in sources:
+        if warning := incomplete_warning(source.metadata, source.label):
+            print(f'WARNING: {warning}', file=sys.stderr)
     every: list[MapSource] = list(sources)
     if args.cellular_automaton:
         every.append(AutomatonSource(scenario, reference=sources[0].reference,

@@ -107,6 +107,17 @@ def checkpoint_training_map(scenario: str, checkpoint: str | Path | bytes | None
     return training_map(payload['metadata'])
 
 
+def incomplete_warning(metadata: Mapping[str, Any], label: str = 'the checkpoint') -> str:
+    """A warning for a checkpoint of a training that stopped before its last scale (its finer
+    scales are untrained, so its maps are noise), or '' for a complete one."""
+    if metadata.get('complete', True) is not False:
+        return ''
+    return (f'{label} is of a training that stopped after scale '
+            f'{metadata.get("trained_scales", "?")} of {metadata.get("num_scales", "?")}: its '
+            'finer scales are untrained and its maps mostly noise; finish it with '
+            '`ros2 run sessgan_gen train ... --resume`')
+
+
 def map_size(metadata: Mapping[str, Any]) -> tuple[int, int]:
     """(height, width) in cells of the map the checkpoint learned: the size its generator
     serves by default."""

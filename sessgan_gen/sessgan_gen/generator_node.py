@@ -21,6 +21,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from sessgan_gen.checkpoint import incomplete_warning
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
@@ -67,7 +68,9 @@ class GeneratorNode(Node):
             max_cells_per_request=int(self.get_parameter('max_cells_per_request').value))
         checkpoint = self.get_parameter('checkpoint').value
         if checkpoint:  # an unreadable checkpoint ends the node at once, with the reason
-            self.sampler.load(checkpoint, self.get_parameter('scenario').value)
+            _, metadata = self.sampler.load(checkpoint, self.get_parameter('scenario').value)
+            if warning := incomplete_warning(metadata, f'checkpoint {checkpoint}'):
+                self.get_logger().warning(warning)
         self.next_seed = int(self.get_parameter('seed').value)
         self.environment_publisher = self.create_publisher(EnvironmentMsg, 'environments', 10)
         self.map_publisher = self.create_publisher(OccupancyGrid, 'environment', MAP_QOS)

@@ -8,6 +8,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NamedTuple, TextIO
 
 import numpy as np
 import torch
@@ -22,25 +23,51 @@ from sessgan_gen.training import (
     TrainConfig,
     Trainer,
     TrainingState,
+    check_training_map,
     config_dict,
+    long_training_warning,
     resolve_config,
     same_training,
     training_metadata,
 )
 
 
-def load_training_map(config: TrainConfig) -> tuple[np.ndarray, Scenario, str]:
-    """(cells, scenario, source label) of the map the config asks to learn."""
+class TrainingMap(NamedTuple):
+    """The map a training run learns."""
+
+    cells: np.ndarray
+    scenario: Scenario
+    source: str
+    """Where it came from (recorded as map_source)."""
+    origin: tuple[float, float, float]
+    """Pose of its cell (0, 0) corner in the original map's frame ((0, 0, 0) for token
+    maps)."""
+
+
+def load_training_map(config: TrainConfig, log: TextIO | None = None) -> TrainingMap:
+    """The map the config asks to learn, checked to be large enough; an imported map_server
+    map is described on ``log`` (default stderr), with warnings for a map that is mostly wall
+    or unknown."""
     from sessgan_gen import token_map  # the other half of the package; imported on use
+
+    log = log or sys.stderr
 
     scenario = get_scenario(config.scenario)
     if config.map_file and config.map_yaml:
         raise SessganGenError('give --map-file or --map-yaml, not both')
+    origin = (0.0, 0.0, 0.0)
+    described = ''
     if config.map_yaml:
-        from sessgan_gen.map_server_io import import_map_server_for_scenario
+        from sessgan_gen.map_server_io import import_facility_map
 
-        loaded = import_map_server_for_scenario(config.map_yaml, scenario)
+        imported = import_facility_map(config.map_yaml, scenario)
+        loaded = imported.token_map
+        origin = imported.origin
         source = str(Path(config.map_yaml).resolve())
+        described = f' ({imported.summary()})'
+        print(f'train: imported {config.map_yaml}: {imported.summary()}', file=log)
+        for warning in imported.warnings():
+            print(f'train: WARNING: {warning}', file=log)
     elif config.map_file:
         loaded = token_map.read_token_map(config.map_file)
         source = str(Path(config.map_file).resolve())
@@ -53,7 +80,11 @@ def load_training_map(config: TrainConfig) -> tuple[np.ndarray, Scenario, str]:
         raise SessganGenError(
             f'map {source} is a {loaded_name!r} map, but --scenario is {scenario.name!r}')
     cells = np.asarray(loaded.cells, dtype=np.int64)
-    return cells, scenario, source
+    try:
+        check_training_map(cells)
+    except ValueError as err:
+        raise SessganGenError(f'map {source}{described}: {err}') from err
+    return TrainingMap(cells, scenario, source, origin)
 
 
 def imported_map_paths(output: Path) -> tuple[Path, Path]:
@@ -62,17 +93,20 @@ def imported_map_paths(output: Path) -> tuple[Path, Path]:
     return output.with_suffix('.map.txt'), output.with_suffix('.map.yaml')
 
 
-def write_imported_map(output: Path, cells: np.ndarray, scenario: Scenario) -> None:
+def write_imported_map(output: Path, cells: np.ndarray, scenario: Scenario,
+                       origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
     """Write the token map learned from a map_server map next to the checkpoint: as tokens and
-    as the map_server map it is at the scenario's cell size (to compare with the original)."""
-    from sessgan_gen.map_server_io import export_token_map
-    from sessgan_gen.token_map import TokenMap, write_token_map
+    as the map_server map it is at the scenario's cell size, at the original's ``origin`` (so it
+    overlays the original in RViz)."""
+    from sessgan_gen.map_server_io import write_map_server
+    from sessgan_gen.token_map import TokenMap, tokens_to_occupancy, write_token_map
 
     text_path, yaml_path = imported_map_paths(output)
     output.parent.mkdir(parents=True, exist_ok=True)
     token_map = TokenMap(scenario=scenario.name, cells=cells)
     write_token_map(text_path, token_map)
-    export_token_map(yaml_path, token_map)
+    write_map_server(yaml_path, tokens_to_occupancy(cells, scenario), scenario.cell_size,
+                     origin)
     print(f'train: the map as learned ({token_map.width}x{token_map.height} cells of '
           f'{scenario.cell_size} m): {text_path} and {yaml_path}', file=sys.stderr)
 
@@ -125,11 +159,9 @@ def train(config: TrainConfig) -> int:
     """Run (or resume) the training that ``config`` describes; writes config.output."""
     if config.threads:
         torch.set_num_threads(config.threads)
-    cells, scenario, source = load_training_map(config)
+    cells, scenario, source, origin = load_training_map(config)
     output = Path(config.output)
     seed_everything(config.seed, config.deterministic)
-    if config.map_yaml:
-        write_imported_map(output, cells, scenario)
 
     pyramid = None
     state = None
@@ -154,6 +186,8 @@ def train(config: TrainConfig) -> int:
             f'this map needs {trainer.pyramid.scale_shapes}')
     shapes = trainer.pyramid.scale_shapes
     log = sys.stderr
+    if config.map_yaml:
+        write_imported_map(output, cells, scenario, origin)
     print(f'train: {scenario.name} map {source} {shapes[-1][0]}x{shapes[-1][1]}, '
           f'{len(shapes)} scales {[f"{h}x{w}" for h, w in shapes]}, '
           f'{config.iterations} iterations per scale, {config.channels} channels, '
@@ -163,6 +197,9 @@ def train(config: TrainConfig) -> int:
         return 0
     if state is not None:
         print(f'train: resuming after scale {state.trained_scales}/{len(shapes)}', file=log)
+    if warning := long_training_warning(shapes[trainer.state.trained_scales:],
+                                        config.iterations, config.channels):
+        print(f'train: WARNING: {warning}', file=log)
 
     printer = ProgressPrinter(log) if config.progress else None
     eta = TotalEta(shapes, config.iterations)
@@ -188,7 +225,31 @@ def train(config: TrainConfig) -> int:
     trainer.run(progress=progress, on_scale_done=checkpoint)
     print(f'train: finished in {trainer.state.seconds:.1f} s of training; checkpoint {output} '
           f'and {output.with_suffix(".json")}', file=log)
+    report_valid_tests(output, scenario, log)
     return 0
+
+
+VALID_TEST_SAMPLES = 20
+"""Maps sampled after training to tell how often the generator makes a valid test."""
+FEW_VALID_TESTS = 0.25
+"""A valid-test share below this warns: a campaign would spend most episodes on nothing."""
+
+
+def report_valid_tests(output: Path, scenario: Scenario, log: TextIO) -> float:
+    """Sample the trained generator and say how many of its maps are valid tests (a route
+    exists between a start and a goal); warn loudly when few are. Returns the share."""
+    from sessgan_gen.environment_sampler import EnvironmentSampler
+
+    seeds = list(range(VALID_TEST_SAMPLES))
+    environments = EnvironmentSampler().sample(seeds, output, scenario.name)
+    share = sum(env.feasible for env in environments) / len(environments)
+    print(f'train: {share:.0%} of {len(seeds)} sampled maps are valid tests', file=log)
+    if share < FEW_VALID_TESTS:
+        print(f'train: WARNING: only {share:.0%} of the maps this generator makes hold a route '
+              f'for the {scenario.robot} robot: a campaign would find few or no valid tests. '
+              'Is the map mostly wall (unknown space, negate)? Are its passages narrower than '
+              'the robot needs?', file=log)
+    return share
 
 
 if __name__ == '__main__':

@@ -117,6 +117,51 @@ SCENARIO_DEFAULTS: dict[str, dict[str, int]] = {
 2-core CPU (factory within 5 min, race track within 30 min)."""
 FALLBACK_DEFAULTS = {'iterations': 600, 'channels': 32}
 
+MIN_TRAINING_SIDE = 8
+"""Fewest cells per side of a map to learn: one receptive field (7 cells) plus one, so the
+patch GAN sees more than one window, and room for the 4 x 4 tiles TPKL counts."""
+
+SECONDS_PER_ITERATION = (0.0158, 5.38e-5)
+"""(a, b) of a training iteration's time a + b * cells at 32 channels on one CPU thread:
+fitted to the shipped factory checkpoint's per-scale times (8x8 27.8 s, 16x16 29.6 s, 32x32
+70.9 s per 1,000 iterations, scale_results in data/checkpoints/factory.json)."""
+LONG_TRAINING_SECONDS = 1800.0
+"""An estimate above this warns before training starts."""
+
+
+def check_training_map(cells: np.ndarray) -> None:
+    """ValueError naming the size when a map is too small to learn."""
+    height, width = np.shape(cells)
+    if min(height, width) < MIN_TRAINING_SIDE:
+        raise ValueError(
+            f'the map is {width}x{height} cells (width x height); training needs at least '
+            f'{MIN_TRAINING_SIDE} cells per side (one 7-cell receptive field and more)')
+
+
+def estimated_training_seconds(shapes: list[tuple[int, int]] | tuple[tuple[int, int], ...],
+                               iterations: int, channels: int) -> float:
+    """Rough CPU seconds (one thread) to train scales of ``shapes``
+    (:data:`SECONDS_PER_ITERATION`; the cell term grows with channels squared)."""
+    fixed, per_cell = SECONDS_PER_ITERATION
+    per_cell *= (channels / 32) ** 2
+    return float(sum(iterations * (fixed + per_cell * h * w) for h, w in shapes))
+
+
+def long_training_warning(shapes: list[tuple[int, int]] | tuple[tuple[int, int], ...],
+                          iterations: int, channels: int) -> str:
+    """What to tell before a training of scales ``shapes`` that would take long (more than
+    :data:`LONG_TRAINING_SECONDS` by :func:`estimated_training_seconds`), or ''."""
+    seconds = estimated_training_seconds(shapes, iterations, channels)
+    if not shapes or seconds <= LONG_TRAINING_SECONDS:
+        return ''
+    height, width = shapes[-1]
+    hours = seconds / 3600
+    return (f'a {width}x{height}-cell map ({height * width:,} cells) at {iterations} iterations '
+            f'a scale takes roughly {hours:.1f} h on one CPU thread (a 32x32 map: about 2 min), '
+            'and memory grows with the cells too: crop the map to the area the robots use, '
+            'train fewer --iterations, or use a GPU (--device cuda)')
+
+
 RESULT_FIELDS = ('output', 'resume', 'progress', 'threads', 'device')
 """Config fields that do not change the trained weights (resume may differ in them)."""
 

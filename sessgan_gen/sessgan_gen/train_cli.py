@@ -198,7 +198,7 @@ def train(config: TrainConfig) -> int:
     if state is not None:
         print(f'train: resuming after scale {state.trained_scales}/{len(shapes)}', file=log)
     if warning := long_training_warning(shapes[trainer.state.trained_scales:],
-                                        config.iterations, config.channels):
+                                        config.iterations, config.channels, config.crop_size):
         print(f'train: WARNING: {warning}', file=log)
 
     printer = ProgressPrinter(log) if config.progress else None

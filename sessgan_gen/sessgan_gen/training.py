@@ -22,7 +22,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 import torch
@@ -33,6 +33,7 @@ from sessgan_gen import __version__
 from sessgan_gen.checkpoint import training_map_rows
 from sessgan_gen.downsampling import downsample_pyramid, one_hot
 from sessgan_gen.model import (
+    GENERATOR_PADDING,
     GeneratorPyramid,
     PatchDiscriminator,
     init_weights,
@@ -92,6 +93,13 @@ class TrainConfig:
     """Weight alpha of the reconstruction loss."""
     init_from_previous_scale: bool = True
     """Start each scale's networks from the previous scale's weights (SinGAN); faster."""
+    crop_size: int = 48
+    """At a scale with a side longer than this, every update sees a random crop of at most
+    this many cells a side instead of the whole map (0: never crop). The patch discriminator
+    judges 7x7 windows and the losses are means over cells, so a crop's loss estimates the
+    whole map's without bias; the generator's input is cut from the whole padded input, so a
+    crop is generated exactly as inside the whole map. A 128x128 map's finest scale then costs
+    a 48x48 one per update."""
     seed: int = 1
     """Seed of every random choice of the run."""
     device: str = 'auto'
@@ -139,19 +147,22 @@ def check_training_map(cells: np.ndarray) -> None:
 
 
 def estimated_training_seconds(shapes: list[tuple[int, int]] | tuple[tuple[int, int], ...],
-                               iterations: int, channels: int) -> float:
+                               iterations: int, channels: int, crop_size: int = 0) -> float:
     """Rough CPU seconds (one thread) to train scales of ``shapes``
-    (:data:`SECONDS_PER_ITERATION`; the cell term grows with channels squared)."""
+    (:data:`SECONDS_PER_ITERATION`; the cell term grows with channels squared; a scale trained
+    on crops costs its crop's cells)."""
     fixed, per_cell = SECONDS_PER_ITERATION
     per_cell *= (channels / 32) ** 2
-    return float(sum(iterations * (fixed + per_cell * h * w) for h, w in shapes))
+    crop = crop_size or max(max(shape) for shape in shapes) if shapes else 0
+    return float(sum(iterations * (fixed + per_cell * min(h, crop) * min(w, crop))
+                     for h, w in shapes))
 
 
 def long_training_warning(shapes: list[tuple[int, int]] | tuple[tuple[int, int], ...],
-                          iterations: int, channels: int) -> str:
+                          iterations: int, channels: int, crop_size: int = 0) -> str:
     """What to tell before a training of scales ``shapes`` that would take long (more than
     :data:`LONG_TRAINING_SECONDS` by :func:`estimated_training_seconds`), or ''."""
-    seconds = estimated_training_seconds(shapes, iterations, channels)
+    seconds = estimated_training_seconds(shapes, iterations, channels, crop_size)
     if not shapes or seconds <= LONG_TRAINING_SECONDS:
         return ''
     height, width = shapes[-1]
@@ -189,6 +200,8 @@ def validate_config(config: TrainConfig) -> None:
         (config.generator_steps >= 1, 'generator_steps must be at least 1'),
         (config.learning_rate > 0, 'learning_rate must be positive'),
         (config.threads >= 0, 'threads must not be negative'),
+        (config.crop_size == 0 or config.crop_size >= MIN_TRAINING_SIDE,
+         f'crop_size must be 0 (no crops) or at least {MIN_TRAINING_SIDE}'),
     ]
     for ok, message in checks:
         if not ok:
@@ -381,23 +394,33 @@ class Trainer:
                 noises = pyramid.draw_noise(torch.default_generator, coarse_shapes, batch=1)
                 return upsample(pyramid.generate(noises), shape)
 
+        crops = Crops(shape, config.crop_size)
         for iteration in range(config.iterations):
             noise = torch.randn(real.shape).to(device)
             for _ in range(config.discriminator_steps):
                 previous = random_previous()
                 optimizer_d.zero_grad(set_to_none=True)
-                fake = generator(pad(amplitude * noise + _or_zero(previous)), previous).detach()
-                loss_d = (discriminator(fake).mean() - discriminator(real).mean()
-                          + gradient_penalty(discriminator, real, fake,
+                corner = crops.draw()
+                fake = generator(crops.cut_padded(pad(amplitude * noise + _or_zero(previous)),
+                                                  corner),
+                                 crops.cut(previous, corner)).detach()
+                real_crop = crops.cut(real, crops.draw())
+                loss_d = (discriminator(fake).mean() - discriminator(real_crop).mean()
+                          + gradient_penalty(discriminator, real_crop, fake,
                                              config.gradient_penalty_weight))
                 loss_d.backward()
                 optimizer_d.step()
             for _ in range(config.generator_steps):
                 optimizer_g.zero_grad(set_to_none=True)
-                fake = generator(pad(amplitude * noise + _or_zero(previous)), previous)
-                reconstruction = generator(reconstruction_input, reconstruction_previous)
+                corner = crops.draw()
+                fake = generator(crops.cut_padded(pad(amplitude * noise + _or_zero(previous)),
+                                                  corner),
+                                 crops.cut(previous, corner))
+                reconstruction = generator(crops.cut_padded(reconstruction_input, corner),
+                                           crops.cut(reconstruction_previous, corner))
                 loss_g = (-discriminator(fake).mean()
-                          + config.reconstruction_weight * F.mse_loss(reconstruction, real))
+                          + config.reconstruction_weight * F.mse_loss(
+                              reconstruction, crops.cut(real, corner)))
                 loss_g.backward()
                 optimizer_g.step()
             for scheduler in schedulers:
@@ -415,6 +438,48 @@ class Trainer:
                              seconds=time.perf_counter() - started,
                              reconstruction_accuracy=accuracy)
         return result, discriminator
+
+
+class Crops:
+    """Random crops of a scale's maps (``TrainConfig.crop_size``); a scale that fits the crop
+    is used whole and draws no random number, so such trainings are as before crops existed."""
+
+    def __init__(self, shape: tuple[int, int], crop_size: int) -> None:
+        self.shape = shape
+        self.active = crop_size > 0 and max(shape) > crop_size
+        self.window = (min(shape[0], crop_size), min(shape[1], crop_size)) if self.active \
+            else shape
+
+    def draw(self) -> tuple[int, int]:
+        """Top-left cell of a random crop (from torch's global generator, so a seeded run
+        repeats and a resumed one continues exactly)."""
+        if not self.active:
+            return 0, 0
+        top = int(torch.randint(self.shape[0] - self.window[0] + 1, (1,)))
+        left = int(torch.randint(self.shape[1] - self.window[1] + 1, (1,)))
+        return top, left
+
+    @overload
+    def cut(self, image: torch.Tensor, corner: tuple[int, int]) -> torch.Tensor: ...
+
+    @overload
+    def cut(self, image: None, corner: tuple[int, int]) -> None: ...
+
+    def cut(self, image: torch.Tensor | None, corner: tuple[int, int]) -> torch.Tensor | None:
+        """The crop at ``corner`` of a (batch, tokens, h, w) map."""
+        if image is None or not self.active:
+            return image
+        top, left = corner
+        return image[..., top:top + self.window[0], left:left + self.window[1]]
+
+    def cut_padded(self, padded: torch.Tensor, corner: tuple[int, int]) -> torch.Tensor:
+        """The generator input of the crop at ``corner``, cut from the whole map's padded
+        input with its margin, so the crop is generated as it is inside the whole map."""
+        if not self.active:
+            return padded
+        top, left = corner
+        margin = 2 * GENERATOR_PADDING
+        return padded[..., top:top + self.window[0] + margin, left:left + self.window[1] + margin]
 
 
 def _or_zero(previous: torch.Tensor | None) -> torch.Tensor | float:

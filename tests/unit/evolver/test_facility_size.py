@@ -124,3 +124,14 @@ def test_compare_final_sources_follow_the_checkpoint(facility):
                                   method)
         assert source is not None and source.maps([3]).shape == (1, 18, 26)
     assert CompareConfig(width=26, height=18).campaign_config(0).width == 26
+
+
+def test_evaluate_warns_about_an_incomplete_checkpoint(facility, tmp_path, capsys):
+    from sessgan_gen.checkpoint import incomplete_warning, load_checkpoint, save_checkpoint
+
+    pyramid, metadata = load_checkpoint(facility)
+    assert incomplete_warning(metadata) == ''
+    partial = save_checkpoint(tmp_path / 'partial.pt', pyramid,
+                              {**metadata, 'complete': False, 'trained_scales': 1})
+    build_sources(parse_args(['--checkpoint', str(partial)]), 'factory')
+    assert 'stopped after scale 1 of 2' in capsys.readouterr().err

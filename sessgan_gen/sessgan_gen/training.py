@@ -59,9 +59,11 @@ class TrainConfig:
     map_file: str = ''
     """Token text file to train on instead of the scenario's example map."""
     map_yaml: str = ''
-    """map_server map (YAML with its PGM) to train on instead, resampled to the scenario's cell
-    size; the token map it becomes is written next to the checkpoint (<output>.map.txt, and
-    <output>.map.yaml/.pgm as it looks at that cell size)."""
+    """map_server map (YAML with its PGM or PNG) to train on instead: a SLAM map is cropped to
+    its known region (unknown space around the mapped area is outside the map), then resampled
+    to the scenario's cell size; the token map it becomes is written next to the checkpoint
+    (<output>.map.txt, and <output>.map.yaml/.pgm as it looks at that cell size, at the
+    original's origin)."""
     output: str = ''
     """Checkpoint file (.pt; the .json metadata goes next to it). Empty: <scenario>.pt."""
     iterations: int = 0

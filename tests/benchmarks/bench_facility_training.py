@@ -84,12 +84,15 @@ def main(argv: list[str] | None = None) -> int:
                                             progress=False))
         seed_everything(config.seed)
         trainer = Trainer(cells, FACTORY, config)
-        started = time.perf_counter()
+        started, cpu_started = time.perf_counter(), time.process_time()
         trainer.run()
         seconds = time.perf_counter() - started
+        cpu = time.process_time() - cpu_started
         scales = '; '.join(f'{r["shape"][0]}x{r["shape"][1]} {r["seconds"]:.0f} s'
                            for r in trainer.state.scale_results)
-        print(f'{side}x{side}: trained in {seconds:.0f} s ({config.iterations} it/scale, crop '
+        # On a busy machine CPU seconds (one thread) are what a quiet core would take.
+        print(f'{side}x{side}: trained in {seconds:.0f} s wall, {cpu:.0f} s CPU '
+              f'({config.iterations} it/scale, crop '
               f'{config.crop_size}, {args.threads} thread(s); {scales}); '
               f'{figures(trainer.pyramid, cells, args.samples)}', flush=True)
     return 0

@@ -135,8 +135,13 @@ SECONDS_PER_ITERATION = (0.0158, 5.38e-5)
 """(a, b) of a training iteration's time a + b * cells at 32 channels on one CPU thread:
 fitted to the shipped factory checkpoint's per-scale times (8x8 27.8 s, 16x16 29.6 s, 32x32
 70.9 s per 1,000 iterations, scale_results in data/checkpoints/factory.json)."""
-LONG_TRAINING_SECONDS = 1800.0
-"""An estimate above this warns before training starts."""
+CROPPED_SECONDS_PER_CELL = 7e-7
+"""What a scale trained on crops still spends per cell of its whole map and iteration
+(generating the coarser scales whole and upsampling them): a 256x256 scale on 48x48 crops took
+0.74 s for 4 iterations where the crop alone models 0.56 s (one thread, process time)."""
+LONG_TRAINING_SECONDS = 600.0
+"""An estimate above this warns before training starts (the target for a facility map of up
+to 128x128 cells: 10 minutes; such a map is estimated at 6.7 min and measured at 6.5)."""
 
 
 def check_training_map(cells: np.ndarray) -> None:
@@ -154,10 +159,15 @@ def estimated_training_seconds(shapes: list[tuple[int, int]] | tuple[tuple[int, 
     (:data:`SECONDS_PER_ITERATION`; the cell term grows with channels squared; a scale trained
     on crops costs its crop's cells)."""
     fixed, per_cell = SECONDS_PER_ITERATION
-    per_cell *= (channels / 32) ** 2
-    crop = crop_size or max(max(shape) for shape in shapes) if shapes else 0
-    return float(sum(iterations * (fixed + per_cell * min(h, crop) * min(w, crop))
-                     for h, w in shapes))
+    scale = (channels / 32) ** 2
+    total = 0.0
+    for height, width in shapes:
+        cropped = crop_size > 0 and max(height, width) > crop_size
+        cells = (min(height, crop_size) * min(width, crop_size) if cropped
+                 else height * width)
+        whole = CROPPED_SECONDS_PER_CELL * height * width if cropped else 0.0
+        total += iterations * (fixed + scale * (per_cell * cells + whole))
+    return total
 
 
 def long_training_warning(shapes: list[tuple[int, int]] | tuple[tuple[int, int], ...],
@@ -168,9 +178,9 @@ def long_training_warning(shapes: list[tuple[int, int]] | tuple[tuple[int, int],
     if not shapes or seconds <= LONG_TRAINING_SECONDS:
         return ''
     height, width = shapes[-1]
-    hours = seconds / 3600
+    took = f'{seconds / 3600:.1f} h' if seconds >= 3600 else f'{seconds / 60:.0f} min'
     return (f'a {width}x{height}-cell map ({height * width:,} cells) at {iterations} iterations '
-            f'a scale takes roughly {hours:.1f} h on one CPU thread (a 32x32 map: about 2 min), '
+            f'a scale takes roughly {took} on one CPU thread (a 32x32 map: about 2 min), '
             'and memory grows with the cells too: crop the map to the area the robots use, '
             'train fewer --iterations, or use a GPU (--device cuda)')
 

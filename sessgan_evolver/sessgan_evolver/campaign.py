@@ -41,15 +41,22 @@ from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
 from sessgan_evolver.search_methods import METHODS
 from sessgan_evolver.seeding import SeedStream, shared_seeds
-from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    checkpoint_bytes,
+    default_checkpoint_path,
+    incomplete_warning,
+    load_checkpoint,
+    training_map,
+)
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
-from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
+from sessgan_gen.environment_sampler import resolve_sample_size
+from sessgan_gen.errors import InvalidFleetError, InvalidMissionError, SamplingRequestError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_sim.bag_recording import BagStorage
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
@@ -62,6 +69,9 @@ search_methods.METHODS runs as a sessgan_evolver.method_campaign.MethodCampaign.
 DEFAULT_METHOD = SESSGAN_METHOD
 """What the ``campaign`` command (and ``./sessgan demo``) runs without --method: the best
 measured. A CampaignConfig built in code defaults to sessgan, the Campaign class's method."""
+
+FEW_VALID_TESTS = 0.25
+"""A first generation with fewer valid tests than this share gets a loud warning."""
 
 EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
 """Wall seconds per map cell added to the default episode timeout for building the world: a
@@ -165,6 +175,11 @@ class CampaignConfig:
     robots: int = 1
     """[1] Robots under test on every map (a fleet episode: robots r1, r2, ... drawn beside
     the map's own start and goal, each route certified), 1..8; 1: one robot."""
+    width: int = 0
+    """[0: the checkpoint's] Width of every map in cells; by default the generator serves
+    maps of the size of the map it learned (your facility's)."""
+    height: int = 0
+    """[0: the checkpoint's] Height of every map in cells."""
     fitness: FitnessConfig = field(default_factory=FitnessConfig)
 
     def validate(self) -> None:
@@ -180,6 +195,9 @@ class CampaignConfig:
             raise CampaignError(f'a budget of {self.budget} episodes pays for no sessgan '
                                 f'generation ({self.population} members x '
                                 f'{self.maps_per_member} maps)')
+        if self.width < 0 or self.height < 0:
+            raise CampaignError(f'width and height must be >= 0 (0: the checkpoint map size), got '
+                                f'{self.width}x{self.height}')
         try:
             self.mission()
         except InvalidMissionError as err:
@@ -354,9 +372,17 @@ class Campaign:
         self.invocation = dict(invocation or {})
         scenario = get_scenario(config.scenario)
         self.scenario = scenario
-        self.example = load_example_map(scenario.name).cells
         checkpoint = config.checkpoint or str(default_checkpoint_path(scenario.name))
         self.pyramid, self.metadata = load_checkpoint(checkpoint, scenario=scenario.name)
+        if warning := incomplete_warning(self.metadata, f'checkpoint {checkpoint}'):
+            log(f'WARNING: {warning}')
+        # TPKL (fitness penalty, report) is measured against the map the generator learned.
+        self.example = training_map(self.metadata)
+        try:
+            self.size = resolve_sample_size(self.pyramid, self.metadata,
+                                            (config.height, config.width), scenario.name)
+        except SamplingRequestError as err:
+            raise CampaignError(str(err)) from err
         self.template = {k: v.clone() for k, v in self.pyramid.state_dict().items()}
         self.store = RunStore(runs_root, run_name)  # creates the run directory
         self.bags_dir = Path(bags_root).resolve() / run_name
@@ -414,6 +440,7 @@ class Campaign:
             for member, genome in enumerate(genomes):
                 environments = evaluator.sample(self.weights_of(genome), map_seeds,
                                                 generation, member)
+                self.check_size(environments)
                 token_maps.append([occupancy_to_tokens(env.occupancy, self.scenario)
                                    for env in environments])
                 jobs += [EpisodeJob(generation, member, k, env, sim_seeds[k])
@@ -490,6 +517,11 @@ class Campaign:
                 f'{format_duration(elapsed)}, ETA '
                 f'{format_duration(per_generation * (config.generations - done))}'
                 + harness_note(harness_reruns, lost_bags))
+            if generation == first_generation and summary['feasible_fraction'] < FEW_VALID_TESTS:
+                self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '
+                         f'generation {generation} are valid tests (hold a route): episodes '
+                         'on the others find no fault. Check the map the generator learned '
+                         '(mostly wall? passages too narrow for the robot?)')
             if done < config.generations:
                 self.store.save_checkpoint(done, algorithm.state_dict(),
                                            {'tpkl_reference': tpkl_reference,
@@ -499,6 +531,21 @@ class Campaign:
         return CampaignResult(self.store.run_dir, self.bags_dir, report_path,
                               self.store.read_rows('generation'),
                               time.monotonic() - wall_start)
+
+    def has_bags(self) -> bool:
+        """Whether the campaign's bag folder exists and holds a bag."""
+        return self.bags_dir.is_dir() and any(self.bags_dir.iterdir())
+
+    def check_size(self, environments: Sequence[Environment]) -> None:
+        """CampaignError unless every map is of the size this campaign asks for (a generator
+        node started elsewhere, or an evaluator built without the size, would serve others)."""
+        for environment in environments:
+            if tuple(environment.occupancy.shape) != self.size:
+                height, width = self.size
+                raise CampaignError(
+                    f'the generator served {environment.id} at {environment.occupancy.shape[0]}'
+                    f'x{environment.occupancy.shape[1]} cells; the campaign asks for '
+                    f'{height}x{width} (height x width)')
 
     # -- report ---------------------------------------------------------------------------
 
@@ -547,8 +594,12 @@ class Campaign:
             uniqueness_table['last population'] = {
                 **{f'{s}x{s}': v for s, v in unique.items()},
                 'mean': float(np.mean(list(unique.values())))}
-        notes = [f'Failure bags: `{self.bags_dir}` (replay one with '
-                 '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+        # Only point to the bag folder when a failure was recorded into it.
+        notes = ([f'Failure bags: `{self.bags_dir}` (replay one with '
+                  '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+                 if self.has_bags() else
+                 ['No failure bag was written (no failure was found, or failures were not '
+                  'recorded).'])
         notes += self.harness_notes()
         return write_report(self.store.run_dir, maps_by_generation, tpkl_table, uniqueness_table,
                             title=f'SESS-GAN campaign {self.store.run_name} '

@@ -227,7 +227,8 @@ class RosEvaluator:
 
         request = GenerateEnvironments.Request(
             scenario=self.config.scenario, seeds=[int(s) for s in seeds],
-            generation=generation, member=member)
+            generation=generation, member=member, height=self.config.height,
+            width=self.config.width)
         request.weights = weights
         for attempt in range(1, self.max_attempts + 1):
             future = self.generator.call_async(request)
@@ -576,8 +577,7 @@ def run_campaign(argv: list[str]) -> int:
         supervisor.stop_all()
         node.destroy_node()
         rclpy.try_shutdown()
-    report_result(result, log)
-    return 0
+    return report_result(result, log)
 
 
 def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
@@ -593,8 +593,8 @@ def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
                 config.scenario, controller, config.time_limit,
                 record_directory=campaign.bags_dir if config.record_failures else None,
                 bag_storage=config.bag_storage, mission=config.mission(),
-                fleet=config.fleet(), harness_tries=config.harness_tries,
-                log=log) as evaluator:
+                fleet=config.fleet(), size=(config.height, config.width),
+                harness_tries=config.harness_tries, log=log) as evaluator:
             result = campaign.run(evaluator, resume=resume)
     except KeyboardInterrupt:
         log(f'interrupted (continue later with --resume --run {run_name} --in-process)')
@@ -606,8 +606,7 @@ def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
     except (SessganEvolverError, SessganGenError) as err:
         log(f'error: {err}')
         return 1
-    report_result(result, log)
-    return 0
+    return report_result(result, log)
 
 
 def make_campaign(config: CampaignConfig, run_name: str, runs_root: Path, bags_root: Path,
@@ -627,8 +626,9 @@ def plan_of(config: CampaignConfig) -> str:
     return f'{config.method}, {config.resolved_budget()} episodes'
 
 
-def report_result(result: Any, log: Callable[[str], None]) -> None:
-    """The last lines: failures and faults found first, then the risks."""
+def report_result(result: Any, log: Callable[[str], None]) -> int:
+    """Print where the results are; the exit status: 1 when no map of the whole campaign was a
+    valid test (its figures measure nothing), else 0."""
     first, last = result.generations[0], result.generations[-1]
     episodes = int(last.get('episodes_so_far') or 0)
     failures = int(last.get('valid_failures_so_far') or 0)
@@ -643,13 +643,21 @@ def report_result(result: Any, log: Callable[[str], None]) -> None:
         f'risk {first.get("mean_risk_score") or 0:.3f} -> '
         f'{last.get("mean_risk_score") or 0:.3f}')
     print(f'report: {result.report_path}')
-    print(f'failure bags: {result.bags_dir}')
+    if result.bags_dir.is_dir() and any(result.bags_dir.iterdir()):
+        print(f'failure bags: {result.bags_dir}')
+    else:
+        print('failure bags: none (no failure was recorded)')
     from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 
     suite = write_suite_of_bags_below(result.run_dir / SUITE_FILE, result.run_dir.name,
                                       result.bags_dir, {'source': 'campaign failure bags'})
     if suite is not None:
         print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
+    if not any(row.get('feasible_fraction') for row in result.generations):
+        log('error: no map of this campaign was a valid test (none held a route for the '
+            'robot), so it could find no fault: check the map the generator learned')
+        return 1
+    return 0
 
 
 if __name__ == '__main__':

@@ -59,12 +59,13 @@ from sessgan_evolver.in_process import EpisodeObserver, InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
+from sessgan_gen.checkpoint import checkpoint_training_map
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.metrics import navigation_columns
@@ -124,6 +125,11 @@ class CompareConfig:
     in process; --controller then only names it. Their failure bags (in <their
     bags_root>/external/<output folder name>/<method-seed>) must be readable on this
     machine."""
+    width: int = 0
+    """[0: the generator's] Width of every method's maps in cells (by default the size of
+    the map the generator learned)."""
+    height: int = 0
+    """[0: the generator's] Height of every method's maps in cells."""
 
     def validate(self) -> None:
         get_scenario(self.scenario)
@@ -169,6 +175,13 @@ class CompareConfig:
         if 'sessgan' in self.methods:
             self.campaign_config(self.search_seeds[0]).validate()
         self.rule().validate()
+        if self.width < 0 or self.height < 0:
+            raise CompareError(f'width and height must be >= 0 (0: the generator map size), '
+                               f'got {self.width}x{self.height}')
+
+    def map_size(self) -> tuple[int, int] | None:
+        """(height, width) asked for; None: the generator's own."""
+        return (self.height, self.width) if self.height or self.width else None
 
     def rule(self) -> FaultRule:
         return FaultRule(self.coarse_cells, self.context_cells)
@@ -188,7 +201,7 @@ class CompareConfig:
             controller=self.controller, time_limit=self.time_limit,
             seed_schedule=self.seed_schedule, record_failures=False,
             mission_stations=self.mission_stations, station_dwell_time=self.station_dwell_time,
-            robots=self.robots,
+            robots=self.robots, width=self.width, height=self.height,
             fitness=FitnessConfig())
 
     def ga_config(self) -> GAConfig:
@@ -211,10 +224,12 @@ def open_evaluator(config: CompareConfig, output: Path, label: str,
         return worker_evaluator(config.scenario, external_record_subdirectory(output, label),
                                 output / 'logs' / label, config.controller,
                                 config.time_limit, config.mission(), config.fleet(),
-                                simulate_invalid=False, observer=observer, log=log)
+                                simulate_invalid=False, observer=observer, log=log,
+                                size=config.map_size())
     return InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                               simulate_invalid=False, observer=observer,
-                              mission=config.mission(), fleet=config.fleet(), log=log)
+                              mission=config.mission(), fleet=config.fleet(), log=log,
+                              size=config.map_size())
 
 
 @dataclass
@@ -299,7 +314,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
             source_key = f'sessgan:{source.label}'
         else:
             searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
-                                     config.ga_config())
+                                     config.ga_config(), config.map_size())
             run_search(searcher, evaluator, config.budget, label)
             source, source_key = _final_source(config, method)
         search_wall = time.perf_counter() - episode_log.started
@@ -317,7 +332,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     first = min(confirmed, key=lambda entry: entry.first, default=None)
     episodes = len(records)
     tokens = _example_tokens(records, faults, config.scenario)
-    example = load_example_map(config.scenario).cells
+    example = checkpoint_training_map(config.scenario, config.checkpoint or None)
     figures = RunFigures(
         method=method, search_seed=seed, episodes=episodes,
         valid_maps=sum(bool(r.metrics.get('feasible')) for r in records),
@@ -342,11 +357,13 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
 
 
 def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None, str]:
+    label = 'shipped generator' if not config.checkpoint else config.checkpoint
+    base = PyramidSource(label, config.scenario, config.checkpoint or None, config.map_size())
     if method in ('random', 'latent'):
-        label = 'shipped generator' if not config.checkpoint else config.checkpoint
-        return PyramidSource(label, config.scenario, config.checkpoint or None), 'pyramid:base'
+        return base, 'pyramid:base'
     if method == 'cellular_automaton':
-        return AutomatonSource(config.scenario), 'cellular_automaton'
+        return (AutomatonSource(config.scenario, reference=base.reference, size=base.size),
+                'cellular_automaton')
     return None, ''
 
 

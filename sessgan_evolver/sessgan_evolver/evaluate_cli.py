@@ -46,6 +46,7 @@ from sessgan_evolver.fresh_seed import (
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
+from sessgan_gen.checkpoint import incomplete_warning
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
@@ -77,6 +78,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         help='also evaluate the non-learned cellular-automaton generator')
     parser.add_argument('--exclude-run', type=Path, action='append', default=[],
                         help='a further run whose seeds must not be used; repeatable')
+    parser.add_argument('--width', type=int, default=0,
+                        help='map width in cells (default 0: the size of the map each '
+                             "generator learned, a campaign's own size for --run)")
+    parser.add_argument('--height', type=int, default=0,
+                        help='map height in cells (default 0: as --width)')
     parser.add_argument('--episodes', type=int, default=30, help='fresh maps per generator')
     parser.add_argument('--seed', type=int, default=1000, help='seed of the fresh seeds')
     parser.add_argument('--controller', default='',
@@ -116,20 +122,30 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error('--episodes must be >= 1')
+    if args.width < 0 or args.height < 0:
+        parser.error("--width and --height must be >= 0 (0: the generator's map size)")
     return args
 
 
 def build_sources(args: argparse.Namespace, scenario: str) -> list[MapSource]:
-    sources: list[MapSource] = []
+    """The generators to evaluate; the cellular automaton makes maps of the first one's size
+    and is measured against its training map."""
+    size = (args.height, args.width) if args.height or args.width else None
+    sources: list[PyramidSource] = []
     for run_dir in args.run:
-        sources += campaign_sources(run_dir, args.member)
+        sources += campaign_sources(run_dir, args.member, size)
     for checkpoint in args.checkpoint:
-        sources.append(PyramidSource(str(checkpoint), scenario, checkpoint))
+        sources.append(PyramidSource(str(checkpoint), scenario, checkpoint, size))
     if args.shipped or not sources:
-        sources.insert(0, PyramidSource('shipped generator', scenario, None))
+        sources.insert(0, PyramidSource('shipped generator', scenario, None, size))
+    for source in sources:
+        if warning := incomplete_warning(source.metadata, source.label):
+            print(f'WARNING: {warning}', file=sys.stderr)
+    every: list[MapSource] = list(sources)
     if args.cellular_automaton:
-        sources.append(AutomatonSource(scenario))
-    return sources
+        every.append(AutomatonSource(scenario, reference=sources[0].reference,
+                                     size=sources[0].size))
+    return every
 
 
 def check_settings(args: argparse.Namespace, scenario: str) -> None:

@@ -63,11 +63,15 @@ class InProcessEvaluator:
                  observer: EpisodeObserver | None = None,
                  mission: MissionSpec | None = None, fleet: FleetSpec | None = None,
                  harness_tries: int = DEFAULT_HARNESS_TRIES,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None,
+                 size: tuple[int, int] | None = None) -> None:
         """``mission``: the stations every sampled map gets (None: plain episodes);
         ``fleet``: the robots under test every sampled map gets (None: one);
         ``harness_tries``: tries of an episode the harness ends (sessgan_evolver.harness);
-        ``log``: where re-runs and lost bags are told (default: nowhere)."""
+        ``log``: where re-runs and lost bags are told (default: nowhere); ``size``: (height,
+        width) of every sampled map in cells (None or a zero side: the checkpoint's training
+        map's)."""
+        self.size = size
         self.scenario = scenario
         self.mission = (mission or MissionSpec()).validate()
         self.fleet = (fleet or FleetSpec()).validate(self.mission.stations)
@@ -104,8 +108,8 @@ class InProcessEvaluator:
 
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
-        return self.sampler.sample(seeds, weights, self.scenario, generation=generation,
-                                   member=member, mission=self.mission,
+        return self.sampler.sample(seeds, weights, self.scenario, size=self.size,
+                                   generation=generation, member=member, mission=self.mission,
                                    fleet=self.fleet)
 
     def evaluate(self, jobs: Sequence[EpisodeJob],

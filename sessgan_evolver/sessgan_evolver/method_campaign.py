@@ -73,7 +73,7 @@ def method_of(config: CampaignConfig) -> SearchMethod:
                   fitness=config.fitness)
     try:
         return make_baseline(config.method, config.scenario, config.seed,
-                             config.checkpoint or None, ga)
+                             config.checkpoint or None, ga, (config.height, config.width))
     except SearchMethodError as err:
         raise CampaignError(f'method {config.method}: {err}') from err
 

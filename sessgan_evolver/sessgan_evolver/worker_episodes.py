@@ -54,8 +54,11 @@ class WorkerEvaluator:
                  controller: str = 'external', simulate_invalid: bool = True,
                  observer: EpisodeObserver | None = None, mission: MissionSpec | None = None,
                  fleet: FleetSpec | None = None,
-                 count_harness_reruns: Callable[[], int] = lambda: 0) -> None:
+                 count_harness_reruns: Callable[[], int] = lambda: 0,
+                 size: tuple[int, int] | None = None) -> None:
         self.scenario = scenario
+        self.size = size
+        """(height, width) of sampled maps (None: the checkpoint's training map's)."""
         self.run_jobs = run_jobs
         self.count_harness_reruns = count_harness_reruns
         self.record_directory = record_directory
@@ -93,8 +96,9 @@ class WorkerEvaluator:
 
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
-        return self.sampler.sample(seeds, weights, self.scenario, generation=generation,
-                                   member=member, mission=self.mission, fleet=self.fleet)
+        return self.sampler.sample(seeds, weights, self.scenario, size=self.size,
+                                   generation=generation, member=member, mission=self.mission,
+                                   fleet=self.fleet)
 
     def evaluate(self, jobs: Sequence[EpisodeJob],
                  on_result: Callable[[EpisodeJob, dict], None]) -> None:
@@ -185,7 +189,8 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
                      fleet: FleetSpec | None = None, simulate_invalid: bool = True,
                      observer: EpisodeObserver | None = None,
                      log: Callable[[str], None] = print,
-                     wait: float = WORKER_WAIT) -> Iterator[WorkerEvaluator]:
+                     wait: float = WORKER_WAIT,
+                     size: tuple[int, int] | None = None) -> Iterator[WorkerEvaluator]:
     """A WorkerEvaluator on every evaluate action server of the domain (after at least one
     answers within ``wait`` seconds), their failure bags in ``record_directory`` under their
     bags_root; its ROS node is shut down on exit. Nothing is started: the simulators and the
@@ -216,7 +221,7 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
             f'{record_directory}')
         yield WorkerEvaluator(scenario, ros.evaluate, record_directory, label,
                               simulate_invalid, observer, mission, fleet,
-                              lambda: ros.harness_reruns)
+                              lambda: ros.harness_reruns, size)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

@@ -41,9 +41,11 @@ class ExportConfig:
     seed: int = 0
     """Seed of the map --generate samples."""
     width: int = 0
-    """Width in cells of the map --generate samples; 0: the scenario's default."""
+    """Width in cells of the map --generate samples; 0: the size of the map the
+    checkpoint learned (your facility's)."""
     height: int = 0
-    """Height in cells of the map --generate samples; 0: the scenario's default."""
+    """Height in cells of the map --generate samples; 0: the size of the map the
+    checkpoint learned (your facility's)."""
     bag: str = ''
     """Failure bag directory whose map to export."""
 
@@ -96,13 +98,20 @@ def export(config: ExportConfig) -> Path:
 
         export_token_map(output, read_token_map(config.map_file))
     elif config.generate:
+        from sessgan_gen.checkpoint import incomplete_warning
         from sessgan_gen.environment_sampler import EnvironmentSampler
 
         scenario = config.scenario or (None if config.checkpoint else 'factory')
-        environment = EnvironmentSampler().sample(
-            [config.seed], config.checkpoint or None, scenario,
-            (config.height, config.width))[0]
+        sampler = EnvironmentSampler()
+        _, metadata = sampler.load(config.checkpoint or None, scenario)
+        if warning := incomplete_warning(metadata, f'checkpoint {config.checkpoint}'):
+            print(f'export: WARNING: {warning}', file=sys.stderr)
+        environment = sampler.sample([config.seed], config.checkpoint or None, scenario,
+                                     (config.height, config.width))[0]
         export_environment(output, environment)
+        if not environment.feasible:
+            print(f'export: WARNING: the map of seed {config.seed} holds no route between a '
+                  'start and a goal for the robot: it is not a valid test', file=sys.stderr)
     else:
         bag = Path(config.bag)
         loaded = read_map_server(bag / 'map.yaml')

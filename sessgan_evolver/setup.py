@@ -11,6 +11,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
     ],
     install_requires=['setuptools'],
+    extras_require={'test': ['pytest']},  # colcon test runs test/ with pytest
     zip_safe=True,
     maintainer='SESS-GAN developers',
     maintainer_email='sessgan@example.org',
@@ -23,6 +24,7 @@ setup(
             'replay = sessgan_evolver.replay_cli:main',
             'evaluate = sessgan_evolver.evaluate_cli:main',
             'compare = sessgan_evolver.compare_cli:main',
+            'suite = sessgan_evolver.suite_cli:main',
         ],
     },
 )

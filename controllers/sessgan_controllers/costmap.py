@@ -214,8 +214,10 @@ class Costmap:
         v = (points[:, 1] - self.origin[1]) / self.resolution - 0.5
         height, width = self.shape
         outside = (u < -0.5) | (v < -0.5) | (u > width - 0.5) | (v > height - 0.5)
-        u = np.clip(u, 0.0, width - 1.0)
-        v = np.clip(v, 0.0, height - 1.0)
+        # The calls a tick makes are many and small: ufuncs instead of np.clip's wrapper and
+        # one flat take per corner instead of 2-D fancy indexing (the same values).
+        u = np.minimum(np.maximum(u, 0.0), width - 1.0)
+        v = np.minimum(np.maximum(v, 0.0), height - 1.0)
         col0 = np.minimum(np.floor(u).astype(int), width - 2) if width > 1 else np.zeros(
             len(u), dtype=int)
         row0 = np.minimum(np.floor(v).astype(int), height - 2) if height > 1 else np.zeros(
@@ -223,8 +225,11 @@ class Costmap:
         col1 = np.minimum(col0 + 1, width - 1)
         row1 = np.minimum(row0 + 1, height - 1)
         fu, fv = u - col0, v - row0
-        value = ((1 - fu) * (1 - fv) * field[row0, col0] + fu * (1 - fv) * field[row0, col1]
-                 + (1 - fu) * fv * field[row1, col0] + fu * fv * field[row1, col1])
+        flat = field.ravel()
+        top, bottom = row0 * width, row1 * width
+        value = ((1 - fu) * (1 - fv) * flat.take(top + col0)
+                 + fu * (1 - fv) * flat.take(top + col1)
+                 + (1 - fu) * fv * flat.take(bottom + col0) + fu * fv * flat.take(bottom + col1))
         return np.where(outside, 0.0, value)
 
     # ----------------------------------------------------------------------------------------

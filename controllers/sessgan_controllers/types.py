@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
+from functools import lru_cache
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -42,6 +43,16 @@ def parameter(default: Any, help: str) -> Any:  # noqa: A002 (help mirrors argpa
 def config_help(config_type: type) -> dict[str, str]:
     """Map each field of a config dataclass to its help text."""
     return {item.name: item.metadata.get('help', '') for item in fields(config_type)}
+
+
+@lru_cache(maxsize=8, typed=True)
+def _beam_angles(count: int, angle_min: float, angle_increment: float) -> np.ndarray:
+    """ScanData.angles, computed once per scan geometry (a controller asks several times a
+    tick, every tick, for the same beams)."""
+    raw = angle_min + angle_increment * np.arange(count)
+    angles = (raw + math.pi) % (2.0 * math.pi) - math.pi
+    angles.flags.writeable = False
+    return angles
 
 
 @dataclass(frozen=True)
@@ -64,9 +75,9 @@ class ScanData:
     """Longest valid range in metres."""
 
     def angles(self) -> np.ndarray:
-        """Body-frame angle of every beam in radians, wrapped to [-pi, pi)."""
-        raw = self.angle_min + self.angle_increment * np.arange(len(self.ranges))
-        return (raw + math.pi) % (2.0 * math.pi) - math.pi
+        """Body-frame angle of every beam in radians, wrapped to [-pi, pi) (read-only: the
+        same array for every scan of the same geometry)."""
+        return _beam_angles(len(self.ranges), self.angle_min, self.angle_increment)
 
     def valid(self) -> np.ndarray:
         """Boolean mask of beams with a usable return."""

@@ -4,12 +4,17 @@ Works for MCAP and sqlite3 bags alike (rosbags picks the storage from metadata.y
 for any rosbag2 bag, with or without the episode.json a failure bag carries. Messages come
 back still CDR-serialized, in timestamp order, so replay can publish them unchanged; this
 module imports no rclpy and no message types.
+
+Before a bag is trusted, :func:`verify_bag_files` checks every file against the sizes and
+SHA-256 digests its episode.json lists (rosbags checks MCAP chunk CRCs while reading), and
+:func:`check_episode_fields` the types of the episode.json fields re-simulation uses.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Collection, Iterator
+import numbers
+from collections.abc import Callable, Collection, Iterator, Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -17,6 +22,7 @@ from rosbags.interfaces import Connection, ConnectionExtRosbag2
 from rosbags.rosbag2 import Reader, ReaderError
 
 from sessgan_evolver.errors import BagReadError
+from sessgan_sim.bag_recording import sha256_of
 
 EPISODE_FILE = 'episode.json'
 """Name of the episode facts file inside a failure bag directory."""
@@ -167,3 +173,118 @@ def _topic_of(connection: Connection) -> BagTopic:
         depth = int(qos.depth)
     return BagTopic(connection.topic, connection.msgtype, int(connection.msgcount),
                     durability, reliability, depth)
+
+
+def verify_bag_files(path: str | Path) -> str | None:
+    """Check every file episode.json lists (``files``: size and SHA-256) against the disk.
+
+    BagReadError naming the file that is missing, of another size or with another digest
+    (a bag corrupted after it was written). Returns a warning for a bag whose episode.json
+    lists no digests (older bags, bags without episode.json), None when all match.
+    """
+    directory = bag_directory(path)
+    episode = read_episode_json(directory)
+    files = (episode or {}).get('files')
+    if files is None:
+        return (f'{directory} records no file digests (a bag from an older version, or no '
+                'failure bag): its files cannot be checked for corruption')
+    if not isinstance(files, Mapping) or not files:
+        raise BagReadError(f'{directory / EPISODE_FILE}: field "files" must map file names to '
+                           '{size, sha256}')
+    for name, expected in sorted(files.items()):
+        file = directory / str(name)
+        if (Path(str(name)).name != name or not isinstance(expected, Mapping)
+                or not isinstance(expected.get('size'), int)
+                or not isinstance(expected.get('sha256'), str)):
+            raise BagReadError(f'{directory / EPISODE_FILE}: field "files" has a malformed entry '
+                               f'{name!r}: {expected!r:.120}')
+        if not file.is_file():
+            raise BagReadError(f'bag {directory} is incomplete: {file} is missing')
+        size = file.stat().st_size
+        if size != expected['size']:
+            raise BagReadError(f'bag {directory} is incomplete or corrupt: {file} has {size} '
+                               f'bytes, episode.json recorded {expected["size"]}')
+        digest = sha256_of(file)
+        if digest != expected['sha256']:
+            raise BagReadError(f'bag {directory} is corrupt: the SHA-256 digest of {file} is '
+                               f'{digest}, episode.json recorded {expected["sha256"]}')
+    return None
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _integer(value: object) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _pose(value: object) -> bool:
+    return (isinstance(value, list) and len(value) in (2, 3)
+            and all(_number(item) for item in value))
+
+
+def _poses(value: object) -> bool:
+    return isinstance(value, list) and all(_pose(item) for item in value)
+
+
+def _fleet(value: object) -> bool:
+    return value is None or (isinstance(value, list) and all(
+        isinstance(robot, Mapping) and _pose(robot.get('start')) and _pose(robot.get('goal'))
+        and _number(robot.get('route_length', 0.0)) for robot in value))
+
+
+_Check = tuple[Callable[[object], bool], str]
+_EPISODE_FIELDS: dict[str, tuple[bool, _Check]] = {
+    # name: (required, (check, what it must be))
+    'environment_id': (True, (lambda v: isinstance(v, str), 'a string')),
+    'scenario': (True, (lambda v: isinstance(v, str), 'a string')),
+    'start': (True, (_pose, 'a list [x, y] or [x, y, yaw] of numbers')),
+    'goal': (True, (_pose, 'a list [x, y] or [x, y, yaw] of numbers')),
+    'metrics': (True, (lambda v: isinstance(v, Mapping), 'an object')),
+    'seed': (False, (_integer, 'an integer')),
+    'episode_seed': (False, (_integer, 'an integer')),
+    'generation': (False, (_integer, 'an integer')),
+    'member': (False, (_integer, 'an integer')),
+    'feasible': (False, (lambda v: isinstance(v, bool), 'true or false')),
+    'route_length': (False, (_number, 'a number')),
+    'route_min_clearance': (False, (_number, 'a number')),
+    'stations': (False, (_poses, 'a list of [x, y, yaw] poses')),
+    'dwell_time': (False, (_number, 'a number')),
+    'fleet': (False, (_fleet, 'a list of {start, goal, route_length} robots, or null')),
+    'time_limit': (False, (_number, 'a number')),
+    'robot': (False, (lambda v: isinstance(v, str), 'a string')),
+    'controller': (False, (lambda v: isinstance(v, str), 'a string')),
+    'namespace': (False, (lambda v: isinstance(v, str), 'a string')),
+    'sim_time_origin': (False, (lambda v: v is None or _number(v), 'a number')),
+    'simulator': (False, (lambda v: isinstance(v, Mapping), 'an object')),
+    'episode_config': (False, (lambda v: isinstance(v, Mapping), 'an object')),
+}
+_METRICS_FIELDS: dict[str, tuple[bool, _Check]] = {
+    'outcome': (True, (lambda v: isinstance(v, str), 'a string')),
+    'collisions': (True, (_integer, 'an integer')),
+    'risk_score': (True, (_number, 'a number')),
+    'simulation_time': (True, (_number, 'a number')),
+    'distance_travelled': (True, (_number, 'a number')),
+    'ticks': (True, (_integer, 'an integer')),
+    'fault_collisions': (False, (_integer, 'an integer')),
+    'legs': (False, (_integer, 'an integer')),
+    'legs_completed': (False, (_integer, 'an integer')),
+}
+
+
+def check_episode_fields(episode: Mapping[str, object], source: str | Path) -> None:
+    """BagReadError naming the first field of episode.json (``source``, for the message) that
+    re-simulation needs and that is missing or of the wrong type (``"start": 5``)."""
+    for fields, document, prefix in ((_EPISODE_FIELDS, episode, ''),
+                                     (_METRICS_FIELDS, episode.get('metrics'), 'metrics.')):
+        if not isinstance(document, Mapping):
+            return  # 'metrics' itself was checked (and named) in the first round
+        for name, (required, (check, expected)) in fields.items():
+            if name not in document:
+                if required:
+                    raise BagReadError(f'{source}: field "{prefix}{name}" is missing')
+                continue
+            if not check(document[name]):
+                raise BagReadError(f'{source}: field "{prefix}{name}" must be {expected}, got '
+                                   f'{json.dumps(document[name])[:80]}')

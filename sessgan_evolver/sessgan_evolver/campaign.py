@@ -12,6 +12,7 @@ episode and member rows -> tell -> generation row -> checkpoint g+1.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,9 +21,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from sessgan_controllers.errors import UnknownControllerError
+from sessgan_controllers.registry import get_controller
 from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import CampaignError
+from sessgan_evolver.fault_tally import FaultTally, FaultTracker
 from sessgan_evolver.fitness import (
     FitnessConfig,
     generation_summary,
@@ -31,22 +35,43 @@ from sessgan_evolver.fitness import (
     tpkl_reference_from,
 )
 from sessgan_evolver.genome import Genome
+from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, check_harness_tries
 from sessgan_evolver.operators import OperatorConfig
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
+from sessgan_evolver.search_methods import METHODS
 from sessgan_evolver.seeding import SeedStream, shared_seeds
-from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    checkpoint_bytes,
+    default_checkpoint_path,
+    incomplete_warning,
+    load_checkpoint,
+    training_map,
+)
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
-from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
+from sessgan_gen.environment_sampler import resolve_sample_size
+from sessgan_gen.errors import InvalidFleetError, InvalidMissionError, SamplingRequestError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_sim.bag_recording import BagStorage
+from sessgan_sim.episode import check_time_limit
+from sessgan_sim.errors import InvalidConfigError
 
 SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
+
+SESSGAN_METHOD = 'sessgan'
+"""The paper's weight evolution (this module's Campaign); every other method of
+search_methods.METHODS runs as a sessgan_evolver.method_campaign.MethodCampaign."""
+DEFAULT_METHOD = SESSGAN_METHOD
+"""What the ``campaign`` command (and ``./sessgan demo``) runs without --method: the best
+measured. A CampaignConfig built in code defaults to sessgan, the Campaign class's method."""
+
+FEW_VALID_TESTS = 0.25
+"""A first generation with fewer valid tests than this share gets a loud warning."""
 
 EPISODE_TIMEOUT_SECONDS_PER_CELL = 5e-5
 """Wall seconds per map cell added to the default episode timeout for building the world: a
@@ -55,6 +80,22 @@ with 10 % walls: 21 us); more than twice that covers a busy host."""
 EPISODE_TIMEOUT_SECONDS_PER_CELL_AND_SIM_SECOND = 1e-5
 """Wall seconds per map cell and sim second of time limit added for stepping: the 1024 x 1024
 map took 5.6 wall s per sim second (5.3 us a cell); about twice that."""
+MAX_EPISODE_TIMEOUT = 7 * 86400.0
+"""Wall seconds: the longest --episode-timeout accepted (a week; 0 derives it)."""
+
+
+def check_controller(scenario: str, controller: str) -> None:
+    """CampaignError unless ``controller`` ('' = the scenario's) is a built-in controller that
+    drives the scenario's robot (or a robot of its own that the simulators then host)."""
+    name = controller or get_scenario(scenario).controller
+    try:
+        spec = get_controller(name)
+    except UnknownControllerError as err:
+        raise CampaignError(str(err)) from err
+    robot = spec.robot_in(get_scenario(scenario).robot)
+    if not spec.drives(robot):
+        raise CampaignError(f'controller {name!r} does not drive the {robot} robot of the '
+                            f'{scenario} scenario')
 
 
 @dataclass(frozen=True)
@@ -63,6 +104,13 @@ class CampaignConfig:
 
     scenario: str = 'factory'
     """[factory] Scenario: factory, racetrack or drone."""
+    method: str = SESSGAN_METHOD
+    """Search method: sessgan (the paper's evolution of generator weights) or an ask/tell
+    method of compare (random, latent, grid_ga, cellular_automaton, ...), each run through
+    the same workers, budget, failure bags and metrics."""
+    budget: int = 0
+    """[0: generations x population x maps per member] Episodes of the robot under test
+    (the budget); sessgan runs the whole generations it pays for."""
     generations: int = 30
     """[30] Generations to evaluate (generation 0 is the mutated pre-trained generator)."""
     population: int = 12
@@ -82,6 +130,10 @@ class CampaignConfig:
     episode_timeout: float = 0.0
     """[max(30, 2 x time limit), plus 50 us + 10 us x time limit per map cell] Wall seconds
     before an episode is retried elsewhere."""
+    harness_tries: int = DEFAULT_HARNESS_TRIES
+    """[3] Tries of an episode the test harness ends (a silent controller, a dead process, a
+    cancelled episode): each is run again, never recorded; an episode the harness ends on
+    every try stops the run (1..20)."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
     seed_schedule: str = 'per-generation'
@@ -123,10 +175,29 @@ class CampaignConfig:
     robots: int = 1
     """[1] Robots under test on every map (a fleet episode: robots r1, r2, ... drawn beside
     the map's own start and goal, each route certified), 1..8; 1: one robot."""
+    width: int = 0
+    """[0: the checkpoint's] Width of every map in cells; by default the generator serves
+    maps of the size of the map it learned (your facility's)."""
+    height: int = 0
+    """[0: the checkpoint's] Height of every map in cells."""
     fitness: FitnessConfig = field(default_factory=FitnessConfig)
 
     def validate(self) -> None:
         get_scenario(self.scenario)
+        if self.method not in METHODS:
+            raise CampaignError(f'method must be one of {", ".join(METHODS)}, got '
+                                f'{self.method!r}')
+        if self.budget < 0:
+            raise CampaignError(f'budget must be >= 0 (0: generations x population x maps '
+                                f'per member), got {self.budget}')
+        if (self.method == SESSGAN_METHOD and self.budget
+                and self.budget < self.population * self.maps_per_member):
+            raise CampaignError(f'a budget of {self.budget} episodes pays for no sessgan '
+                                f'generation ({self.population} members x '
+                                f'{self.maps_per_member} maps)')
+        if self.width < 0 or self.height < 0:
+            raise CampaignError(f'width and height must be >= 0 (0: the checkpoint map size), got '
+                                f'{self.width}x{self.height}')
         try:
             self.mission()
         except InvalidMissionError as err:
@@ -138,6 +209,18 @@ class CampaignConfig:
         for name in ('generations', 'population', 'maps_per_member', 'workers'):
             if getattr(self, name) < 1:
                 raise CampaignError(f'{name} must be >= 1, got {getattr(self, name)}')
+        try:
+            check_time_limit(self.time_limit, 'time_limit')
+        except InvalidConfigError as err:
+            raise CampaignError(str(err)) from err
+        if not (math.isfinite(self.episode_timeout)
+                and 0.0 <= self.episode_timeout <= MAX_EPISODE_TIMEOUT):
+            raise CampaignError(f'episode_timeout must lie in [0, {MAX_EPISODE_TIMEOUT:.0f}] '
+                                f'wall seconds (0: derived from the time limit), got '
+                                f'{self.episode_timeout}')
+        check_harness_tries(self.harness_tries)
+        if not self.external:
+            check_controller(self.scenario, self.controller)
         if self.seed_schedule not in SEED_SCHEDULES:
             raise CampaignError(f'seed schedule must be one of {", ".join(SEED_SCHEDULES)}, '
                                 f'got {self.seed_schedule!r}')
@@ -164,6 +247,18 @@ class CampaignConfig:
             tournament_size=min(self.tournament_size, self.population),
             crossover_probability=self.crossover_probability, seed=self.seed,
             operators=operators)
+
+    def resolved_budget(self) -> int:
+        """Episodes of the robot under test the campaign may run."""
+        return self.budget or self.generations * self.population * self.maps_per_member
+
+    def with_budget_generations(self) -> CampaignConfig:
+        """sessgan: this config with as many whole generations as ``budget`` pays for
+        (unchanged without a budget)."""
+        if not self.budget or self.method != SESSGAN_METHOD:
+            return self
+        return dataclasses.replace(
+            self, generations=self.budget // (self.population * self.maps_per_member))
 
     def resolved_seed_pool(self) -> int:
         return self.seed_pool or 4 * self.maps_per_member
@@ -232,6 +327,12 @@ class EpisodeJob:
 class Evaluator(Protocol):
     """How the loop reaches the generator and the simulators."""
 
+    @property
+    def harness_reruns(self) -> int:
+        """Episodes run again so far because the test harness, not the controller, ended
+        them (sessgan_evolver.harness): never results, shown so a user sees the harness
+        struggled."""
+
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
         """Environments of a member's weights (checkpoint bytes), one per seed."""
@@ -239,7 +340,9 @@ class Evaluator(Protocol):
     def evaluate(self, jobs: Sequence[EpisodeJob],
                  on_result: Callable[[EpisodeJob, dict], None]) -> None:
         """Run every job (in parallel where possible), calling ``on_result(job, metrics)``
-        as each finishes; metrics is a dict of EpisodeMetrics fields."""
+        as each finishes; metrics is a dict of EpisodeMetrics fields (``bag_error``: why
+        the failure bag of a failure was lost, '' if none was). An episode the harness ended
+        is run again, not passed on (HarnessFailureError when it never gets a result)."""
 
 
 @dataclass
@@ -261,13 +364,25 @@ class Campaign:
         kept in config.json beside the config. Bad settings or an unreadable checkpoint raise
         before anything is written."""
         config.validate()
+        if config.method != SESSGAN_METHOD:
+            raise CampaignError(f'method {config.method!r} runs as a MethodCampaign '
+                                '(sessgan_evolver.method_campaign), not as the weight evolution')
+        config = config.with_budget_generations()
         self.config = config
         self.invocation = dict(invocation or {})
         scenario = get_scenario(config.scenario)
         self.scenario = scenario
-        self.example = load_example_map(scenario.name).cells
         checkpoint = config.checkpoint or str(default_checkpoint_path(scenario.name))
         self.pyramid, self.metadata = load_checkpoint(checkpoint, scenario=scenario.name)
+        if warning := incomplete_warning(self.metadata, f'checkpoint {checkpoint}'):
+            log(f'WARNING: {warning}')
+        # TPKL (fitness penalty, report) is measured against the map the generator learned.
+        self.example = training_map(self.metadata)
+        try:
+            self.size = resolve_sample_size(self.pyramid, self.metadata,
+                                            (config.height, config.width), scenario.name)
+        except SamplingRequestError as err:
+            raise CampaignError(str(err)) from err
         self.template = {k: v.clone() for k, v in self.pyramid.state_dict().items()}
         self.store = RunStore(runs_root, run_name)  # creates the run directory
         self.bags_dir = Path(bags_root).resolve() / run_name
@@ -311,6 +426,9 @@ class Campaign:
         progress = ProgressPrinter()
         last_tokens: list[list[np.ndarray]] = []
         first_generation = algorithm.generation
+        tracker = FaultTracker()
+        tracker.attach(evaluator)
+        tally = FaultTally.from_rows(self.store.read_rows('episode'))
         while algorithm.generation < config.generations:
             generation = algorithm.generation
             self.store.save_checkpoint(generation, algorithm.state_dict(),
@@ -322,6 +440,7 @@ class Campaign:
             for member, genome in enumerate(genomes):
                 environments = evaluator.sample(self.weights_of(genome), map_seeds,
                                                 generation, member)
+                self.check_size(environments)
                 token_maps.append([occupancy_to_tokens(env.occupancy, self.scenario)
                                    for env in environments])
                 jobs += [EpisodeJob(generation, member, k, env, sim_seeds[k])
@@ -337,10 +456,17 @@ class Campaign:
 
             def on_result(job: EpisodeJob, metrics: dict) -> None:
                 results[job.key] = metrics
+                if metrics.get('bag_error'):
+                    self.log(f'WARNING: failure bag LOST for episode {job.environment.id}: '
+                             f'{metrics["bag_error"]} (its metrics are recorded; bag_error in '
+                             'metrics_episodes.csv)')
                 progress.update(len(results), f'collisions so far '
                                 f'{sum(m["collisions"] for m in results.values())}')
 
+            reruns_before = evaluator.harness_reruns
             evaluator.evaluate(jobs, on_result)
+            harness_reruns = evaluator.harness_reruns - reruns_before
+            lost_bags = sum(bool(metrics.get('bag_error')) for metrics in results.values())
             missing = [job.key for job in jobs if job.key not in results]
             if missing:
                 raise CampaignError(f'generation {generation}: no result for episodes {missing}')
@@ -350,10 +476,12 @@ class Campaign:
                 episodes = [results[(member, k)] for k in range(config.maps_per_member)]
                 for job in jobs[member * config.maps_per_member:(member + 1) *
                                 config.maps_per_member]:
+                    fault = tracker.label_of(job.environment, results[job.key])
+                    tally.add(fault)
                     self.store.append_episode({
                         'generation': generation, 'member': member, 'map': job.index,
                         'environment_id': job.environment.id, 'map_seed': job.environment.seed,
-                        'sim_seed': job.seed, **results[job.key]})
+                        'sim_seed': job.seed, **results[job.key], 'fault': fault})
                 breakdown = member_fitness(
                     episodes, tpkls[member], tpkl_reference,
                     map_diversity(token_maps[member]), config.fitness)
@@ -372,19 +500,28 @@ class Campaign:
             survivors = {genome.digest() for genome in algorithm.ask()}
             history = {digest: values for digest, values in history.items()
                        if digest in survivors}
-            summary = generation_summary(generation, fitnesses)
+            summary = {**generation_summary(generation, fitnesses), **tally.columns(),
+                       'harness_reruns': harness_reruns, 'lost_bags': lost_bags}
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
             done = generation + 1
             per_generation = elapsed / (done - first_generation)
             self.log(
-                f'generation {generation}: mean risk {fmt(summary["mean_risk_score"])}, '
-                f'collisions {fmt(summary["mean_collisions"])}, feasible '
+                f'generation {generation}: {tally.line()} | fault risk '
+                f'{fmt(summary["mean_fault_risk_score"])}, risk '
+                f'{fmt(summary["mean_risk_score"])}, collisions '
+                f'{fmt(summary["mean_collisions"])}, feasible '
                 f'{summary["feasible_fraction"]:.0%}, TPKL {fmt(summary["mean_tpkl"])}, best '
                 f'fitness {summary["best_fitness"]:.3f} | {done}/{config.generations} '
                 f'generations, {60 / per_generation:.1f}/min, elapsed '
                 f'{format_duration(elapsed)}, ETA '
-                f'{format_duration(per_generation * (config.generations - done))}')
+                f'{format_duration(per_generation * (config.generations - done))}'
+                + harness_note(harness_reruns, lost_bags))
+            if generation == first_generation and summary['feasible_fraction'] < FEW_VALID_TESTS:
+                self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '
+                         f'generation {generation} are valid tests (hold a route): episodes '
+                         'on the others find no fault. Check the map the generator learned '
+                         '(mostly wall? passages too narrow for the robot?)')
             if done < config.generations:
                 self.store.save_checkpoint(done, algorithm.state_dict(),
                                            {'tpkl_reference': tpkl_reference,
@@ -394,6 +531,21 @@ class Campaign:
         return CampaignResult(self.store.run_dir, self.bags_dir, report_path,
                               self.store.read_rows('generation'),
                               time.monotonic() - wall_start)
+
+    def has_bags(self) -> bool:
+        """Whether the campaign's bag folder exists and holds a bag."""
+        return self.bags_dir.is_dir() and any(self.bags_dir.iterdir())
+
+    def check_size(self, environments: Sequence[Environment]) -> None:
+        """CampaignError unless every map is of the size this campaign asks for (a generator
+        node started elsewhere, or an evaluator built without the size, would serve others)."""
+        for environment in environments:
+            if tuple(environment.occupancy.shape) != self.size:
+                height, width = self.size
+                raise CampaignError(
+                    f'the generator served {environment.id} at {environment.occupancy.shape[0]}'
+                    f'x{environment.occupancy.shape[1]} cells; the campaign asks for '
+                    f'{height}x{width} (height x width)')
 
     # -- report ---------------------------------------------------------------------------
 
@@ -405,6 +557,25 @@ class Campaign:
         path.parent.mkdir(parents=True, exist_ok=True)
         # The first map of up to four members: enough for the report's figure.
         np.save(path, np.stack([maps[0] for maps in token_maps[:4]]))
+
+    def harness_notes(self) -> list[str]:
+        """The report's lines on harness re-runs and lost failure bags of the whole run."""
+        generations = self.store.read_rows('generation')
+        reruns = sum(int(row.get('harness_reruns') or 0) for row in generations)
+        lost = [row for row in self.store.read_rows('episode') if row.get('bag_error')]
+        notes = []
+        if reruns:
+            notes.append(f'Harness re-runs: {reruns} episodes were ended by the test harness '
+                         '(a silent controller, a dead process, a cancelled episode), not by '
+                         'the controller, and run again; none of them is a result (the '
+                         '`harness_reruns` column of metrics_generations.csv says when).')
+        if lost:
+            notes.append(f'**WARNING: {len(lost)} failure bags were lost** (their metrics are '
+                         'recorded; see the `bag_error` column of metrics_episodes.csv): '
+                         + '; '.join(f'{row.get("environment_id")}: {row.get("bag_error")}'
+                                     for row in lost[:5])
+                         + ('; ...' if len(lost) > 5 else ''))
+        return notes
 
     def write_report(self, last_population: list[list[np.ndarray]]) -> Path:
         maps_by_generation = {}
@@ -423,12 +594,28 @@ class Campaign:
             uniqueness_table['last population'] = {
                 **{f'{s}x{s}': v for s, v in unique.items()},
                 'mean': float(np.mean(list(unique.values())))}
-        notes = [f'Failure bags: `{self.bags_dir}` (replay one with '
-                 '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+        # Only point to the bag folder when a failure was recorded into it.
+        notes = ([f'Failure bags: `{self.bags_dir}` (replay one with '
+                  '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+                 if self.has_bags() else
+                 ['No failure bag was written (no failure was found, or failures were not '
+                  'recorded).'])
+        notes += self.harness_notes()
         return write_report(self.store.run_dir, maps_by_generation, tpkl_table, uniqueness_table,
                             title=f'SESS-GAN campaign {self.store.run_name} '
                                   f'({self.config.scenario})',
                             token_names=self.scenario.token_names, notes=notes)
+
+
+def harness_note(harness_reruns: int, lost_bags: int) -> str:
+    """The console line's note of what went wrong around the episodes ('' when nothing)."""
+    parts = []
+    if harness_reruns:
+        parts.append(f'harness re-runs {harness_reruns} (episodes the harness, not the '
+                     'controller, ended: run again)')
+    if lost_bags:
+        parts.append(f'WARNING: {lost_bags} failure bags lost')
+    return ''.join(f' | {part}' for part in parts)
 
 
 def fmt(value: float | None) -> str:

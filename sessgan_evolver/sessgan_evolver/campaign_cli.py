@@ -10,8 +10,8 @@ it started on exit, Ctrl-C or SIGTERM.
 from __future__ import annotations
 
 import argparse
+import math
 import os
-import signal
 import sys
 import time
 from collections import deque
@@ -20,8 +20,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError, EpisodeJob
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.campaign import (
+    DEFAULT_METHOD,
+    SESSGAN_METHOD,
+    Campaign,
+    CampaignConfig,
+    CampaignError,
+    EpisodeJob,
+)
+from sessgan_evolver.errors import HarnessFailureError, SessganEvolverError
+from sessgan_evolver.harness import HarnessRetries
+from sessgan_evolver.method_campaign import MethodCampaign
 from sessgan_evolver.process_supervisor import (
     ChildProcess,
     ProcessSupervisor,
@@ -33,7 +42,9 @@ from sessgan_evolver.process_supervisor import (
 from sessgan_gen.config_cli import build_parser, config_from_namespace
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
 from sessgan_gen.scenarios import get_scenario
+from sessgan_sim.metrics import Outcome, is_harness_outcome
 
 if TYPE_CHECKING:  # ROS types, imported where they are used so --help works without ROS
     from rclpy.action import ActionClient
@@ -45,7 +56,6 @@ EVALUATE_TYPE = 'sessgan_interfaces/action/EvaluateEnvironment'
 GENERATOR_NAMESPACE = '/sessgan'
 SIMULATOR_READY_LOG = 'simulator ready'
 """What a simulator logs once its action server is up (a restarted pair waits for it)."""
-CONTROLLER_UNRESPONSIVE = 'controller_unresponsive'
 GENERATOR_TIMEOUT = 120.0
 """Wall seconds the generator may take to answer one request."""
 GOAL_ANSWER_TIMEOUT = 15.0
@@ -72,6 +82,8 @@ def campaign_parser() -> argparse.ArgumentParser:
                         help='directory of the failure bag directories')
     parser.add_argument('--resume', action='store_true',
                         help='continue a killed run from its last completed generation')
+    # The command's default method is the best measured; a CampaignConfig in code: sessgan.
+    parser.set_defaults(method=DEFAULT_METHOD)
     return parser
 
 
@@ -122,7 +134,7 @@ class RosEvaluator:
         self.pool = pool if pool is not None else WorkerPool(supervisor)
         self.generator_process: ChildProcess | None = None
         self.config = config
-        self.record_directory = record_directory
+        self.record_directory = record_directory  # relative to the simulators' bags root
         self.controller = controller
         self.log = log
         self.action_client_class = ActionClient
@@ -135,6 +147,16 @@ class RosEvaluator:
         """Action names of restarted pairs whose new simulator is not ready yet, with the
         monotonic time by which it must be."""
         self.max_attempts = 3
+        """Requests of one member the generator may die on."""
+        self.retries = HarnessRetries(config.harness_tries, log)
+
+    rerun_harness_outcomes = True
+    """Run a harness outcome again here (never told); False: tell it, for a caller that
+    judges harness outcomes itself (``suite``)."""
+
+    @property
+    def harness_reruns(self) -> int:
+        return self.retries.reruns
 
     def spin(self, seconds: float = 0.02) -> None:
         import rclpy
@@ -205,7 +227,8 @@ class RosEvaluator:
 
         request = GenerateEnvironments.Request(
             scenario=self.config.scenario, seeds=[int(s) for s in seeds],
-            generation=generation, member=member)
+            generation=generation, member=member, height=self.config.height,
+            width=self.config.width)
         request.weights = weights
         for attempt in range(1, self.max_attempts + 1):
             future = self.generator.call_async(request)
@@ -323,8 +346,6 @@ class RosEvaluator:
         from action_msgs.msg import GoalStatus
 
         pending = deque(jobs)
-        attempts: dict[tuple[int, int], int] = {}
-        harness_failures: dict[tuple[int, int], int] = {}
         running: dict[str, Running] = {}
         last_discovery = 0.0
         last_worker_seen = time.monotonic()
@@ -348,12 +369,8 @@ class RosEvaluator:
                                     f'{NO_WORKER_TIMEOUT:.0f} s')
             self.spin(0.01)
             for job in self.take_back_from_dead_pairs(running):
-                harness_failures[job.key] = harness_failures.get(job.key, 0) + 1
-                if harness_failures[job.key] >= self.max_attempts:
-                    raise CampaignError(
-                        f'episode {job.environment.id}: a worker process died under it '
-                        f'{harness_failures[job.key]} times; see the logs in '
-                        f'{self.supervisor.log_directory}')
+                self.retries.failed(job.key, job.environment.id, 'a worker process died',
+                                    f'logs in {self.supervisor.log_directory}')
                 pending.appendleft(job)
             for name, state in list(running.items()):
                 retry_reason = None
@@ -374,10 +391,19 @@ class RosEvaluator:
                     if response.status == GoalStatus.STATUS_SUCCEEDED:
                         metrics = metrics_dict(response.result.metrics)
                         pair = self.pair_of(name)
-                        if (metrics['outcome'] == CONTROLLER_UNRESPONSIVE and pair is not None
+                        if (metrics['outcome'] == Outcome.CONTROLLER_UNRESPONSIVE
+                                and pair is not None
                                 and not all(child.alive for child in pair.controllers)):
                             continue  # its controller died: the next loop re-runs it
                         del running[name]
+                        if self.rerun_harness_outcomes and is_harness_outcome(metrics['outcome']):
+                            # No result: never recorded (sessgan_evolver.harness).
+                            self.retries.failed(state.job.key, state.job.environment.id,
+                                                metrics['outcome'],
+                                                f'worker {name}: {metrics["detail"]}')
+                            pending.appendleft(state.job)
+                            continue
+                        self.retries.succeeded(state.job.key)
                         on_result(state.job, metrics)
                         continue
                     retry_reason = f'ended the goal with status {response.status}'
@@ -389,14 +415,8 @@ class RosEvaluator:
                     self.quarantine[name] = time.monotonic() + 60.0
                 if retry_reason is not None:
                     del running[name]
-                    key = state.job.key
-                    attempts[key] = attempts.get(key, 0) + 1
-                    if attempts[key] >= self.max_attempts:
-                        raise CampaignError(
-                            f'episode {state.job.environment.id} failed {attempts[key]} times; '
-                            f'last: worker {name} {retry_reason}')
-                    self.log(f'worker {name} {retry_reason}: retrying '
-                             f'{state.job.environment.id} on another worker')
+                    self.retries.failed(state.job.key, state.job.environment.id,
+                                        f'worker {name}', retry_reason)
                     pending.appendleft(state.job)
 
 
@@ -417,19 +437,32 @@ def metrics_dict(msg) -> dict:
         'distance_travelled': float(msg.distance_travelled),
         'final_distance_to_goal': float(msg.final_distance_to_goal), 'ticks': int(msg.ticks),
         'wall_time': float(msg.wall_time), 'bag_path': msg.bag_path,
+        'bag_error': msg.bag_error,
         'legs': int(msg.legs), 'legs_completed': int(msg.legs_completed),
         'leg_times': [float(value) for value in msg.leg_times],
         'failed_leg': int(msg.failed_leg),
+        'success': bool(msg.success),
+        # NaN (not reached, no route) becomes None, as EpisodeMetrics.to_dict writes it.
+        **{name: finite_or_none(getattr(msg, name)) for name in (
+            'time_to_goal', 'path_length_ratio', 'mean_clearance', 'linear_jerk',
+            'angular_jerk', 'mean_speed')},
     }
+
+
+def finite_or_none(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
 
 
 # ---- processes ---------------------------------------------------------------------------
 
 
 def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: CampaignConfig,
-                controller: str, generator_running: bool) -> ChildProcess | None:
+                controller: str, generator_running: bool,
+                bags_root: Path = Path('bags')) -> ChildProcess | None:
     """Start the generator (unless one runs) and, without ``config.external``, a simulator +
-    controller pair per worker; returns the generator process started, if any."""
+    controller pair per worker (writing failure bags under ``bags_root``); returns the
+    generator process started, if any."""
     generator = None
     if not generator_running:
         # No checkpoint parameter: the campaign sends every member's weights itself.
@@ -458,7 +491,7 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
             (f'simulator_w{worker}', [
                 'ros2', 'run', 'sessgan_sim', 'simulator', *ros_args,
                 '-p', f'mode:={config.mode}', '-p', f'bag_storage:={config.bag_storage}',
-                *simulator_args]),
+                '-p', f'bags_root:={Path(bags_root).resolve()}', *simulator_args]),
             # A fleet's robots each get a controller of their own (/w0/r0, /w0/r1, ...).
             *((f'{controller}_{robot_namespace[1:].replace("/", "_")}', [
                 'ros2', 'run', 'sessgan_controllers', controller, '--ros-args', *placement,
@@ -470,7 +503,13 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
+    """Exit status: 0 done, 1 failed (a --resume hint when the run can go on), 2 bad
+    settings (nothing written), 130 interrupted (SIGINT or SIGTERM; the --resume hint)."""
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    return run_command(lambda: run_campaign(arguments), 'interrupted')
+
+
+def run_campaign(argv: list[str]) -> int:
     args = parse_args(argv)
     try:
         config = config_from_args(args)
@@ -487,39 +526,50 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'[campaign] {message}', file=sys.stderr, flush=True)
 
     try:
-        campaign = Campaign(config, run_name, args.runs_root, args.bags_root, log,
-                            invocation=invocation_of(args, argv))
+        campaign = make_campaign(config, run_name, args.runs_root, args.bags_root, log,
+                                 invocation_of(args, argv))
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
+    except OSError as err:  # the run directory cannot be made
+        print(f'error: {err}', file=sys.stderr)
+        return 1
 
-    # SIGTERM ends the campaign like Ctrl-C, so the children are stopped too.
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    # SIGINT and SIGTERM raise KeyboardInterrupt (run_command), so the children are stopped.
     if config.in_process:
         return run_in_process(campaign, config, controller, run_name, args.resume, log)
 
     import rclpy
-    rclpy.init(args=['--ros-args'])
+    init_rclpy(['--ros-args'])
     node = rclpy.create_node('sessgan_evolver')
     supervisor = ProcessSupervisor(campaign.store.run_dir / 'logs')
     try:
-        evaluator = RosEvaluator(node, config, campaign.bags_dir, controller, supervisor, log)
-        generator_running = evaluator.generator.wait_for_service(timeout_sec=1.0)
+        # Goals name bags/<run>/ relative to the simulators' bags root (they write nowhere else).
+        evaluator = RosEvaluator(node, config, Path(run_name), controller, supervisor, log)
+        # Ask/tell methods make their maps in this process: no generator node.
+        needs_generator = config.method == SESSGAN_METHOD
+        generator_running = (not needs_generator
+                             or evaluator.generator.wait_for_service(timeout_sec=1.0))
         if not config.external:
             evaluator.allowed = {f'/w{i}/evaluate' for i in range(config.workers)}
             evaluator.wait_until_absent(sorted(evaluator.allowed), timeout=15.0)
         evaluator.generator_process = start_graph(
-            supervisor, evaluator.pool, config, controller, generator_running)
-        log(f'run {run_name}: {config.generations} generations x {config.population} members x '
-            f'{config.maps_per_member} maps, scenario {config.scenario}, controller '
-            f'{controller}, ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
-        evaluator.wait_for_generator(timeout=120.0)
+            supervisor, evaluator.pool, config, controller, generator_running,
+            campaign.bags_dir.parent)
+        log(f'run {run_name}: {plan_of(campaign.config)}, scenario {config.scenario}, '
+            f'controller {controller}, ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
+        if needs_generator:
+            evaluator.wait_for_generator(timeout=120.0)
         evaluator.wait_for_workers(1 if config.external else config.workers, timeout=120.0)
         result = campaign.run(evaluator, resume=args.resume)
     except KeyboardInterrupt:
         log('interrupted: stopping every process this campaign started '
             f'(continue later with --resume --run {run_name})')
-        return 130
+        return INTERRUPTED_STATUS
+    except (HarnessFailureError, OSError) as err:
+        # OSError: the run directory cannot be written (a full disk): nothing more can be.
+        log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')
+        return 1
     except (SessganEvolverError, SessganGenError) as err:
         log(f'error: {err}')
         return 1
@@ -527,42 +577,87 @@ def main(argv: Sequence[str] | None = None) -> int:
         supervisor.stop_all()
         node.destroy_node()
         rclpy.try_shutdown()
-    report_result(result, log)
-    return 0
+    return report_result(result, log)
 
 
-def run_in_process(campaign: Campaign, config: CampaignConfig, controller: str, run_name: str,
-                   resume: bool, log: Callable[[str], None]) -> int:
+def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
+                   controller: str, run_name: str, resume: bool,
+                   log: Callable[[str], None]) -> int:
     """The campaign with sessgan_evolver.in_process's evaluator: no ROS at all."""
     from sessgan_evolver.in_process import InProcessEvaluator
 
-    log(f'run {run_name}: {config.generations} generations x {config.population} members x '
-        f'{config.maps_per_member} maps, scenario {config.scenario}, controller {controller}, '
-        'in process')
+    log(f'run {run_name}: {plan_of(campaign.config)}, scenario {config.scenario}, controller '
+        f'{controller}, in process')
     try:
         with InProcessEvaluator(
                 config.scenario, controller, config.time_limit,
                 record_directory=campaign.bags_dir if config.record_failures else None,
                 bag_storage=config.bag_storage, mission=config.mission(),
-                fleet=config.fleet()) as evaluator:
+                fleet=config.fleet(), size=(config.height, config.width),
+                harness_tries=config.harness_tries, log=log) as evaluator:
             result = campaign.run(evaluator, resume=resume)
     except KeyboardInterrupt:
         log(f'interrupted (continue later with --resume --run {run_name} --in-process)')
-        return 130
+        return INTERRUPTED_STATUS
+    except (HarnessFailureError, OSError) as err:
+        log(f'error: {err}\nstopped; continue later with --resume --run {run_name} '
+            '--in-process')
+        return 1
     except (SessganEvolverError, SessganGenError) as err:
         log(f'error: {err}')
         return 1
-    report_result(result, log)
-    return 0
+    return report_result(result, log)
 
 
-def report_result(result: Any, log: Callable[[str], None]) -> None:
+def make_campaign(config: CampaignConfig, run_name: str, runs_root: Path, bags_root: Path,
+                  log: Callable[[str], None], invocation: dict[str, Any]
+                  ) -> Campaign | MethodCampaign:
+    """The weight evolution for sessgan, else the ask/tell method's campaign."""
+    if config.method == SESSGAN_METHOD:
+        return Campaign(config, run_name, runs_root, bags_root, log, invocation=invocation)
+    return MethodCampaign(config, run_name, runs_root, bags_root, log, invocation=invocation)
+
+
+def plan_of(config: CampaignConfig) -> str:
+    """What the campaign will run, for its first log line."""
+    if config.method == SESSGAN_METHOD:
+        return (f'sessgan, {config.generations} generations x {config.population} members x '
+                f'{config.maps_per_member} maps')
+    return f'{config.method}, {config.resolved_budget()} episodes'
+
+
+def report_result(result: Any, log: Callable[[str], None]) -> int:
+    """Print where the results are; the exit status: 1 when no map of the whole campaign was a
+    valid test (its figures measure nothing), else 0."""
     first, last = result.generations[0], result.generations[-1]
-    log(f'done in {result.wall_time / 60:.1f} min: mean risk '
-        f'{first["mean_risk_score"] or 0:.3f} (generation 0) -> '
-        f'{last["mean_risk_score"] or 0:.3f} (generation {last["generation"]})')
+    episodes = int(last.get('episodes_so_far') or 0)
+    failures = int(last.get('valid_failures_so_far') or 0)
+    faults = int(last.get('distinct_faults_so_far') or 0)
+    unplaced = int(last.get('unplaced_failures_so_far') or 0)
+    per = 1.0 / episodes if episodes else 0.0
+    log(f'done in {result.wall_time / 60:.1f} min: {failures} valid failures '
+        f'({failures * per:.3f}/episode), {faults} distinct faults ({faults * per:.3f}/episode)'
+        + (f' + {unplaced} unplaced' if unplaced else '') + f' in {episodes} episodes; '
+        f'fault risk {first.get("mean_fault_risk_score") or 0:.3f} (generation 0) -> '
+        f'{last.get("mean_fault_risk_score") or 0:.3f} (generation {last["generation"]}); '
+        f'risk {first.get("mean_risk_score") or 0:.3f} -> '
+        f'{last.get("mean_risk_score") or 0:.3f}')
     print(f'report: {result.report_path}')
-    print(f'failure bags: {result.bags_dir}')
+    if result.bags_dir.is_dir() and any(result.bags_dir.iterdir()):
+        print(f'failure bags: {result.bags_dir}')
+    else:
+        print('failure bags: none (no failure was recorded)')
+    from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
+
+    suite = write_suite_of_bags_below(result.run_dir / SUITE_FILE, result.run_dir.name,
+                                      result.bags_dir, {'source': 'campaign failure bags'})
+    if suite is not None:
+        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
+    if not any(row.get('feasible_fraction') for row in result.generations):
+        log('error: no map of this campaign was a valid test (none held a route for the '
+            'robot), so it could find no fault: check the map the generator learned')
+        return 1
+    return 0
 
 
 if __name__ == '__main__':

@@ -1,7 +1,8 @@
 """`ros2 run sessgan_evolver compare`: every search method side by side at equal budget.
 
 Runs SESS-GAN and the baselines (random, grid_ga, cellular_automaton, latent) on one scenario
-and controller, in process, once per search seed; confirms and counts distinct faults,
+and controller, in process (or, with --external, on the simulators and stack already running
+under /w0, /w1, ...), once per search seed; confirms and counts distinct faults,
 evaluates the final generators on fresh seeds and writes <output>/report.md, compare.png,
 failing_maps.png and CSV files (sessgan_evolver.comparison says how everything is counted).
 """
@@ -19,8 +20,10 @@ import torch
 
 from sessgan_evolver.comparison import CompareConfig, run_comparison
 from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_gen.config_cli import field_docs
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 
 
 def _int_tuple(text: str) -> tuple[int, ...]:
@@ -46,6 +49,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         elif field.name == 'search_seeds':
             parser.add_argument(flag, type=_int_tuple, default=default,
                                 help=docs.get(field.name, '') + ' Comma-separated.')
+        elif isinstance(default, bool):
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
+                                help=docs.get(field.name, ''))
         else:
             parser.add_argument(flag, type=type(default), default=default,
                                 help=docs.get(field.name, ''))
@@ -56,6 +62,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = sys.argv[1:] if argv is None else list(argv)
+    return run_command(lambda: compare(arguments))
+
+
+def compare(arguments: list[str]) -> int:
     args = parse_args(arguments)
     torch.set_num_threads(1)
     config = CompareConfig(**{field.name: getattr(args, field.name)
@@ -74,8 +84,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         log('interrupted')
-        return 130
+        return INTERRUPTED_STATUS
     print(f'report: {result.report_path}')
+    suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
+                                      {'source': 'compare: confirmed distinct faults'})
+    if suite is not None:
+        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
     return 0
 
 

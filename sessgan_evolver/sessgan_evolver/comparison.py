@@ -30,13 +30,14 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig
+from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig, check_controller
 from sessgan_evolver.errors import CompareError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
 from sessgan_evolver.fault_records import confirm_faults
@@ -54,15 +55,20 @@ from sessgan_evolver.fresh_seed import (
     summary_table,
     write_csv,
 )
-from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.in_process import EpisodeObserver, InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
+from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
+from sessgan_gen.checkpoint import checkpoint_training_map
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
+from sessgan_gen.token_map import occupancy_to_tokens
+from sessgan_sim.episode import check_time_limit
+from sessgan_sim.errors import InvalidConfigError
+from sessgan_sim.metrics import navigation_columns
 
 
 @dataclass(frozen=True)
@@ -113,6 +119,17 @@ class CompareConfig:
     """[1] Robots under test on every map of every method (a fleet episode: robots r1, r2,
     ... drawn beside the map's own start and goal, each route certified), 1..8; 1: one
     robot."""
+    external: bool = False
+    """[False] Run every episode (and every confirming re-run) on the evaluate action servers
+    already running, e.g. your own stack under /w0, /w1 (as campaign --external), instead of
+    in process; --controller then only names it. Their failure bags (in <their
+    bags_root>/external/<output folder name>/<method-seed>) must be readable on this
+    machine."""
+    width: int = 0
+    """[0: the generator's] Width of every method's maps in cells (by default the size of
+    the map the generator learned)."""
+    height: int = 0
+    """[0: the generator's] Height of every method's maps in cells."""
 
     def validate(self) -> None:
         get_scenario(self.scenario)
@@ -141,7 +158,30 @@ class CompareConfig:
         if 'sessgan' in self.methods and self.budget < self.population * self.maps_per_member:
             raise CompareError(f'a budget of {self.budget} pays for no SESS-GAN generation of '
                                f'{self.population} x {self.maps_per_member} episodes')
+        if self.max_fault_records < -1:
+            raise CompareError(f'max_fault_records must be >= -1 (-1: every one), got '
+                               f'{self.max_fault_records}')
+        for name, value in (('search_seeds', min(self.search_seeds)),
+                            ('evaluation_seed', self.evaluation_seed)):
+            if value < 0:
+                raise CompareError(f'{name} must be >= 0, got {value}')
+        try:
+            check_time_limit(self.time_limit, 'time_limit')
+        except InvalidConfigError as err:
+            raise CompareError(str(err)) from err
+        check_controller(self.scenario, self.controller)
+        if self.checkpoint and not Path(self.checkpoint).is_file():
+            raise CompareError(f'checkpoint {self.checkpoint!r} does not exist')
+        if 'sessgan' in self.methods:
+            self.campaign_config(self.search_seeds[0]).validate()
         self.rule().validate()
+        if self.width < 0 or self.height < 0:
+            raise CompareError(f'width and height must be >= 0 (0: the generator map size), '
+                               f'got {self.width}x{self.height}')
+
+    def map_size(self) -> tuple[int, int] | None:
+        """(height, width) asked for; None: the generator's own."""
+        return (self.height, self.width) if self.height or self.width else None
 
     def rule(self) -> FaultRule:
         return FaultRule(self.coarse_cells, self.context_cells)
@@ -161,11 +201,35 @@ class CompareConfig:
             controller=self.controller, time_limit=self.time_limit,
             seed_schedule=self.seed_schedule, record_failures=False,
             mission_stations=self.mission_stations, station_dwell_time=self.station_dwell_time,
-            robots=self.robots,
+            robots=self.robots, width=self.width, height=self.height,
             fitness=FitnessConfig())
 
     def ga_config(self) -> GAConfig:
         return GAConfig(population=self.population)
+
+    def controller_label(self) -> str:
+        if self.external:
+            return self.controller or 'external'
+        return self.controller or get_scenario(self.scenario).controller
+
+
+def open_evaluator(config: CompareConfig, output: Path, label: str,
+                   observer: EpisodeObserver | None = None,
+                   log: Callable[[str], None] = print) -> AbstractContextManager[Any]:
+    """Where ``compare`` runs its episodes: in process, or with ``external`` on the graph's
+    workers (sessgan_evolver.worker_episodes; their bags under <their bags_root>/external/
+    <output folder name>/<label>).
+    Maps without a certified route are not simulated."""
+    if config.external:
+        return worker_evaluator(config.scenario, external_record_subdirectory(output, label),
+                                output / 'logs' / label, config.controller,
+                                config.time_limit, config.mission(), config.fleet(),
+                                simulate_invalid=False, observer=observer, log=log,
+                                size=config.map_size())
+    return InProcessEvaluator(config.scenario, config.controller, config.time_limit,
+                              simulate_invalid=False, observer=observer,
+                              mission=config.mission(), fleet=config.fleet(), log=log,
+                              size=config.map_size())
 
 
 @dataclass
@@ -243,10 +307,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     rule = config.rule()
     episode_log = EpisodeLog(rule)
     label = f'{method}-seed{seed}'
-    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, observer=episode_log,
-                            mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+    with open_evaluator(config, output, label, episode_log, log) as evaluator:
         episode_log.restart_clock()
         source: MapSource | None
         cheap_wall = 0.0
@@ -257,7 +318,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
             source_key = f'sessgan:{source.label}'
         else:
             searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
-                                     config.ga_config())
+                                     config.ga_config(), config.map_size())
             run_search(searcher, evaluator, config.budget, label)
             cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))
             source, source_key = _final_source(config, method)
@@ -276,7 +337,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
     first = min(confirmed, key=lambda entry: entry.first, default=None)
     episodes = len(records)
     tokens = _example_tokens(records, faults, config.scenario)
-    example = load_example_map(config.scenario).cells
+    example = checkpoint_training_map(config.scenario, config.checkpoint or None)
     figures = RunFigures(
         method=method, search_seed=seed, episodes=episodes,
         valid_maps=sum(bool(r.metrics.get('feasible')) for r in records),
@@ -301,11 +362,13 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
 
 
 def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None, str]:
+    label = 'shipped generator' if not config.checkpoint else config.checkpoint
+    base = PyramidSource(label, config.scenario, config.checkpoint or None, config.map_size())
     if method in ('random', 'latent', 'screened'):
-        label = 'shipped generator' if not config.checkpoint else config.checkpoint
-        return PyramidSource(label, config.scenario, config.checkpoint or None), 'pyramid:base'
+        return base, 'pyramid:base'
     if method == 'cellular_automaton':
-        return AutomatonSource(config.scenario), 'cellular_automaton'
+        return (AutomatonSource(config.scenario, reference=base.reference, size=base.size),
+                'cellular_automaton')
     return None, ''
 
 
@@ -316,9 +379,7 @@ def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Pat
     used_sims = {int(r.sim_seed) for run in runs for r in run.records}
     plan = fresh_seed_plan(config.evaluation_seed, config.fresh_episodes, used_maps, used_sims)
     summaries: dict[str, FreshSeedSummary] = {}
-    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+    with open_evaluator(config, output, 'fresh', log=log) as evaluator:
         for run in runs:
             if run.source is None or run.source_key in summaries:
                 continue
@@ -421,7 +482,7 @@ def plot_comparison(config: CompareConfig, runs: Sequence[MethodRun], path: Path
     axes.flat[-1].text(0.0, 0.5, _settings_text(config), fontsize='small', va='center',
                        transform=axes.flat[-1].transAxes)
     figure.suptitle(f'Fault finding on {config.scenario} against '
-                    f'{config.controller or get_scenario(config.scenario).controller}: mean ± '
+                    f'{config.controller_label()}: mean ± '
                     f'std over search seeds {list(config.search_seeds)} (dots: runs)')
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -441,14 +502,12 @@ def _settings_text(config: CompareConfig) -> str:
             f'fault cells {config.coarse_cells} (+{config.context_cells} context)')
 
 
-def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method: int = 4
-                   ) -> list[tuple[str, list[FaultScene]]]:
+def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method: int = 4,
+                   output: Path | None = None) -> list[tuple[str, list[FaultScene]]]:
     """Up to ``per_method`` confirmed distinct faults per method (seeds in turn), re-run
     with a trace for the picture."""
     rows = []
-    with InProcessEvaluator(config.scenario, config.controller, config.time_limit,
-                            simulate_invalid=False, mission=config.mission(),
-                            fleet=config.fleet()) as evaluator:
+    with open_evaluator(config, output or Path('.'), 'scenes') as evaluator:
         for method in config.methods:
             method_runs = [r for r in runs if r.figures.method == method]
             if not method_runs:
@@ -464,7 +523,8 @@ def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method:
             for run, entry in picked:
                 record = run.records[entry.first]
                 episode = evaluator.runner.run(record.environment, record.sim_seed, trace=True)
-                assert episode.trace is not None
+                if episode.trace is None:
+                    continue  # an external stack that did not fail again: nothing to draw
                 scene = scene_from_run(record.environment, episode.trace, episode.metrics,
                                        entry.key, config.rule())
                 scene.caption = (f'seed {run.figures.search_seed}: '
@@ -478,7 +538,7 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
                  fresh: dict[str, FreshSeedSummary], output: Path, command: str,
                  wall_time: float) -> Path:
     plot_comparison(config, runs, output / 'compare.png')
-    write_scene_grid(example_scenes(config, runs), output / 'failing_maps.png')
+    write_scene_grid(example_scenes(config, runs, output=output), output / 'failing_maps.png')
     write_csv(output / 'runs.csv', [run.figures.row() for run in runs])
     write_csv(output / 'faults.csv', [
         {'method': run.figures.method, 'search_seed': run.figures.search_seed,
@@ -501,16 +561,19 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
          'collisions': record.metrics.get('collisions'),
          'risk_score': record.metrics.get('risk_score'),
          'fault_risk_score': record.metrics.get('fault_risk_score'),
+         **navigation_columns(record.metrics),
          'valid_failure': record.valid_failure,
          'fault': record.fault.label if record.fault else '', 'elapsed': record.elapsed,
          'cpu': record.cpu, 'origin': record.origin}
         for run in runs for record in run.records])
-    controller = config.controller or get_scenario(config.scenario).controller
+    controller = config.controller_label()
     lines = [
         f'# Fault finding: {config.scenario}, {controller}', '',
         f'Command: `{command}`', '',
         f'{len(config.search_seeds)} search seeds {list(config.search_seeds)}, '
-        f'{config.budget} episodes per run, in process (lockstep, one core), '
+        f'{config.budget} episodes per run, '
+        + ('on the external workers (one episode at a time), ' if config.external
+           else 'in process (lockstep, one core), ') +
         f'{wall_time / 60:.1f} min in all. Mean ± sample std over the seeds; '
         '`(k/n runs)`: only k of n runs had a value.', '',
         method_table(config, runs), '',

@@ -52,7 +52,7 @@ from sessgan_evolver.errors import EpisodeRunnerError
 from sessgan_gen.environment import Environment
 from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_gen.scenarios import get_scenario
-from sessgan_sim.episode import Episode, EpisodeConfig, Observation
+from sessgan_sim.episode import Episode, EpisodeConfig, Observation, TickProfile
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import ContactEvent
 from sessgan_sim.simulator_settings import SimulatorSettings
@@ -160,7 +160,8 @@ class EpisodeRunner:
     ``controller``: a name of sessgan_controllers' registry ('' = the scenario's);
     ``time_limit``: sim seconds (0 = the settings', else the scenario's); ``settings``: the
     simulator worker's settings each episode's config is built from (default: the node's
-    defaults; only lockstep makes sense in process).
+    defaults; only lockstep makes sense in process); ``clock``: times each run's ``wall_time``
+    and the parts of its ticks (:attr:`profile`), e.g. ``time.thread_time`` for CPU time.
     """
 
     def __init__(self, scenario: str, controller: str = '', time_limit: float = 0.0,
@@ -202,7 +203,7 @@ class EpisodeRunner:
 
     def open(self) -> EpisodeRunner:
         if self._episode is None:
-            self._episode = Episode().open()
+            self._episode = Episode(clock=self._clock).open()
         return self
 
     def close(self) -> None:
@@ -216,6 +217,12 @@ class EpisodeRunner:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  traceback: TracebackType | None) -> None:
         self.close()
+
+    @property
+    def profile(self) -> TickProfile:
+        """Where the ticks of the last episode spent their time (physics, sensors, metrics;
+        the rest of a run is the controller's and the trace's), in ``clock`` seconds."""
+        return self._episode.profile if self._episode is not None else TickProfile()
 
     # --- episodes ---------------------------------------------------------------------------
 
@@ -299,6 +306,7 @@ class EpisodeRunner:
         metrics = result.to_dict()
         metrics['wall_time'] = wall_time
         metrics['bag_path'] = ''
+        metrics['bag_error'] = ''
         episode_trace = None
         if recorders:
             traces = [recorder.finish(list(episode.robot_metrics(index).contacts))

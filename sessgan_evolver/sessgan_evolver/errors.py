@@ -34,6 +34,11 @@ class CampaignError(SessganEvolverError):
     """A campaign cannot go on (no workers, a generator that refuses, bad settings)."""
 
 
+class HarnessFailureError(CampaignError):
+    """An episode the test harness (a silent controller, a dead process, a simulator that
+    could not run it) ended on every one of its tries: no result can be recorded."""
+
+
 class CellularAutomatonError(SessganEvolverError, ValueError):
     """Settings or a scenario the cellular automaton cannot work with."""
 
@@ -72,3 +77,11 @@ class EpisodeRunnerError(SessganEvolverError):
 
 class SearchMethodError(SessganEvolverError, ValueError):
     """A method name or setting that does not exist or does not fit."""
+
+
+class ExternalWorkerError(SessganEvolverError):
+    """An episode on an external worker gave nothing this process can use."""
+
+
+class SuiteError(SessganEvolverError):
+    """A regression suite that cannot be read or run as given (names the entry)."""

@@ -4,7 +4,8 @@ Samples --episodes maps from each generator given (the shipped checkpoint, a cam
 member or final population, your own checkpoints, the cellular-automaton baseline) with seeds
 no campaign used (--run and --exclude-run name the campaigns; their seeds are read from
 their metrics and skipped), runs each map once with the built-in controller in this process
-(lockstep) and writes <output>/summary.md, summary.csv (one row per generator) and
+(lockstep; with --external: on the simulators and stack already running under /w0, /w1, ...,
+as ``campaign --external``) and writes <output>/summary.md, summary.csv (one row per generator) and
 episodes.csv (one row per map): valid maps, failure rate, collisions, risk, TPKL to the
 example map, uniqueness, distinct faults. --fault-records N keeps the first N confirmed
 distinct faults of each generator as a bag with a picture.
@@ -16,11 +17,14 @@ import argparse
 import shlex
 import sys
 from collections.abc import Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import torch
 
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.campaign import check_controller
+from sessgan_evolver.errors import FreshSeedError, SessganEvolverError
 from sessgan_evolver.fault_records import confirm_faults
 from sessgan_evolver.faults import FaultRule
 from sessgan_evolver.fresh_seed import (
@@ -40,12 +44,18 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
+from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
+from sessgan_gen.checkpoint import incomplete_warning
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.progress import ProgressPrinter
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 from sessgan_gen.scenarios import get_scenario
+from sessgan_sim.episode import check_time_limit
+from sessgan_sim.errors import InvalidConfigError
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -68,6 +78,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         help='also evaluate the non-learned cellular-automaton generator')
     parser.add_argument('--exclude-run', type=Path, action='append', default=[],
                         help='a further run whose seeds must not be used; repeatable')
+    parser.add_argument('--width', type=int, default=0,
+                        help='map width in cells (default 0: the size of the map each '
+                             "generator learned, a campaign's own size for --run)")
+    parser.add_argument('--height', type=int, default=0,
+                        help='map height in cells (default 0: as --width)')
     parser.add_argument('--episodes', type=int, default=30, help='fresh maps per generator')
     parser.add_argument('--seed', type=int, default=1000, help='seed of the fresh seeds')
     parser.add_argument('--controller', default='',
@@ -85,6 +100,12 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         help='robots under test on every fresh map (a fleet episode: robots '
                              "r1, r2, ... beside the map's own start and goal, each route "
                              f'certified; 1..{MAX_ROBOTS}; default 1: one robot)')
+    parser.add_argument('--external', action='store_true',
+                        help='run every episode on the evaluate action servers already running '
+                             '(your stack under /w0, /w1, ..., as campaign --external) instead '
+                             'of in process; --controller then only names it. Their failure '
+                             'bags (in <their bags_root>/external/<output folder name>/) must '
+                             'be readable on this machine')
     parser.add_argument('--simulate-invalid', action='store_true',
                         help='also simulate maps without a certified route')
     parser.add_argument('--fault-records', type=int, default=0,
@@ -101,24 +122,68 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error('--episodes must be >= 1')
+    if args.width < 0 or args.height < 0:
+        parser.error("--width and --height must be >= 0 (0: the generator's map size)")
     return args
 
 
 def build_sources(args: argparse.Namespace, scenario: str) -> list[MapSource]:
-    sources: list[MapSource] = []
+    """The generators to evaluate; the cellular automaton makes maps of the first one's size
+    and is measured against its training map."""
+    size = (args.height, args.width) if args.height or args.width else None
+    sources: list[PyramidSource] = []
     for run_dir in args.run:
-        sources += campaign_sources(run_dir, args.member)
+        sources += campaign_sources(run_dir, args.member, size)
     for checkpoint in args.checkpoint:
-        sources.append(PyramidSource(str(checkpoint), scenario, checkpoint))
+        sources.append(PyramidSource(str(checkpoint), scenario, checkpoint, size))
     if args.shipped or not sources:
-        sources.insert(0, PyramidSource('shipped generator', scenario, None))
+        sources.insert(0, PyramidSource('shipped generator', scenario, None, size))
+    for source in sources:
+        if warning := incomplete_warning(source.metadata, source.label):
+            print(f'WARNING: {warning}', file=sys.stderr)
+    every: list[MapSource] = list(sources)
     if args.cellular_automaton:
-        sources.append(AutomatonSource(scenario))
-    return sources
+        every.append(AutomatonSource(scenario, reference=sources[0].reference,
+                                     size=sources[0].size))
+    return every
+
+
+def check_settings(args: argparse.Namespace, scenario: str) -> None:
+    """Raise naming the first option a run cannot work with, before anything is written."""
+    try:
+        check_time_limit(args.time_limit, '--time-limit')
+    except InvalidConfigError as err:
+        raise FreshSeedError(str(err)) from err
+    check_controller(scenario, args.controller)
+    for option, value, least in (('--seed', args.seed, 0), ('--repeats', args.repeats, 0),
+                                 ('--fault-records', args.fault_records, -1)):
+        if value < least:
+            raise FreshSeedError(f'{option} must be >= {least}, got {value}')
+    FaultRule(args.coarse_cells, args.context_cells).validate()
+
+
+def open_evaluator(args: argparse.Namespace, scenario: str, mission: MissionSpec,
+                   fleet: FleetSpec, output: Path) -> AbstractContextManager[Any]:
+    """In process, or with --external on the graph's workers (sessgan_evolver
+    .worker_episodes)."""
+    def log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    if args.external:
+        return worker_evaluator(
+            scenario, external_record_subdirectory(output), output / 'logs', args.controller,
+            args.time_limit, mission, fleet, simulate_invalid=args.simulate_invalid, log=log)
+    return InProcessEvaluator(scenario, args.controller, args.time_limit,
+                              simulate_invalid=args.simulate_invalid, mission=mission,
+                              fleet=fleet, log=log)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = sys.argv[1:] if argv is None else list(argv)
+    return run_command(lambda: evaluate(arguments))
+
+
+def evaluate(arguments: list[str]) -> int:
     args = parse_args(arguments)
     torch.set_num_threads(1)
     try:
@@ -131,6 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             scenario = run_scenario
         scenario = scenario or 'factory'
         get_scenario(scenario)
+        check_settings(args, scenario)
         mission = MissionSpec(args.mission_stations, args.station_dwell_time).validate()
         fleet = FleetSpec(args.robots).validate(mission.stations)
         runs = list(args.run) + list(args.exclude_run)
@@ -150,9 +216,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     summaries, rows = [], []
     progress = ProgressPrinter()
     try:
-        with InProcessEvaluator(scenario, args.controller, args.time_limit,
-                                simulate_invalid=args.simulate_invalid,
-                                mission=mission, fleet=fleet) as evaluator:
+        with open_evaluator(args, scenario, mission, fleet, output) as evaluator:
             for source in sources:
                 progress.start(source.label, len(plan.pairs))
                 result = evaluate_source(source, plan, evaluator, rule,
@@ -167,23 +231,31 @@ def main(argv: Sequence[str] | None = None) -> int:
                                    {'generator': source.label})
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
-        return 130
+        return INTERRUPTED_STATUS
     except (SessganEvolverError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 1
     table = summary_table(summaries)
     write_csv(output / 'summary.csv', summary_rows(summaries))
     write_csv(output / 'episodes.csv', rows, EPISODE_COLUMNS)
-    controller = args.controller or get_scenario(scenario).controller
+    controller = args.controller or ('external' if args.external
+                                     else get_scenario(scenario).controller)
     (output / 'summary.md').write_text(
         f'# Fresh-seed evaluation: {scenario}, {controller}\n\n'
         f'Command: `ros2 run sessgan_evolver evaluate {shlex.join(arguments)}`\n\n'
         f'{len(plan.pairs)} fresh (map, simulator) seed pairs from evaluation seed '
-        f'{args.seed}, disjoint from the {len(runs)} runs given; failure rate = valid '
+        f'{args.seed}, disjoint from the {len(runs)} runs given, '
+        + ('on the external workers' if args.external else 'in process (lockstep)')
+        + '; failure rate = valid '
         'failures / valid maps; collisions and risk: means over valid maps.\n\n'
         f'{table}\n', encoding='utf-8')
     print(table)
     print(f'summary: {output / "summary.md"}')
+    suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
+                                      {'source': 'evaluate: confirmed distinct faults',
+                                       'controller': controller})
+    if suite is not None:
+        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
     return 0
 
 

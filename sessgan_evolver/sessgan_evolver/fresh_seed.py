@@ -38,18 +38,28 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.run_store import RunStore
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord
 from sessgan_evolver.seeding import SeedStream, shared_seeds
-from sessgan_gen.checkpoint import checkpoint_bytes, default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    checkpoint_bytes,
+    default_checkpoint_path,
+    load_checkpoint,
+    training_map,
+)
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
+from sessgan_gen.environment_sampler import resolve_sample_size
+from sessgan_gen.errors import SamplingRequestError
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.token_map import load_example_map
 from sessgan_gen.track_cleanup import clean_generated_maps
+from sessgan_sim.metrics import NAVIGATION_COLUMNS, navigation_columns
 
 
 class MapSource(Protocol):
     """Something that turns seeds into token maps."""
 
     label: str
+    reference: np.ndarray
+    """The token map its TPKL is measured against: the map the generator learned."""
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         """Token maps (len(seeds), height, width), map i from seeds[i] alone."""
@@ -59,18 +69,24 @@ class MapSource(Protocol):
 class PyramidSource:
     """A generator checkpoint (a path, checkpoint bytes, or None for the shipped one)."""
 
-    def __init__(self, label: str, scenario: str, checkpoint: str | Path | bytes | None = None
-                 ) -> None:
+    def __init__(self, label: str, scenario: str, checkpoint: str | Path | bytes | None = None,
+                 size: tuple[int, int] | None = None) -> None:
+        """``size``: (height, width) of its maps; None or a zero side: the map it learned."""
         self.label = label
         self.scenario = scenario
         source = checkpoint or default_checkpoint_path(scenario)
         self.pyramid, self.metadata = load_checkpoint(source, scenario=scenario)
+        self.reference = training_map(self.metadata)
+        try:
+            self.size = resolve_sample_size(self.pyramid, self.metadata, size, scenario)
+        except SamplingRequestError as err:
+            raise FreshSeedError(f'{label}: {err}') from err
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         """The maps the generator node would serve for ``seeds`` (the scenario's
         track_cleanup applied, as the sampler does)."""
-        return clean_generated_maps(sample_token_maps(self.pyramid, [int(s) for s in seeds]),
-                                    self.scenario)
+        return clean_generated_maps(
+            sample_token_maps(self.pyramid, [int(s) for s in seeds], self.size), self.scenario)
 
 
 class PopulationSource:
@@ -82,6 +98,7 @@ class PopulationSource:
             raise FreshSeedError('a population needs at least one member')
         self.label = label
         self.members = list(members)
+        self.reference = self.members[0].reference
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         count = len(self.members)
@@ -94,9 +111,16 @@ class PopulationSource:
 class AutomatonSource:
     """The BARN-style cellular automaton (sessgan_evolver.cellular_automaton)."""
 
-    def __init__(self, scenario: str, label: str = 'cellular automaton') -> None:
+    def __init__(self, scenario: str, label: str = 'cellular automaton',
+                 reference: np.ndarray | None = None,
+                 size: tuple[int, int] | None = None) -> None:
+        """``reference``: the map its TPKL is measured against (default: the scenario's
+        example map); give the training map of the generators it is compared with, and
+        their map ``size`` (height, width; default the scenario's)."""
         self.label = label
-        self.generator = CellularAutomatonGenerator(scenario)
+        self.generator = CellularAutomatonGenerator(scenario, size=size)
+        self.reference = (load_example_map(scenario).cells if reference is None
+                          else np.asarray(reference))
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         return self.generator.maps([int(s) for s in seeds])
@@ -180,12 +204,20 @@ def last_evaluated_generation(store: RunStore) -> int:
     return max(generations)
 
 
-def campaign_sources(run_dir: str | Path, member: str = 'best') -> list[PyramidSource]:
+def campaign_sources(run_dir: str | Path, member: str = 'best',
+                     size: tuple[int, int] | None = None) -> list[PyramidSource]:
     """Generators of a campaign's last evaluated population: ``member`` is 'best' (the
-    fittest member of that generation), 'final' (every member) or a member index."""
+    fittest member of that generation), 'final' (every member) or a member index; their maps
+    are of ``size`` (height, width), by default of the campaign's."""
     store = open_run(run_dir)
     config = store.read_config()['config']
     scenario = str(config['scenario'])
+    method = str(config.get('method') or 'sessgan')
+    if method != 'sessgan':
+        raise FreshSeedError(
+            f'run {store.run_dir} is a {method} campaign: it evolves no generator weights to '
+            'evaluate; evaluate the generator it sampled (--shipped or --checkpoint) and pass '
+            'the run as --exclude-run so its seeds are not reused')
     generation = last_evaluated_generation(store)
     rows = [row for row in store.read_rows('member') if int(row['generation']) == generation]
     state = store.load_checkpoint(generation)['algorithm']
@@ -213,8 +245,9 @@ def campaign_sources(run_dir: str | Path, member: str = 'best') -> list[PyramidS
     for index in chosen:
         pyramid.load_state_dict(genomes[index].to_state_dict(template))
         weights = checkpoint_bytes(pyramid, metadata)
-        sources.append(PyramidSource(f'{store.run_name} g{generation} m{index}', scenario,
-                                     weights))
+        sources.append(PyramidSource(
+            f'{store.run_name} g{generation} m{index}', scenario, weights,
+            size or (int(config.get('height', 0)), int(config.get('width', 0)))))
     return sources
 
 
@@ -241,7 +274,7 @@ class FreshSeedSummary:
     mean_fault_risk: float | None
     """Fault risk score, mean over valid maps."""
     tpkl: float
-    """Of all its maps to the example map, nats."""
+    """Of all its maps to the map its generator learned (``MapSource.reference``), nats."""
     uniqueness: float
     """Mean of the 8x8 and 16x16 uniqueness of all its maps, percent."""
     distinct_faults: int
@@ -282,7 +315,7 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
     records = log.records
     valid = [record for record in records if record.metrics.get('feasible')]
     failures = [record for record in valid if record.valid_failure]
-    example = load_example_map(evaluator.scenario).cells
+    example = source.reference
     token_maps = [np.asarray(m) for m in maps]
     faults = group_faults([record.fault for record in records])
     summary = FreshSeedSummary(
@@ -303,7 +336,8 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
 EPISODE_COLUMNS = ('generator', 'index', 'environment_id', 'map_seed', 'sim_seed', 'feasible',
                    'route_length', 'route_min_clearance', 'outcome', 'fault_collisions',
                    'collisions', 'proximity_time', 'simulation_time', 'risk_score',
-                   'fault_risk_score', 'valid_failure', 'fault', 'wall_time')
+                   'fault_risk_score', *NAVIGATION_COLUMNS, 'valid_failure', 'fault',
+                   'wall_time')
 
 
 def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
@@ -324,6 +358,7 @@ def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
             'simulation_time': metrics.get('simulation_time'),
             'risk_score': metrics.get('risk_score'),
             'fault_risk_score': metrics.get('fault_risk_score'),
+            **navigation_columns(metrics),
             'valid_failure': record.valid_failure,
             'fault': record.fault.label if record.fault else '',
             'wall_time': metrics.get('wall_time')})

@@ -22,12 +22,14 @@ from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.campaign import EpisodeJob
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeRunner
 from sessgan_evolver.faults import is_valid_failure
+from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, HarnessRetries
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import MissionSpec
 from sessgan_sim.bag_recording import episode_bag_directory
-from sessgan_sim.metrics import EpisodeMetrics, Outcome
+from sessgan_sim.errors import BagWriteError
+from sessgan_sim.metrics import EpisodeMetrics, Outcome, is_harness_outcome
 from sessgan_sim.simulator_settings import SimulatorSettings, episode_config_record
 
 EpisodeObserver = Callable[[Environment, int, EpisodeRun, str], None]
@@ -44,6 +46,7 @@ def invalid_map_run(environment: Environment) -> EpisodeRun:
         outcome=Outcome.INVALID_ENVIRONMENT, detail=NOT_SIMULATED).to_dict()
     metrics['wall_time'] = 0.0
     metrics['bag_path'] = ''
+    metrics['bag_error'] = ''
     return EpisodeRun(metrics, None, 0.0)
 
 
@@ -58,9 +61,17 @@ class InProcessEvaluator:
                  record_directory: str | Path | None = None, bag_storage: str = 'mcap',
                  simulate_invalid: bool = True, settings: SimulatorSettings | None = None,
                  observer: EpisodeObserver | None = None,
-                 mission: MissionSpec | None = None, fleet: FleetSpec | None = None) -> None:
+                 mission: MissionSpec | None = None, fleet: FleetSpec | None = None,
+                 harness_tries: int = DEFAULT_HARNESS_TRIES,
+                 log: Callable[[str], None] | None = None,
+                 size: tuple[int, int] | None = None) -> None:
         """``mission``: the stations every sampled map gets (None: plain episodes);
-        ``fleet``: the robots under test every sampled map gets (None: one)."""
+        ``fleet``: the robots under test every sampled map gets (None: one);
+        ``harness_tries``: tries of an episode the harness ends (sessgan_evolver.harness);
+        ``log``: where re-runs and lost bags are told (default: nowhere); ``size``: (height,
+        width) of every sampled map in cells (None or a zero side: the checkpoint's training
+        map's)."""
+        self.size = size
         self.scenario = scenario
         self.mission = (mission or MissionSpec()).validate()
         self.fleet = (fleet or FleetSpec()).validate(self.mission.stations)
@@ -72,6 +83,13 @@ class InProcessEvaluator:
         self.observer = observer
         self.episodes = 0
         """Episodes run so far (simulated or not)."""
+        self.retries = HarnessRetries(harness_tries, log)
+        self.log = log
+
+    @property
+    def harness_reruns(self) -> int:
+        """Episodes run again because the harness ended them (never recorded)."""
+        return self.retries.reruns
 
     @property
     def controller(self) -> str:
@@ -90,8 +108,8 @@ class InProcessEvaluator:
 
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
-        return self.sampler.sample(seeds, weights, self.scenario, generation=generation,
-                                   member=member, mission=self.mission,
+        return self.sampler.sample(seeds, weights, self.scenario, size=self.size,
+                                   generation=generation, member=member, mission=self.mission,
                                    fleet=self.fleet)
 
     def evaluate(self, jobs: Sequence[EpisodeJob],
@@ -106,17 +124,31 @@ class InProcessEvaluator:
     def run_environment(self, environment: Environment, seed: int, origin: str = '',
                         keep_scans: bool = False) -> EpisodeRun:
         """Run one episode (with its trace), write its failure bag if asked, tell the
-        observer. ``keep_scans`` keeps the scans in the trace even without a bag."""
+        observer. ``keep_scans`` keeps the scans in the trace even without a bag. An episode
+        the harness ended is run again, never returned (HarnessFailureError after the last
+        try); a bag that cannot be written (a full disk) is told to ``log`` and its reason is
+        the metrics' ``bag_error``: the episode is still a result."""
         if not environment.feasible and not self.simulate_invalid:
             run = invalid_map_run(environment)
         else:
             directory = self.record_directory
-            run = self.runner.run(environment, seed, trace=True,
-                                  keep_scans=keep_scans or directory is not None)
+            while True:
+                run = self.runner.run(environment, seed, trace=True,
+                                      keep_scans=keep_scans or directory is not None)
+                if not is_harness_outcome(run.metrics['outcome']):
+                    break
+                self.retries.failed((environment.id, seed), environment.id,
+                                    run.metrics['outcome'], run.metrics['detail'])
+            self.retries.succeeded((environment.id, seed))
             if directory is not None and is_valid_failure(run.metrics) and run.trace is not None:
-                run.metrics['bag_path'] = str(self.write_bag(
-                    episode_bag_directory(directory, environment.id), environment, seed, run,
-                    origin))
+                try:
+                    run.metrics['bag_path'] = str(self.write_bag(
+                        episode_bag_directory(directory, environment.id), environment, seed,
+                        run, origin))
+                except (BagWriteError, OSError) as err:
+                    # The writer leaves nothing half-written (bag_recording's staging).
+                    run.metrics['bag_error'] = (f'cannot write the failure bag of '
+                                                f'{environment.id!r} in {directory}: {err}')
                 if not keep_scans:
                     run.trace.scans = None  # a campaign keeps no scans in memory
         self.episodes += 1

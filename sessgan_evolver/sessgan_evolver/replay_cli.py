@@ -13,6 +13,10 @@ the simulator is started there. ``--worker /w0`` uses a simulator that already r
 own settings. Exit codes: 0 as expected (``--expect same``: same outcome and collision count;
 ``--expect pass``: no failure any more), 1 not as expected, 2 on an error (unreadable bag, no
 worker, settings that cannot be rebuilt).
+
+Both modes first check the bag: every file against the size and SHA-256 digest episode.json
+recorded, every message readable (MCAP chunk CRCs) and as many as recorded; a corrupt bag is
+refused (exit 2) naming the file, one without digests (older bags) replays with a warning.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from sessgan_gen.ros_spin import init_rclpy, run_command
 
 EXIT_AS_EXPECTED, EXIT_DIFFERENT, EXIT_ERROR = 0, 1, 2
 
@@ -81,7 +87,7 @@ def replay(args, episode) -> int:
 
     topics = read_bag_topics(args.bag)
     recorded_namespace = (episode or {}).get('namespace', '')
-    rclpy.init()
+    init_rclpy()
     node = rclpy.create_node('sessgan_replay')
     try:
         publishers = {}
@@ -184,7 +190,7 @@ def resimulate(args, episode: dict) -> int:
         print(f'note: {note}', file=sys.stderr)
     log_directory = Path(tempfile.mkdtemp(prefix='sessgan-replay-'))
     with ProcessSupervisor(log_directory) as supervisor:
-        rclpy.init()
+        init_rclpy()
         node = rclpy.create_node('sessgan_resimulate')
         try:
             if not args.worker:
@@ -292,21 +298,39 @@ def start_resimulation_graph(supervisor, settings, namespace: str, log_directory
 
 
 def main(argv=None) -> int:
-    args = parse_args(sys.argv[1:] if argv is None else argv)
-    from sessgan_evolver.bag_reading import check_bag_complete, read_episode_json
+    arguments = sys.argv[1:] if argv is None else argv
+    # SIGINT and SIGTERM: a replay stops as expected, a re-simulation exits 130 (run_command).
+    return run_command(lambda: replay_or_resimulate(arguments))
+
+
+def replay_or_resimulate(argv) -> int:
+    args = parse_args(argv)
+    from sessgan_evolver.bag_reading import (
+        bag_directory,
+        check_bag_complete,
+        check_episode_fields,
+        read_episode_json,
+        verify_bag_files,
+    )
     from sessgan_evolver.errors import SessganEvolverError
+    from sessgan_gen.errors import SessganGenError
 
     try:
         episode = read_episode_json(args.bag)
+        # Nothing is published or re-simulated from a bag that changed since it was written
+        # (digests), or whose messages are cut off or corrupt (counts, MCAP chunk CRCs).
+        warning = verify_bag_files(args.bag)
+        if warning:
+            print(f'warning: {warning}', file=sys.stderr)
+        check_bag_complete(args.bag)
         if args.resimulate:
             if episode is None:
                 print(f'error: {args.bag} has no episode.json to re-simulate', file=sys.stderr)
                 return EXIT_ERROR
-            # episode.json of a bag whose messages are cut off is not to be trusted either.
-            check_bag_complete(args.bag)
+            check_episode_fields(episode, bag_directory(args.bag) / 'episode.json')
             return resimulate(args, episode)
         return replay(args, episode)
-    except (SessganEvolverError, OSError, KeyError, ValueError) as err:
+    except (SessganEvolverError, SessganGenError, OSError, KeyError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return EXIT_ERROR
 

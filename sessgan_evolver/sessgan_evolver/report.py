@@ -2,7 +2,10 @@
 
 ``write_report(run_dir, ...)`` writes ``<run_dir>/report/``::
 
-    report.md                 ties everything together (relative links)
+    report.md                 ties everything together (relative links); leads with the
+                              valid failures and distinct faults found (fault_tally)
+    faults_found.png          valid failures and distinct faults so far against episodes,
+                              fault risk and the paper's risk per generation
     generation_metrics.png    mean and best simulation time, proximity time, collisions and
                               risk score per generation (the paper's Fig. 10)
     search_progress.png       fitness, feasible fraction and TPKL per generation
@@ -28,8 +31,10 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from sessgan_evolver.errors import ReportError, RunStoreError  # noqa: E402
+from sessgan_evolver.fault_tally import FaultTally  # noqa: E402
 from sessgan_evolver.run_store import RunStore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -225,6 +230,7 @@ def write_report(run_dir: str | Path,
         lines += [f'Seed {config.get("seed")}, software version '
                   f'{config.get("software_version")}; generations {first["generation"]}'
                   f'..{last["generation"]}.', '']
+    lines += faults_found_lines(store.read_rows('episode'), rows, report_dir)
     lines += ['## Summary', '', _summary_table(first, last), '']
 
     plot_generation_metrics(rows, report_dir / 'generation_metrics.png')
@@ -257,11 +263,73 @@ def write_report(run_dir: str | Path,
     return path
 
 
+def faults_found_lines(episode_rows: Sequence[Mapping[str, Any]],
+                       generation_rows: Sequence[Mapping[str, Any]],
+                       report_dir: Path) -> list[str]:
+    """The report's lead: valid failures and distinct faults found, per episode of the
+    robot under test, and faults_found.png (nothing for a run recorded without fault
+    labels)."""
+    if not episode_rows or 'fault' not in episode_rows[0]:
+        return []
+    tally = FaultTally.from_rows(episode_rows)
+    plot_faults_found(generation_rows, report_dir / 'faults_found.png')
+    first = ('none' if tally.first_failure is None
+             else f'episode {tally.first_failure}')
+    fault_risks = [row.get('mean_fault_risk_score') for row in generation_rows]
+    lines = ['## Faults found', '',
+             f'**{tally.valid_failures} valid failures and {tally.distinct_faults} distinct '
+             f'faults in {tally.episodes} episodes of the robot under test** '
+             f'({tally.per_episode(tally.valid_failures):.3f} and '
+             f'{tally.per_episode(tally.distinct_faults):.3f} per episode); first valid '
+             f'failure: {first}. Mean fault risk {_fmt(fault_risks[0])} (generation '
+             f'{generation_rows[0]["generation"]}) -> {_fmt(fault_risks[-1])} (generation '
+             f'{generation_rows[-1]["generation"]}).', '',
+             'Distinct faults as `compare` counts them (sessgan_evolver.faults: same kind, '
+             'same coarse cell, same map around it); a campaign re-runs nothing, so they are '
+             'not confirmed.']
+    if tally.unplaced:
+        lines[-1] += (f' {tally.unplaced} valid failures could not be placed (no failure '
+                      'bag to read their contacts from) and are not among the distinct '
+                      'faults.')
+    return lines + ['', '![faults found](faults_found.png)', '']
+
+
+def plot_faults_found(generation_rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
+    """Two panels: valid failures and distinct faults so far against episodes so far;
+    mean fault risk and the paper's mean risk per generation."""
+    rows = _sorted_rows(generation_rows)
+    # From the origin: nothing is found before the first episode.
+    episodes = [0.0] + _column(rows, 'episodes_so_far')
+    figure, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    axes[0].plot(episodes, [0.0] + _column(rows, 'valid_failures_so_far'), marker='o',
+                 markersize=3, label='valid failures')
+    axes[0].plot(episodes, [0.0] + _column(rows, 'distinct_faults_so_far'), marker='o',
+                 markersize=3, label='distinct faults')
+    axes[0].set_xlabel('Episodes of the robot under test')
+    axes[0].set_ylabel('Found so far')
+    axes[0].legend(fontsize='small')
+    generations = [row['generation'] for row in rows]
+    axes[1].plot(generations, _column(rows, 'mean_fault_risk_score'), marker='o',
+                 markersize=3, label='fault risk')
+    axes[1].plot(generations, _column(rows, 'mean_risk_score'), marker='.', markersize=3,
+                 linestyle='--', label="risk (paper's, all collisions)")
+    axes[1].set_xlabel('Generation')
+    axes[1].xaxis.set_major_locator(MaxNLocator(integer=True))
+    axes[1].set_ylabel('Mean over feasible maps')
+    axes[1].legend(fontsize='small')
+    for axis in axes:
+        axis.grid(alpha=0.3)
+    return _save(figure, path)
+
+
 # -- helpers --------------------------------------------------------------------------------
 
 
 def _summary_table(first: Mapping[str, Any], last: Mapping[str, Any]) -> str:
-    metrics = [('mean_risk_score', 'mean risk score'), ('max_risk_score', 'max member risk'),
+    metrics = [('valid_failures_so_far', 'valid failures so far'),
+               ('distinct_faults_so_far', 'distinct faults so far'),
+               ('mean_fault_risk_score', 'mean fault risk score'),
+               ('mean_risk_score', 'mean risk score'), ('max_risk_score', 'max member risk'),
                ('mean_collisions', 'mean collisions'),
                ('mean_proximity_time', 'mean proximity time (s)'),
                ('mean_simulation_time', 'mean simulation time (s)'),
@@ -272,8 +340,11 @@ def _summary_table(first: Mapping[str, Any], last: Mapping[str, Any]) -> str:
     for key, label in metrics:
         a, b = first.get(key), last.get(key)
         ratio = ''
+        if key in ('valid_failures_so_far', 'distinct_faults_so_far') and a is None:
+            continue  # a run recorded before faults were counted
         # Fitness can be negative, so a ratio of fitnesses means nothing.
-        if key not in ('mean_fitness', 'best_fitness') and isinstance(a, (int, float)) \
+        if key not in ('mean_fitness', 'best_fitness', 'valid_failures_so_far',
+                       'distinct_faults_so_far') and isinstance(a, (int, float)) \
                 and isinstance(b, (int, float)) and a > 0:
             ratio = f'{b / a:.2f}x'
         lines.append(f'| {label} | {_fmt(a)} | {_fmt(b)} | {ratio} |')

@@ -43,7 +43,8 @@ from sessgan_evolver import __version__
 from sessgan_evolver.errors import RunStoreError
 from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_gen.checkpoint import check_checkpoint_file, not_a_checkpoint_message
-from sessgan_gen.errors import CheckpointError
+from sessgan_gen.environment import MAX_ENVIRONMENT_ID_LENGTH, check_environment_id
+from sessgan_gen.errors import CheckpointError, InvalidEnvironmentError
 from sessgan_gen.json_data import to_json_data
 
 CHECKPOINT_FORMAT = 'sessgan_evolver.checkpoint/1'
@@ -52,8 +53,8 @@ CHECKPOINT_FORMAT = 'sessgan_evolver.checkpoint/1'
 ROW_KINDS = ('episode', 'member', 'generation')
 """Kinds of metrics rows; each kind has its own CSV file."""
 
-_CHECKPOINT_NAME = re.compile(r'^generation_(\d{4,})\.pt$')
-_RUN_NAME = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.-]*$')
+# Used with fullmatch: '$' alone also matches before a trailing newline.
+_CHECKPOINT_NAME = re.compile(r'generation_(\d{4,})\.pt')
 
 
 @dataclass(frozen=True)
@@ -82,9 +83,15 @@ class RunStore:
 
     def __init__(self, runs_root: str | Path, run_name: str) -> None:
         """Create the run directory (and its checkpoints folder) if needed."""
-        if not _RUN_NAME.match(run_name):
-            raise RunStoreError(f'run name {run_name!r} must start with a letter or digit and '
-                                'contain only letters, digits, ".", "_" and "-"')
+        # The rule of environment ids: bags/<run>/ is also the record directory simulators
+        # are asked to write into, and they accept only such names.
+        try:
+            check_environment_id(run_name)
+        except InvalidEnvironmentError as err:
+            raise RunStoreError(f'run name {run_name!r} must start with a letter or digit, '
+                                'contain only letters, digits, ".", "_" and "-" (no "..", no '
+                                f'".tmp-") and have at most {MAX_ENVIRONMENT_ID_LENGTH} '
+                                'characters') from err
         self.run_name = run_name
         self.run_dir = Path(runs_root) / run_name
         self.checkpoints_dir = self.run_dir / 'checkpoints'
@@ -169,7 +176,7 @@ class RunStore:
         """Every complete checkpoint, by generation (temporary files are ignored)."""
         found = []
         for path in self.checkpoints_dir.iterdir():
-            match = _CHECKPOINT_NAME.match(path.name)
+            match = _CHECKPOINT_NAME.fullmatch(path.name)
             if match and path.is_file():
                 found.append(CheckpointInfo(int(match.group(1)), path))
         return sorted(found, key=lambda info: info.generation)

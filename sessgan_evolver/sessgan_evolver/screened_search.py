@@ -65,14 +65,15 @@ from sessgan_evolver.search_methods import (
     SEED_BOUND,
     Evaluated,
     Proposal,
-    load_pyramid,
+    load_generator,
     method_rng,
 )
+from sessgan_gen.checkpoint import checkpoint_training_map
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl
 from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, tokens_to_occupancy
+from sessgan_gen.token_map import tokens_to_occupancy
 from sessgan_gen.track_cleanup import clean_generated_maps
 
 
@@ -207,12 +208,14 @@ class ScreenedSearch:
     name = 'screened'
 
     def __init__(self, scenario: str, seed: int, checkpoint: str | bytes | None = None,
-                 config: ScreenedConfig | None = None) -> None:
+                 config: ScreenedConfig | None = None,
+                 size: tuple[int, int] | None = None) -> None:
         self.config = config or ScreenedConfig()
         self.config.validate()
         self.spec = get_scenario(scenario)
-        self.pyramid = load_pyramid(scenario, checkpoint)
-        self.example = load_example_map(scenario).cells
+        self.pyramid, self.size = load_generator(scenario, checkpoint, size)
+        # Realism is measured against the map the generator learned.
+        self.example = checkpoint_training_map(scenario, checkpoint)
         self.rng = method_rng(seed, self.name)
         self.archive = FaultArchive(self.config.rule)
         self.surrogate = OnlineLogistic(len(FEATURE_NAMES) + 1)
@@ -228,7 +231,7 @@ class ScreenedSearch:
         """Wall seconds spent screening and learning (never in the robot under test)."""
         self._pending: list[Test] = []
         started = time.perf_counter()
-        reference = self._express([seed_noise_maps(self.pyramid, self._seed())
+        reference = self._express([seed_noise_maps(self.pyramid, self._seed(), self.size)
                                    for _ in range(self.config.reference_maps)])
         self.tpkl_limit = float(np.quantile([self._tpkl(cells) for cells in reference],
                                             self.config.tpkl_quantile))
@@ -264,7 +267,7 @@ class ScreenedSearch:
     def _fresh_test(self) -> Test:
         def draw(count: int) -> list[Test]:
             seeds = [self._seed() for _ in range(count)]
-            noises = [seed_noise_maps(self.pyramid, seed) for seed in seeds]
+            noises = [seed_noise_maps(self.pyramid, seed, self.size) for seed in seeds]
             return [Test(noise, cells, seed, seed, self._seed(), 'fresh sample')
                     for noise, cells, seed in zip(noises, self._express(noises), seeds)]
         # A generator whose samples all fail the screen: run the last like random does.

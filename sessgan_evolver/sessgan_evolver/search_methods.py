@@ -49,9 +49,15 @@ from sessgan_evolver.map_operators import (
     mutate_noise,
     mutate_token_map,
 )
-from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import (
+    checkpoint_training_map,
+    default_checkpoint_path,
+    load_checkpoint,
+)
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl
+from sessgan_gen.environment_sampler import resolve_sample_size
+from sessgan_gen.errors import SamplingRequestError
 from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.sampling import (
     sample_token_maps,
@@ -59,7 +65,6 @@ from sessgan_gen.sampling import (
     seed_noise_maps,
 )
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
 from sessgan_gen.track_cleanup import clean_generated_maps
 
 SEED_BOUND = 2**32
@@ -122,9 +127,21 @@ def method_rng(seed: int, method: str) -> np.random.Generator:
 
 def load_pyramid(scenario: str, checkpoint: str | bytes | None) -> GeneratorPyramid:
     """The generator to sample: ``checkpoint`` (a path or bytes) or the scenario's shipped."""
+    return load_generator(scenario, checkpoint)[0]
+
+
+def load_generator(scenario: str, checkpoint: str | bytes | None,
+                   size: tuple[int, int] | None = None
+                   ) -> tuple[GeneratorPyramid, tuple[int, int]]:
+    """(generator, map size): ``size`` (height, width) as the sampler resolves it (None or a
+    zero side: the checkpoint's training map's), so every method searches maps of the size
+    the generator serves."""
     source = checkpoint or default_checkpoint_path(scenario)
-    pyramid, _ = load_checkpoint(source, scenario=scenario)
-    return pyramid
+    pyramid, metadata = load_checkpoint(source, scenario=scenario)
+    try:
+        return pyramid, resolve_sample_size(pyramid, metadata, size, scenario)
+    except SamplingRequestError as err:
+        raise SearchMethodError(str(err)) from err
 
 
 class RandomSampling:
@@ -133,8 +150,8 @@ class RandomSampling:
     name = 'random'
 
     def __init__(self, scenario: str, seed: int, checkpoint: str | bytes | None = None,
-                 batch: int = 12) -> None:
-        self.pyramid = load_pyramid(scenario, checkpoint)
+                 batch: int = 12, size: tuple[int, int] | None = None) -> None:
+        self.pyramid, self.size = load_generator(scenario, checkpoint, size)
         self.scenario = scenario
         self.rng = method_rng(seed, self.name)
         self.batch = batch
@@ -143,7 +160,8 @@ class RandomSampling:
         seeds = self.rng.integers(0, SEED_BOUND, size=(self.batch, 2))
         # As the sampler serves them: the scenario's track_cleanup applied.
         maps = clean_generated_maps(
-            sample_token_maps(self.pyramid, [int(s) for s in seeds[:, 0]]), self.scenario)
+            sample_token_maps(self.pyramid, [int(s) for s in seeds[:, 0]], self.size),
+            self.scenario)
         return [Proposal(cells, int(sim), int(map_seed), 'random sample')
                 for cells, (map_seed, sim) in zip(maps, seeds)]
 
@@ -157,8 +175,12 @@ class CellularAutomatonSampling:
     name = 'cellular_automaton'
 
     def __init__(self, scenario: str, seed: int, config: CellularAutomatonConfig | None = None,
-                 batch: int = 12) -> None:
-        self.generator = CellularAutomatonGenerator(scenario, config)
+                 batch: int = 12, checkpoint: str | bytes | None = None,
+                 size: tuple[int, int] | None = None) -> None:
+        """``checkpoint``, ``size``: maps of the size that generator serves (None: the
+        shipped one's), or of ``size``."""
+        self.generator = CellularAutomatonGenerator(
+            scenario, config, load_generator(scenario, checkpoint, size)[1])
         self.rng = method_rng(seed, self.name)
         self.batch = batch
 
@@ -221,11 +243,14 @@ class MapSearchGA(Generic[Genotype]):
 
     name = ''
 
-    def __init__(self, scenario: str, seed: int, config: GAConfig | None = None) -> None:
+    def __init__(self, scenario: str, seed: int, config: GAConfig | None = None,
+                 checkpoint: str | bytes | None = None) -> None:
+        """``checkpoint``: the generator compared with (None: the shipped one); its training
+        map is the TPKL reference of the fitness."""
         self.config = config or GAConfig()
         self.config.validate()
         self.spec = get_scenario(scenario)
-        self.example = load_example_map(scenario).cells
+        self.example = checkpoint_training_map(scenario, checkpoint)
         self.rng = method_rng(seed, self.name)
         self.generation = 0
         self.tpkl_reference: float | None = None
@@ -322,9 +347,12 @@ class GridGA(MapSearchGA[np.ndarray]):
     name = 'grid_ga'
 
     def __init__(self, scenario: str, seed: int, config: GAConfig | None = None,
-                 automaton: CellularAutomatonConfig | None = None) -> None:
-        self.automaton = CellularAutomatonGenerator(scenario, automaton)
-        super().__init__(scenario, seed, config)
+                 automaton: CellularAutomatonConfig | None = None,
+                 checkpoint: str | bytes | None = None,
+                 size: tuple[int, int] | None = None) -> None:
+        self.automaton = CellularAutomatonGenerator(
+            scenario, automaton, load_generator(scenario, checkpoint, size)[1])
+        super().__init__(scenario, seed, config, checkpoint)
 
     def initial(self, index: int) -> tuple[np.ndarray, int]:
         seed = int(self.rng.integers(0, SEED_BOUND))
@@ -346,13 +374,14 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
     name = 'latent'
 
     def __init__(self, scenario: str, seed: int, config: GAConfig | None = None,
-                 checkpoint: str | bytes | None = None) -> None:
-        self.pyramid = load_pyramid(scenario, checkpoint)
-        super().__init__(scenario, seed, config)
+                 checkpoint: str | bytes | None = None,
+                 size: tuple[int, int] | None = None) -> None:
+        self.pyramid, self.size = load_generator(scenario, checkpoint, size)
+        super().__init__(scenario, seed, config, checkpoint)
 
     def initial(self, index: int) -> tuple[NoiseMaps, int]:
         seed = int(self.rng.integers(0, SEED_BOUND))
-        return seed_noise_maps(self.pyramid, seed), seed
+        return seed_noise_maps(self.pyramid, seed, self.size), seed
 
     def mutate(self, genotype: NoiseMaps) -> tuple[NoiseMaps, str]:
         return mutate_noise(genotype, self.rng, self.config.noise_strength), 'noise'
@@ -365,24 +394,30 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
             sample_token_maps_from_noise(self.pyramid, genotypes), self.spec.name))
 
 
-def _screened(scenario: str, seed: int, checkpoint: str | bytes | None) -> SearchMethod:
+def _screened(scenario: str, seed: int, checkpoint: str | bytes | None,
+              size: tuple[int, int] | None) -> SearchMethod:
     # Imported here: sessgan_evolver.screened_search builds on this module's types.
     from sessgan_evolver.screened_search import ScreenedSearch
 
-    return ScreenedSearch(scenario, seed, checkpoint)
+    return ScreenedSearch(scenario, seed, checkpoint, size=size)
 
 
-BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None'], SearchMethod]
-"""(scenario, search seed, generator checkpoint or None, GA settings or None) -> method."""
+BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None',
+                            'tuple[int, int] | None'], SearchMethod]
+"""(scenario, search seed, generator checkpoint or None, GA settings or None, map size or
+None: the generator's) -> method."""
 
 BASELINES: dict[str, BaselineFactory] = {
-    'random': lambda scenario, seed, checkpoint, ga: RandomSampling(scenario, seed, checkpoint),
-    'grid_ga': lambda scenario, seed, checkpoint, ga: GridGA(scenario, seed, ga),
-    'cellular_automaton': lambda scenario, seed, checkpoint, ga: CellularAutomatonSampling(
-        scenario, seed),
-    'latent': lambda scenario, seed, checkpoint, ga: LatentEvolution(scenario, seed, ga,
-                                                                     checkpoint),
-    'screened': lambda scenario, seed, checkpoint, ga: _screened(scenario, seed, checkpoint),
+    'random': lambda scenario, seed, checkpoint, ga, size: RandomSampling(
+        scenario, seed, checkpoint, size=size),
+    'grid_ga': lambda scenario, seed, checkpoint, ga, size: GridGA(
+        scenario, seed, ga, checkpoint=checkpoint, size=size),
+    'cellular_automaton': lambda scenario, seed, checkpoint, ga, size: CellularAutomatonSampling(
+        scenario, seed, checkpoint=checkpoint, size=size),
+    'latent': lambda scenario, seed, checkpoint, ga, size: LatentEvolution(
+        scenario, seed, ga, checkpoint, size),
+    'screened': lambda scenario, seed, checkpoint, ga, size: _screened(
+        scenario, seed, checkpoint, size),
 }
 """Methods the search driver runs, by name (``sessgan`` runs as the real Campaign)."""
 
@@ -391,11 +426,13 @@ METHODS = ('sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent', 'scre
 
 
 def make_baseline(name: str, scenario: str, seed: int, checkpoint: str | bytes | None = None,
-                  ga_config: GAConfig | None = None) -> SearchMethod:
-    """A baseline by name (SearchMethodError lists the known ones)."""
+                  ga_config: GAConfig | None = None,
+                  size: tuple[int, int] | None = None) -> SearchMethod:
+    """A baseline by name (SearchMethodError lists the known ones); ``size``: (height, width)
+    of its maps (None or a zero side: the generator's training map's)."""
     try:
         factory = BASELINES[name]
     except KeyError as err:
         raise SearchMethodError(f'unknown search method {name!r}; known: '
                                 f'{", ".join(METHODS)}') from err
-    return factory(scenario, seed, checkpoint, ga_config)
+    return factory(scenario, seed, checkpoint, ga_config, size)

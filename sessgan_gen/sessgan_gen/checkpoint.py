@@ -17,12 +17,14 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from sessgan_gen.atomic_files import atomic_write_bytes
-from sessgan_gen.errors import CheckpointError, UnknownScenarioError
+from sessgan_gen.errors import CheckpointError, SessganGenError, UnknownScenarioError
 from sessgan_gen.model import GeneratorPyramid, pyramid_from_state_dict, resolve_device
 from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map, read_token_map
 
 CHECKPOINT_FORMAT = 'sessgan_gen.pyramid'
 FORMAT_VERSION = 1
@@ -51,6 +53,76 @@ def structural_metadata(pyramid: GeneratorPyramid) -> dict[str, Any]:
         'scale_shapes': [list(shape) for shape in pyramid.scale_shapes],
         'noise_amplitudes': [round(float(a), 8) for a in pyramid.noise_amplitudes.cpu()],
     }
+
+
+def training_map_rows(cells: np.ndarray, tokens: list[str] | tuple[str, ...]) -> list[str]:
+    """The ``training_map`` metadata field: the learned token map as rows of token characters,
+    top row first (as in the token text format), so the checkpoint carries its own TPKL
+    reference."""
+    chars = np.array(list(tokens))
+    return [''.join(row) for row in chars[np.asarray(cells)[::-1]]]
+
+
+def training_map(metadata: Mapping[str, Any]) -> np.ndarray:
+    """The token map (cells, OccupancyGrid row order) the checkpoint was trained on: its
+    ``training_map`` field; for a checkpoint written before that field existed, the map its
+    ``map_source`` names (the scenario's example map for ``example:<scenario>``, as for the
+    shipped checkpoints, or the token file it learned); for one that names no source (made by
+    hand, not trained), the scenario's example map. Every TPKL figure of a generator is
+    measured against this map. CheckpointError if the source named cannot be read back."""
+    rows = metadata.get('training_map')
+    tokens = list(metadata.get('tokens') or [])
+    if rows is not None:
+        index = {token: value for value, token in enumerate(tokens)}
+        try:
+            cells = np.array([[index[char] for char in row] for row in rows[::-1]],
+                             dtype=np.int64)
+        except (KeyError, TypeError) as err:
+            raise CheckpointError(f'checkpoint training_map holds a token not in {tokens}: '
+                                  f'{err}') from err
+        if cells.ndim != 2 or cells.size == 0:
+            raise CheckpointError('checkpoint training_map is not a rectangular token map')
+        return cells
+    source = str(metadata.get('map_source') or '')
+    scenario = str(metadata.get('scenario') or '')
+    try:
+        if not source or source == f'example:{scenario}':
+            return load_example_map(scenario).cells
+        if source.endswith('.txt') and Path(source).is_file():
+            return read_token_map(source, scenario).cells
+    except SessganGenError as err:
+        raise CheckpointError(f'cannot read the training map {source!r} of the checkpoint: '
+                              f'{err}') from err
+    raise CheckpointError(
+        f'the checkpoint holds no training map and its map source {source!r} cannot be read '
+        'back; train it again with this version to store the map in it')
+
+
+def checkpoint_training_map(scenario: str, checkpoint: str | Path | bytes | None = None
+                            ) -> np.ndarray:
+    """:func:`training_map` of ``checkpoint`` (a path or bytes; None or empty: the scenario's
+    shipped one), checked to be a checkpoint of ``scenario``."""
+    payload = read_checkpoint(checkpoint or default_checkpoint_path(scenario))
+    _check_scenario(payload['label'], payload['metadata'], scenario)
+    return training_map(payload['metadata'])
+
+
+def incomplete_warning(metadata: Mapping[str, Any], label: str = 'the checkpoint') -> str:
+    """A warning for a checkpoint of a training that stopped before its last scale (its finer
+    scales are untrained, so its maps are noise), or '' for a complete one."""
+    if metadata.get('complete', True) is not False:
+        return ''
+    return (f'{label} is of a training that stopped after scale '
+            f'{metadata.get("trained_scales", "?")} of {metadata.get("num_scales", "?")}: its '
+            'finer scales are untrained and its maps mostly noise; finish it with '
+            '`ros2 run sessgan_gen train ... --resume`')
+
+
+def map_size(metadata: Mapping[str, Any]) -> tuple[int, int]:
+    """(height, width) in cells of the map the checkpoint learned: the size its generator
+    serves by default."""
+    shape = metadata.get('map_shape') or metadata['scale_shapes'][-1]
+    return int(shape[0]), int(shape[1])
 
 
 def _payload(

@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from sessgan_gen.checkpoint import (
     check_checkpoint_file,
     default_checkpoint_path,
     load_checkpoint,
+    map_size,
 )
 from sessgan_gen.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
 from sessgan_gen.errors import CheckpointError, SamplingRequestError
@@ -94,7 +96,8 @@ class EnvironmentSampler:
                fleet: FleetSpec | None = None) -> list[Environment]:
         """One Environment per seed; map i depends only on seeds[i] and the weights.
 
-        ``size`` is (height, width) in cells; None or zeros mean the scenario's default.
+        ``size`` is (height, width) in cells; None, or a zero side, means the checkpoint's
+        training map's (:func:`resolve_sample_size`).
         ``mission``: stations before home drawn on each map (sessgan_gen.missions); None: plain
         start -> goal episodes.
         ``post_process``: apply the scenario's ``track_cleanup`` (sessgan_gen.track_cleanup)
@@ -113,18 +116,7 @@ class EnvironmentSampler:
         if not scenario_name:
             raise SamplingRequestError('the checkpoint names no scenario: give one')
         spec = get_scenario(scenario_name)
-        if size is None or size == (0, 0):
-            size = spec.default_size
-        height, width = (int(v) for v in size)
-        min_side = min_sample_side(pyramid)
-        if not all(min_side <= side <= MAX_CELLS_PER_SIDE for side in (height, width)):
-            raise SamplingRequestError(
-                f'size {height}x{width} cells is outside {min_side}..{MAX_CELLS_PER_SIDE} per '
-                f'side for this {scenario_name} generator')
-        if height * width > MAX_TOTAL_CELLS:
-            raise SamplingRequestError(
-                f'size {height}x{width} is {height * width:,} cells a map, more than the '
-                f'{MAX_TOTAL_CELLS:,} a simulator accepts')
+        height, width = resolve_sample_size(pyramid, metadata, size, scenario_name)
         if len(seeds) * height * width > self.max_cells_per_request:
             raise SamplingRequestError(
                 f'{len(seeds)} maps of {height}x{width} are {len(seeds) * height * width:,} '
@@ -139,6 +131,30 @@ class EnvironmentSampler:
                              mission=mission, fleet=fleet)
             for cells, seed in zip(maps, seeds)
         ]
+
+
+def resolve_sample_size(pyramid: GeneratorPyramid, metadata: Mapping[str, Any],
+                        size: Sequence[int] | None, scenario: str = '') -> tuple[int, int]:
+    """The (height, width) in cells a request for ``size`` gets: a generator serves maps of
+    the size of the map it learned (a facility's) unless asked otherwise; a zero side takes
+    the learned map's. SamplingRequestError for a size the pyramid or a simulator cannot
+    take."""
+    learned = map_size(metadata)
+    requested = (0, 0) if size is None else tuple(int(v) for v in size)
+    if len(requested) != 2 or min(requested) < 0:
+        raise SamplingRequestError(f'size must be (height, width) >= 0, got {size}')
+    height, width = (side or default for side, default in zip(requested, learned))
+    label = f'this {scenario} generator' if scenario else 'this generator'
+    min_side = min_sample_side(pyramid)
+    if not all(min_side <= side <= MAX_CELLS_PER_SIDE for side in (height, width)):
+        raise SamplingRequestError(
+            f'size {height}x{width} cells is outside {min_side}..{MAX_CELLS_PER_SIDE} per '
+            f'side for {label}')
+    if height * width > MAX_TOTAL_CELLS:
+        raise SamplingRequestError(
+            f'size {height}x{width} is {height * width:,} cells a map, more than the '
+            f'{MAX_TOTAL_CELLS:,} a simulator accepts')
+    return height, width
 
 
 def min_sample_side(pyramid: GeneratorPyramid) -> int:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from sessgan_gen.config_cli import parse_config
 from sessgan_gen.errors import SessganGenError
+from sessgan_gen.ros_spin import run_command
 
 
 @dataclass
@@ -40,16 +41,18 @@ class ExportConfig:
     seed: int = 0
     """Seed of the map --generate samples."""
     width: int = 0
-    """Width in cells of the map --generate samples; 0: the scenario's default."""
+    """Width in cells of the map --generate samples; 0: the size of the map the
+    checkpoint learned (your facility's)."""
     height: int = 0
-    """Height in cells of the map --generate samples; 0: the scenario's default."""
+    """Height in cells of the map --generate samples; 0: the size of the map the
+    checkpoint learned (your facility's)."""
     bag: str = ''
     """Failure bag directory whose map to export."""
 
 
-def export(config: ExportConfig) -> Path:
-    """Write the map ``config`` names; returns the YAML path. SessganGenError (or ValueError)
-    says what is wrong with the options or the source."""
+def check_options(config: ExportConfig) -> Path:
+    """The YAML path to write, or SessganGenError naming the first option that cannot work;
+    nothing is written."""
     sources = [name for name, given in (('--map-file', config.map_file),
                                         ('--generate', config.generate), ('--bag', config.bag))
                if given]
@@ -62,6 +65,26 @@ def export(config: ExportConfig) -> Path:
     if output.suffix.lower() not in ('.yaml', '.yml'):
         raise SessganGenError(f'--output {output} must name a .yaml file (the PGM goes beside '
                               'it)')
+    for option, value in (('--seed', config.seed), ('--width', config.width),
+                          ('--height', config.height)):
+        if value < 0:
+            raise SessganGenError(f'{option} must be >= 0, got {value}')
+    if config.scenario:
+        from sessgan_gen.scenarios import get_scenario
+
+        get_scenario(config.scenario)
+    for option, path in (('--map-file', config.map_file), ('--checkpoint', config.checkpoint)):
+        if path and not Path(path).is_file():
+            raise SessganGenError(f'{option} {path} does not exist')
+    if config.bag and not (Path(config.bag) / 'map.yaml').is_file():
+        raise SessganGenError(f'{config.bag} is no failure bag: it has no map.yaml')
+    return output
+
+
+def export(config: ExportConfig) -> Path:
+    """Write the map ``config`` names; returns the YAML path. SessganGenError (or ValueError)
+    says what is wrong with the options or the source."""
+    output = check_options(config)
     from sessgan_gen.map_server_io import (
         export_environment,
         export_token_map,
@@ -75,26 +98,41 @@ def export(config: ExportConfig) -> Path:
 
         export_token_map(output, read_token_map(config.map_file))
     elif config.generate:
+        from sessgan_gen.checkpoint import incomplete_warning
         from sessgan_gen.environment_sampler import EnvironmentSampler
 
         scenario = config.scenario or (None if config.checkpoint else 'factory')
-        environment = EnvironmentSampler().sample(
-            [config.seed], config.checkpoint or None, scenario,
-            (config.height, config.width))[0]
+        sampler = EnvironmentSampler()
+        _, metadata = sampler.load(config.checkpoint or None, scenario)
+        if warning := incomplete_warning(metadata, f'checkpoint {config.checkpoint}'):
+            print(f'export: WARNING: {warning}', file=sys.stderr)
+        environment = sampler.sample([config.seed], config.checkpoint or None, scenario,
+                                     (config.height, config.width))[0]
         export_environment(output, environment)
+        if not environment.feasible:
+            print(f'export: WARNING: the map of seed {config.seed} holds no route between a '
+                  'start and a goal for the robot: it is not a valid test', file=sys.stderr)
     else:
         bag = Path(config.bag)
-        if not (bag / 'map.yaml').is_file():
-            raise SessganGenError(f'{bag} is no failure bag: it has no map.yaml')
         loaded = read_map_server(bag / 'map.yaml')
         write_map_server(output, loaded.occupancy, loaded.resolution, loaded.origin)
     return output
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status (0 written, 1 error)."""
+    """Entry point; returns the exit status (0 written, 1 error, 2 bad options: nothing
+    written, 130 interrupted)."""
+    return run_command(lambda: run_export(argv), 'export: interrupted')
+
+
+def run_export(argv: Sequence[str] | None) -> int:
     config = parse_config(ExportConfig, argv, prog='ros2 run sessgan_gen export',
                           description=__doc__.split('\n\n')[0])
+    try:
+        check_options(config)
+    except (SessganGenError, ValueError) as err:
+        print(f'export: error: {err}', file=sys.stderr)
+        return 2
     try:
         output = export(config)
     except (SessganGenError, ValueError, OSError) as err:

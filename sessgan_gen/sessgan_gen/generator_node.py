@@ -21,6 +21,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from sessgan_gen.checkpoint import incomplete_warning
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
@@ -42,7 +43,7 @@ class GeneratorNode(Node):
         super().__init__('sessgan_gen')
         self.declare_parameter('scenario', 'factory')
         self.declare_parameter('checkpoint', '')  # empty: the scenario's shipped checkpoint
-        self.declare_parameter('width', 0)        # cells; 0: the scenario's default
+        self.declare_parameter('width', 0)        # cells; 0: the checkpoint's map size
         self.declare_parameter('height', 0)
         self.declare_parameter('seed', 0)         # first seed; each publication uses the next
         self.declare_parameter('rate', 0.0)       # Hz; 0 publishes one environment at start
@@ -67,7 +68,9 @@ class GeneratorNode(Node):
             max_cells_per_request=int(self.get_parameter('max_cells_per_request').value))
         checkpoint = self.get_parameter('checkpoint').value
         if checkpoint:  # an unreadable checkpoint ends the node at once, with the reason
-            self.sampler.load(checkpoint, self.get_parameter('scenario').value)
+            _, metadata = self.sampler.load(checkpoint, self.get_parameter('scenario').value)
+            if warning := incomplete_warning(metadata, f'checkpoint {checkpoint}'):
+                self.get_logger().warning(warning)
         self.next_seed = int(self.get_parameter('seed').value)
         self.environment_publisher = self.create_publisher(EnvironmentMsg, 'environments', 10)
         self.map_publisher = self.create_publisher(OccupancyGrid, 'environment', MAP_QOS)

@@ -10,9 +10,15 @@ pixel, shade = value / maxval, occ = shade if ``negate`` else 1 - shade;
 * ``raw``: round(shade * 255) when it is 0..100, otherwise -1.
 
 Image rows are stored top row first; the returned arrays are in OccupancyGrid
-order (row 0 = lowest y). Only PGM images (P5 binary or P2 ASCII, 8 or 16 bit)
-are supported. ``image``, ``resolution`` and ``origin`` are required; a missing
-``negate`` reads as 0, missing thresholds as map_saver's defaults (0.65, 0.25).
+order (row 0 = lowest y). PGM images (P5 binary or P2 ASCII, 8 or 16 bit) are read
+exactly; other images map_server loads (PNG, BMP, ...) through Pillow, the shade
+being the mean of the colour channels as map_server computes it. ``image``,
+``resolution`` and ``origin`` are required; a missing ``negate`` reads as 0,
+missing thresholds as map_saver's defaults (0.65, 0.25).
+
+Importing for training (:func:`import_facility_map`) crops a SLAM map to its known
+region first: the unknown margin a SLAM map has around the mapped area is outside the
+map, not wall, so it must not count as part of the facility.
 
 Writing produces a P5 PGM and a YAML that Nav2's map_server loads: free 0 ->
 254 (white, as map_saver writes free space), blocked 100 -> 0 (black). A grid
@@ -208,6 +214,9 @@ def read_map_yaml(yaml_path: str | os.PathLike) -> MapMetadata:
         document: Any = yaml.safe_load(text)
     except yaml.YAMLError as err:
         raise MapFormatError(f'{source}: invalid YAML: {err}') from err
+    if document is None:
+        raise MapFormatError(f'{source}: the file is empty; a map_server YAML names at least '
+                             'image, resolution and origin')
     if not isinstance(document, dict):
         raise MapFormatError(
             f'{source}: expected a mapping of map_server keys (image, resolution, origin, ...), '
@@ -275,14 +284,40 @@ def pixels_to_occupancy(pixels: np.ndarray, maxval: int, metadata: MapMetadata) 
     return np.ascontiguousarray(grid.astype(np.int8)[::-1])
 
 
+def read_image(path: Path) -> tuple[np.ndarray, int]:
+    """A non-PGM map image (PNG, BMP, ...) as (uint16 shades (height, width), top row first;
+    maxval), the shade of a colour pixel being the mean of its colour channels (as map_server
+    computes it; an alpha channel is ignored)."""
+    source = str(path)
+    if not path.is_file():
+        raise MapFormatError(f'map image {source!r} does not exist')
+    try:
+        with Image.open(path) as image:
+            image.load()
+            if image.mode in ('I;16', 'I;16B', 'I;16L', 'I'):
+                array = np.asarray(image, dtype=np.int64)
+                maxval = 65535
+            else:
+                colour = image.convert('RGBA' if 'A' in image.getbands() else 'RGB')
+                array = np.rint(np.asarray(colour, dtype=np.float64)[..., :3].mean(axis=2))
+                maxval = 255
+    except (OSError, ValueError, Image.DecompressionBombError) as err:
+        raise MapFormatError(f'cannot read map image {source!r}: {err}') from err
+    if array.ndim != 2 or array.size == 0:
+        raise MapFormatError(f'map image {source!r} has no pixels')
+    if max(array.shape) > MAX_IMAGE_SIDE:
+        raise MapFormatError(f'{source}: image size {array.shape[1]}x{array.shape[0]} is '
+                             f'outside 1..{MAX_IMAGE_SIDE} per side')
+    return np.clip(array, 0, maxval).astype(np.uint16), maxval
+
+
 def read_map_server(yaml_path: str | os.PathLike) -> MapServerMap:
     """Read a map_server map: (occupancy int8 in OccupancyGrid order, resolution, origin)."""
     metadata = read_map_yaml(yaml_path)
-    if metadata.image.suffix.lower() not in ('.pgm', ''):
-        raise MapFormatError(
-            f'{yaml_path}: image {str(metadata.image)!r} is not a PGM; only PGM (P5/P2) images '
-            'are supported (convert it, e.g. with `convert map.png map.pgm`)')
-    pixels, maxval = read_pgm(metadata.image)
+    if metadata.image.suffix.lower() in ('.pgm', ''):
+        pixels, maxval = read_pgm(metadata.image)
+    else:
+        pixels, maxval = read_image(metadata.image)
     return MapServerMap(pixels_to_occupancy(pixels, maxval, metadata), metadata.resolution,
                         metadata.origin)
 
@@ -441,23 +476,115 @@ def cells_at_cell_size(pixels: tuple[int, int], resolution: float,
     return height, width
 
 
-def import_map_server_for_scenario(yaml_path: str | os.PathLike,
-                                   scenario: ScenarioLike) -> TokenMap:
-    """A map_server map as a token map of ``scenario`` at the scenario's cell size.
+LOW_FREE_FRACTION = 0.2
+"""An imported map with less free floor than this share of its cells gets a warning: the
+example maps have 40 % (race track) to 74 % (drone), and a robot needs room for a route."""
+LOW_KNOWN_FRACTION = 0.75
+"""An imported map whose known region is less than this share of its cells (after cropping)
+gets a warning: the unknown cells inside count as walls."""
 
-    :func:`import_map_server` with the size that keeps the map's metres: an image of h x w
-    pixels at r m/px becomes round(h*r/cell) x round(w*r/cell) cells of the scenario's
-    ``cell_size`` (a 0.05 m/px map of a 16 m room becomes 32 x 32 cells of 0.5 m). The map's
-    origin does not matter to the token map (tokens have no position). MapFormatError when the
-    result would exceed the grid limits.
+
+class FacilityImport(NamedTuple):
+    """A map_server map imported for training (:func:`import_facility_map`)."""
+
+    token_map: TokenMap
+    """The token map at the scenario's cell size, cropped to the map's known region."""
+    origin: tuple[float, float, float]
+    """Pose (x m, y m, yaw rad) of the corner of the token map's cell (0, 0) in the original
+    map's frame: the original origin moved to the cropped region, so the learned map overlays
+    the original in RViz."""
+    image_shape: tuple[int, int]
+    """(height, width) in pixels of the original image."""
+    known_box: tuple[int, int, int, int]
+    """(first row, last row + 1, first column, last column + 1), OccupancyGrid order, of the
+    pixels kept: the bounding box of the known (not unknown) pixels."""
+    resolution: float
+    """Metres per pixel of the original."""
+    known_fraction: float
+    """Share of the kept pixels that are known (the rest count as walls)."""
+    free_fraction: float
+    """Share of the token map's cells that are free floor."""
+
+    def warnings(self) -> list[str]:
+        """What a user should hear about this import (empty when nothing is odd)."""
+        found = []
+        if self.free_fraction < LOW_FREE_FRACTION:
+            found.append(
+                f'only {self.free_fraction:.0%} of the imported map is free floor (less than '
+                f'{LOW_FREE_FRACTION:.0%}): the generator will learn a map that is almost all '
+                'wall, and its samples will rarely hold a route (check negate and the '
+                'thresholds in the YAML: is free space white?)')
+        if self.known_fraction < LOW_KNOWN_FRACTION:
+            found.append(
+                f'{1 - self.known_fraction:.0%} of the mapped region is unknown and counts as '
+                'wall: finish mapping it, or mark it free or occupied in an image editor')
+        return found
+
+    def summary(self) -> str:
+        """One line: what was kept and what it became."""
+        height, width = self.image_shape
+        top, bottom, left, right = self.known_box
+        cropped = ('' if (bottom - top, right - left) == (height, width) else
+                   f', cropped to its known region of {right - left}x{bottom - top} px '
+                   '(unknown outside the mapped area is outside the map)')
+        spec = resolve_scenario(self.token_map.scenario)
+        return (f'{width}x{height} px at {self.resolution} m/px{cropped} -> '
+                f'{self.token_map.width}x{self.token_map.height} cells of {spec.cell_size} m, '
+                f'{self.free_fraction:.0%} free')
+
+
+def known_bounding_box(occupancy: np.ndarray) -> tuple[int, int, int, int]:
+    """(first row, last row + 1, first column, last column + 1) of the cells that are not
+    unknown; MapFormatError if every cell is unknown."""
+    known = np.asarray(occupancy) != UNKNOWN
+    if not known.any():
+        raise MapFormatError('every cell of the map is unknown: there is nothing to learn')
+    rows = np.flatnonzero(known.any(axis=1))
+    cols = np.flatnonzero(known.any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) -> FacilityImport:
+    """A map_server map as a token map of ``scenario`` at the scenario's cell size, for
+    training on a facility's own map.
+
+    A SLAM map (map_saver's output) is a rectangle of unknown space with the mapped area
+    somewhere inside: the image is first cropped to the bounding box of its known pixels, since
+    unknown space outside the mapped area is outside the facility, not part of it. Unknown
+    pixels that remain inside the box count as walls (a test map must not invent floor).
+    Then :func:`import_map_server`'s conversion with the size that keeps the map's metres: an
+    image of h x w pixels at r m/px becomes round(h*r/cell) x round(w*r/cell) cells of the
+    scenario's ``cell_size``. MapFormatError when the result exceeds the grid limits or holds
+    no known pixel.
     """
     spec = resolve_scenario(scenario)
     loaded = read_map_server(yaml_path)
-    size = cells_at_cell_size(loaded.occupancy.shape, loaded.resolution, spec.cell_size)
+    try:
+        top, bottom, left, right = known_bounding_box(loaded.occupancy)
+    except MapFormatError as err:
+        raise MapFormatError(f'{yaml_path}: {err}') from err
+    cropped = loaded.occupancy[top:bottom, left:right]
+    size = cells_at_cell_size(cropped.shape, loaded.resolution, spec.cell_size)
     if max(size) > MAX_CELLS_PER_SIDE:
         raise MapFormatError(
-            f'{yaml_path}: {loaded.occupancy.shape[1]}x{loaded.occupancy.shape[0]} pixels at '
+            f'{yaml_path}: {cropped.shape[1]}x{cropped.shape[0]} known pixels at '
             f'{loaded.resolution} m/px make {size[1]}x{size[0]} cells of {spec.cell_size} m, '
             f'more than {MAX_CELLS_PER_SIDE} per side')
-    cells = resample_tokens(occupancy_to_tokens(loaded.occupancy, spec), spec, size)
-    return TokenMap(scenario=spec.name, cells=cells)
+    cells = resample_tokens(occupancy_to_tokens(cropped, spec), spec, size)
+    x, y, yaw = loaded.origin
+    # The origin is the pose of the corner of pixel (0, 0): move it along the map's own axes.
+    dx, dy = left * loaded.resolution, top * loaded.resolution
+    origin = (x + dx * math.cos(yaw) - dy * math.sin(yaw),
+              y + dx * math.sin(yaw) + dy * math.cos(yaw), yaw)
+    free = float(np.mean(tokens_to_occupancy(cells, spec) == FREE))
+    known = float(np.mean(cropped != UNKNOWN))
+    return FacilityImport(TokenMap(scenario=spec.name, cells=cells), origin,
+                          (int(loaded.occupancy.shape[0]), int(loaded.occupancy.shape[1])),
+                          (top, bottom, left, right), loaded.resolution, known, free)
+
+
+def import_map_server_for_scenario(yaml_path: str | os.PathLike,
+                                   scenario: ScenarioLike) -> TokenMap:
+    """The token map of :func:`import_facility_map` (cropped to the known region, at the
+    scenario's cell size)."""
+    return import_facility_map(yaml_path, scenario).token_map

@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
+from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint, training_map
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness
 from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_seeds, sample_token_maps
 from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, to_common_encoding
+from sessgan_gen.token_map import to_common_encoding
 
 REPORT_SCENARIOS = ('factory', 'racetrack', 'drone')
 UNIQUENESS_SIZES = (8, 16)
@@ -123,7 +123,7 @@ def collect_samples(
     seconds = time.perf_counter() - started
     feasible = [make_environment(cells, spec, f'{spec.name}-{i}').feasible
                 for i, cells in enumerate(maps)]
-    example = load_example_map(spec.name).cells
+    example = training_map(metadata)
     return ScenarioSamples(spec.name, maps, np.asarray(example, dtype=np.int64), feasible,
                            str(path), metadata, seconds)
 

@@ -18,6 +18,8 @@ from sessgan_gen.report import (
     uniqueness_markdown,
     write_report,
 )
+from sessgan_gen.ros_spin import run_command
+from sessgan_gen.scenarios import get_scenario
 
 
 @dataclass
@@ -43,14 +45,38 @@ class ReportConfig:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status (0 success, 1 error)."""
+    """Entry point; returns the exit status (0 success, 1 error, 2 bad options: nothing
+    written, 130 interrupted)."""
+    return run_command(lambda: run_report(argv), 'report: interrupted')
+
+
+def check_options(config: ReportConfig) -> list[str]:
+    """The scenarios to report, or SessganGenError naming the first option that cannot
+    work."""
+    for option, value, least in (('--samples', config.samples, 1), ('--seed', config.seed, 0),
+                                 ('--threads', config.threads, 0)):
+        if value < least:
+            raise SessganGenError(f'{option} must be >= {least}, got {value}')
+    scenarios = [name.strip() for name in config.scenarios.split(',') if name.strip()]
+    if not scenarios:
+        raise SessganGenError('--scenarios names no scenario')
+    for name in scenarios:
+        get_scenario(name)
+    return scenarios
+
+
+def run_report(argv: Sequence[str] | None) -> int:
     config = parse_config(
         ReportConfig, argv, prog='ros2 run sessgan_gen report',
         description='Write the TPKL matrix, uniqueness table and sample maps of the '
                     'generators (paper Fig. 11 and Table 1).')
+    try:
+        scenarios = check_options(config)
+    except SessganGenError as err:
+        print(f'report: error: {err}', file=sys.stderr)
+        return 2
     if config.threads:
         torch.set_num_threads(config.threads)
-    scenarios = [name.strip() for name in config.scenarios.split(',') if name.strip()]
     checkpoints = {name: getattr(config, f'{name}_checkpoint', '') for name in scenarios}
     try:
         data = compute_report(scenarios, checkpoints, config.samples, config.seed)

@@ -12,6 +12,12 @@ the interpreter's finalization: with the executor in a thread of its own, finali
 and DDS's native threads took about a second and, in 1 of 8 generator exits measured, aborted
 with "terminate called without an active exception". rclpy is imported when a node is run, so
 this module imports without ROS.
+
+Commands (campaign, evaluate, replay, ...) stop the other way, through
+:func:`run_command`: SIGINT and SIGTERM raise KeyboardInterrupt in the main thread, the
+command cleans up where it stands and exits 130, and a command that uses rclpy starts it with
+:func:`init_rclpy`, without rclpy's own handlers (which shut the context down under a
+spinning command, so it ended with an ExternalShutdownException traceback and exit 1).
 """
 
 from __future__ import annotations
@@ -53,6 +59,44 @@ class StopRequest:
     @property
     def requested(self) -> bool:
         return self.signal is not None
+
+
+INTERRUPTED_STATUS = 130
+"""A command's exit status after SIGINT or SIGTERM (128 + SIGINT, as shells report Ctrl-C)."""
+
+
+class _InterruptOnSignals(StopRequest):
+    """SIGINT or SIGTERM raise KeyboardInterrupt in the main thread; a second one ends the
+    process at once."""
+
+    def _handle(self, signum, frame) -> None:
+        super()._handle(signum, frame)
+        raise KeyboardInterrupt
+
+
+def run_command(body: Callable[[], int], interrupted: str = 'interrupted',
+                stream: Any = None) -> int:
+    """Run a command's ``body`` and return its exit status; on SIGINT or SIGTERM print
+    ``interrupted`` to ``stream`` (stderr) and return INTERRUPTED_STATUS, without a traceback.
+    ``body`` may catch KeyboardInterrupt itself to clean up or say more (a --resume hint)."""
+    request = _InterruptOnSignals()
+    request.install()
+    try:
+        return body()
+    except KeyboardInterrupt:
+        print(interrupted, file=stream or sys.stderr, flush=True)
+        return INTERRUPTED_STATUS
+    finally:
+        request.restore()
+
+
+def init_rclpy(args: list[str] | None = None) -> None:
+    """rclpy.init without rclpy's signal handlers: a command under :func:`run_command` gets
+    SIGINT and SIGTERM as KeyboardInterrupt, with its context still up for the clean-up."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
 
 
 def run_node(make_node: Callable[[], Any], make_executor: Callable[[Any], Any] | None = None,

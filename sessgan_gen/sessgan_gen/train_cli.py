@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import NamedTuple, TextIO
 
 import numpy as np
 import torch
@@ -16,31 +17,60 @@ from sessgan_gen.checkpoint import load_training_checkpoint, save_checkpoint
 from sessgan_gen.config_cli import parse_config
 from sessgan_gen.errors import CheckpointError, SessganGenError
 from sessgan_gen.progress import ProgressPrinter, format_duration
+from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_gen.seeding import seed_everything
 from sessgan_gen.training import (
     TrainConfig,
     Trainer,
     TrainingState,
+    check_training_map,
     config_dict,
+    estimated_training_seconds,
+    long_training_warning,
     resolve_config,
     same_training,
     training_metadata,
+    validate_config,
 )
 
 
-def load_training_map(config: TrainConfig) -> tuple[np.ndarray, Scenario, str]:
-    """(cells, scenario, source label) of the map the config asks to learn."""
+class TrainingMap(NamedTuple):
+    """The map a training run learns."""
+
+    cells: np.ndarray
+    scenario: Scenario
+    source: str
+    """Where it came from (recorded as map_source)."""
+    origin: tuple[float, float, float]
+    """Pose of its cell (0, 0) corner in the original map's frame ((0, 0, 0) for token
+    maps)."""
+
+
+def load_training_map(config: TrainConfig, log: TextIO | None = None) -> TrainingMap:
+    """The map the config asks to learn, checked to be large enough; an imported map_server
+    map is described on ``log`` (default stderr), with warnings for a map that is mostly wall
+    or unknown."""
     from sessgan_gen import token_map  # the other half of the package; imported on use
+
+    log = log or sys.stderr
 
     scenario = get_scenario(config.scenario)
     if config.map_file and config.map_yaml:
         raise SessganGenError('give --map-file or --map-yaml, not both')
+    origin = (0.0, 0.0, 0.0)
+    described = ''
     if config.map_yaml:
-        from sessgan_gen.map_server_io import import_map_server_for_scenario
+        from sessgan_gen.map_server_io import import_facility_map
 
-        loaded = import_map_server_for_scenario(config.map_yaml, scenario)
+        imported = import_facility_map(config.map_yaml, scenario)
+        loaded = imported.token_map
+        origin = imported.origin
         source = str(Path(config.map_yaml).resolve())
+        described = f' ({imported.summary()})'
+        print(f'train: imported {config.map_yaml}: {imported.summary()}', file=log)
+        for warning in imported.warnings():
+            print(f'train: WARNING: {warning}', file=log)
     elif config.map_file:
         loaded = token_map.read_token_map(config.map_file)
         source = str(Path(config.map_file).resolve())
@@ -53,7 +83,11 @@ def load_training_map(config: TrainConfig) -> tuple[np.ndarray, Scenario, str]:
         raise SessganGenError(
             f'map {source} is a {loaded_name!r} map, but --scenario is {scenario.name!r}')
     cells = np.asarray(loaded.cells, dtype=np.int64)
-    return cells, scenario, source
+    try:
+        check_training_map(cells)
+    except ValueError as err:
+        raise SessganGenError(f'map {source}{described}: {err}') from err
+    return TrainingMap(cells, scenario, source, origin)
 
 
 def imported_map_paths(output: Path) -> tuple[Path, Path]:
@@ -62,60 +96,80 @@ def imported_map_paths(output: Path) -> tuple[Path, Path]:
     return output.with_suffix('.map.txt'), output.with_suffix('.map.yaml')
 
 
-def write_imported_map(output: Path, cells: np.ndarray, scenario: Scenario) -> None:
+def write_imported_map(output: Path, cells: np.ndarray, scenario: Scenario,
+                       origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
     """Write the token map learned from a map_server map next to the checkpoint: as tokens and
-    as the map_server map it is at the scenario's cell size (to compare with the original)."""
-    from sessgan_gen.map_server_io import export_token_map
-    from sessgan_gen.token_map import TokenMap, write_token_map
+    as the map_server map it is at the scenario's cell size, at the original's ``origin`` (so it
+    overlays the original in RViz)."""
+    from sessgan_gen.map_server_io import write_map_server
+    from sessgan_gen.token_map import TokenMap, tokens_to_occupancy, write_token_map
 
     text_path, yaml_path = imported_map_paths(output)
     output.parent.mkdir(parents=True, exist_ok=True)
     token_map = TokenMap(scenario=scenario.name, cells=cells)
     write_token_map(text_path, token_map)
-    export_token_map(yaml_path, token_map)
+    write_map_server(yaml_path, tokens_to_occupancy(cells, scenario), scenario.cell_size,
+                     origin)
     print(f'train: the map as learned ({token_map.width}x{token_map.height} cells of '
           f'{scenario.cell_size} m): {text_path} and {yaml_path}', file=sys.stderr)
 
 
 class TotalEta:
-    """Whole-run ETA. Time per iteration is modelled as a + b * area: fitted over the scales
-    measured so far, or, with one scale measured, taken as proportional to area."""
+    """Whole-run ETA: the cost model of :func:`estimated_training_seconds` (per scale, crops
+    counted) for the work left, scaled by how much slower or faster than the model this run
+    has been so far. The first seconds of a scale no longer decide the rate of every later
+    scale, so the estimate does not jump (it read 115 h, then 7 min, within seconds)."""
 
-    def __init__(self, shapes: Sequence[tuple[int, int]], iterations: int) -> None:
-        self.areas = [h * w for h, w in shapes]
+    MIN_MEASURED_SECONDS = 2.0
+    """Before this much of the run is measured, the model's own figure is shown."""
+
+    def __init__(self, shapes: Sequence[tuple[int, int]], iterations: int, channels: int = 32,
+                 crop_size: int = 0, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.costs = [estimated_training_seconds([shape], 1, channels, crop_size)
+                      for shape in shapes]
         self.iterations = iterations
-        self.scale_started = time.perf_counter()
-        self.scale = -1
-        self.measured: dict[int, float] = {}
+        self.clock = clock
+        self.started: float | None = None
+        self.origin = 0.0
+
+    def _position(self, scale: int, done: int) -> float:
+        """Model seconds of the work up to iteration ``done`` of ``scale``."""
+        current = self.costs[scale] * done if scale < len(self.costs) else 0.0
+        return sum(self.costs[:scale]) * self.iterations + current
 
     def estimate(self, scale: int, done: int) -> float:
-        now = time.perf_counter()
-        if scale != self.scale:
-            self.scale, self.scale_started = scale, now
-        per_iteration = (now - self.scale_started) / max(done, 1)
-        self.measured[scale] = per_iteration
-        areas = np.array([self.areas[s] for s in self.measured], dtype=float)
-        times = np.array(list(self.measured.values()))
-        if len(self.measured) >= 2 and np.ptp(areas) > 0:
-            slope, intercept = np.polyfit(areas, times, 1)
-            slope, intercept = max(slope, 0.0), max(intercept, 0.0)
-        else:
-            slope, intercept = per_iteration / self.areas[scale], 0.0
-        later = sum(intercept + slope * area for area in self.areas[scale + 1:])
-        return (self.iterations - done) * per_iteration + self.iterations * later
+        now = self.clock()
+        position = self._position(scale, done)
+        if self.started is None:  # a resumed run starts part-way
+            self.started, self.origin = now, position
+        left = self._position(len(self.costs), 0) - position
+        elapsed, modelled = now - self.started, position - self.origin
+        ratio = (elapsed / modelled if elapsed >= self.MIN_MEASURED_SECONDS and modelled > 0
+                 else 1.0)
+        return ratio * left
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the process exit status (0 success, 1 error, 130 interrupted)."""
+    """Entry point; returns the process exit status (0 success, 1 error, 2 bad options
+    (nothing written), 130 interrupted)."""
+    return run_command(lambda: run_training(argv), 'train: interrupted')
+
+
+def run_training(argv: Sequence[str] | None) -> int:
     config = resolve_config(parse_config(
         TrainConfig, argv, prog='ros2 run sessgan_gen train',
         description='Train a SESS-GAN (TOAD-GAN) generator pyramid on one token map.'))
+    try:
+        validate_config(config)
+    except ValueError as err:
+        print(f'train: error: {err}', file=sys.stderr)
+        return 2
     try:
         return train(config)
     except KeyboardInterrupt:
         print('train: interrupted; run again with --resume to continue from the last '
               'finished scale', file=sys.stderr)
-        return 130
+        return INTERRUPTED_STATUS
     except (SessganGenError, ValueError, OSError) as err:
         print(f'train: error: {err}', file=sys.stderr)
         return 1
@@ -125,11 +179,9 @@ def train(config: TrainConfig) -> int:
     """Run (or resume) the training that ``config`` describes; writes config.output."""
     if config.threads:
         torch.set_num_threads(config.threads)
-    cells, scenario, source = load_training_map(config)
+    cells, scenario, source, origin = load_training_map(config)
     output = Path(config.output)
     seed_everything(config.seed, config.deterministic)
-    if config.map_yaml:
-        write_imported_map(output, cells, scenario)
 
     pyramid = None
     state = None
@@ -154,6 +206,8 @@ def train(config: TrainConfig) -> int:
             f'this map needs {trainer.pyramid.scale_shapes}')
     shapes = trainer.pyramid.scale_shapes
     log = sys.stderr
+    if config.map_yaml:
+        write_imported_map(output, cells, scenario, origin)
     print(f'train: {scenario.name} map {source} {shapes[-1][0]}x{shapes[-1][1]}, '
           f'{len(shapes)} scales {[f"{h}x{w}" for h, w in shapes]}, '
           f'{config.iterations} iterations per scale, {config.channels} channels, '
@@ -163,9 +217,12 @@ def train(config: TrainConfig) -> int:
         return 0
     if state is not None:
         print(f'train: resuming after scale {state.trained_scales}/{len(shapes)}', file=log)
+    if warning := long_training_warning(shapes[trainer.state.trained_scales:],
+                                        config.iterations, config.channels, config.crop_size):
+        print(f'train: WARNING: {warning}', file=log)
 
     printer = ProgressPrinter(log) if config.progress else None
-    eta = TotalEta(shapes, config.iterations)
+    eta = TotalEta(shapes, config.iterations, config.channels, config.crop_size)
 
     def progress(scale: int, num_scales: int, done: int, total: int) -> None:
         if printer is None:
@@ -176,7 +233,7 @@ def train(config: TrainConfig) -> int:
         printer.update(done, f'total ETA {format_duration(eta.estimate(scale, done))}')
 
     def checkpoint(pyramid, state: TrainingState) -> None:
-        metadata = training_metadata(scenario, config, pyramid, state, source)
+        metadata = training_metadata(scenario, config, pyramid, state, source, cells)
         save_checkpoint(output, pyramid, metadata, state.to_dict())
         result = state.scale_results[-1]
         print(f'train: scale {state.trained_scales}/{len(shapes)} done in '
@@ -188,7 +245,31 @@ def train(config: TrainConfig) -> int:
     trainer.run(progress=progress, on_scale_done=checkpoint)
     print(f'train: finished in {trainer.state.seconds:.1f} s of training; checkpoint {output} '
           f'and {output.with_suffix(".json")}', file=log)
+    report_valid_tests(output, scenario, log)
     return 0
+
+
+VALID_TEST_SAMPLES = 20
+"""Maps sampled after training to tell how often the generator makes a valid test."""
+FEW_VALID_TESTS = 0.25
+"""A valid-test share below this warns: a campaign would spend most episodes on nothing."""
+
+
+def report_valid_tests(output: Path, scenario: Scenario, log: TextIO) -> float:
+    """Sample the trained generator and say how many of its maps are valid tests (a route
+    exists between a start and a goal); warn loudly when few are. Returns the share."""
+    from sessgan_gen.environment_sampler import EnvironmentSampler
+
+    seeds = list(range(VALID_TEST_SAMPLES))
+    environments = EnvironmentSampler().sample(seeds, output, scenario.name)
+    share = sum(env.feasible for env in environments) / len(environments)
+    print(f'train: {share:.0%} of {len(seeds)} sampled maps are valid tests', file=log)
+    if share < FEW_VALID_TESTS:
+        print(f'train: WARNING: only {share:.0%} of the maps this generator makes hold a route '
+              f'for the {scenario.robot} robot: a campaign would find few or no valid tests. '
+              'Is the map mostly wall (unknown space, negate)? Are its passages narrower than '
+              'the robot needs?', file=log)
+    return share
 
 
 if __name__ == '__main__':

@@ -22,7 +22,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 import torch
@@ -30,8 +30,10 @@ import torch.nn.functional as F
 from torch import nn
 
 from sessgan_gen import __version__
+from sessgan_gen.checkpoint import training_map_rows
 from sessgan_gen.downsampling import downsample_pyramid, one_hot
 from sessgan_gen.model import (
+    GENERATOR_PADDING,
     GeneratorPyramid,
     PatchDiscriminator,
     init_weights,
@@ -57,9 +59,11 @@ class TrainConfig:
     map_file: str = ''
     """Token text file to train on instead of the scenario's example map."""
     map_yaml: str = ''
-    """map_server map (YAML with its PGM) to train on instead, resampled to the scenario's cell
-    size; the token map it becomes is written next to the checkpoint (<output>.map.txt, and
-    <output>.map.yaml/.pgm as it looks at that cell size)."""
+    """map_server map (YAML with its PGM or PNG) to train on instead: a SLAM map is cropped to
+    its known region (unknown space around the mapped area is outside the map), then resampled
+    to the scenario's cell size; the token map it becomes is written next to the checkpoint
+    (<output>.map.txt, and <output>.map.yaml/.pgm as it looks at that cell size, at the
+    original's origin)."""
     output: str = ''
     """Checkpoint file (.pt; the .json metadata goes next to it). Empty: <scenario>.pt."""
     iterations: int = 0
@@ -91,6 +95,13 @@ class TrainConfig:
     """Weight alpha of the reconstruction loss."""
     init_from_previous_scale: bool = True
     """Start each scale's networks from the previous scale's weights (SinGAN); faster."""
+    crop_size: int = 48
+    """At a scale with a side longer than this, every update sees a random crop of at most
+    this many cells a side instead of the whole map (0: never crop). The patch discriminator
+    judges 7x7 windows and the losses are means over cells, so a crop's loss estimates the
+    whole map's without bias; the generator's input is cut from the whole padded input, so a
+    crop is generated exactly as inside the whole map. A 128x128 map's finest scale then costs
+    a 48x48 one per update."""
     seed: int = 1
     """Seed of every random choice of the run."""
     device: str = 'auto'
@@ -115,6 +126,64 @@ SCENARIO_DEFAULTS: dict[str, dict[str, int]] = {
 """Per-scenario iterations and channels, chosen to meet the training-time targets on a
 2-core CPU (factory within 5 min, race track within 30 min)."""
 FALLBACK_DEFAULTS = {'iterations': 600, 'channels': 32}
+
+MIN_TRAINING_SIDE = 8
+"""Fewest cells per side of a map to learn: one receptive field (7 cells) plus one, so the
+patch GAN sees more than one window, and room for the 4 x 4 tiles TPKL counts."""
+
+SECONDS_PER_ITERATION = (0.0158, 5.38e-5)
+"""(a, b) of a training iteration's time a + b * cells at 32 channels on one CPU thread:
+fitted to the shipped factory checkpoint's per-scale times (8x8 27.8 s, 16x16 29.6 s, 32x32
+70.9 s per 1,000 iterations, scale_results in data/checkpoints/factory.json)."""
+CROPPED_SECONDS_PER_CELL = 7e-7
+"""What a scale trained on crops still spends per cell of its whole map and iteration
+(generating the coarser scales whole and upsampling them): a 256x256 scale on 48x48 crops took
+0.74 s for 4 iterations where the crop alone models 0.56 s (one thread, process time)."""
+LONG_TRAINING_SECONDS = 600.0
+"""An estimate above this warns before training starts (the target for a facility map of up
+to 128x128 cells: 10 minutes; such a map is estimated at 6.7 min and measured at 6.5)."""
+
+
+def check_training_map(cells: np.ndarray) -> None:
+    """ValueError naming the size when a map is too small to learn."""
+    height, width = np.shape(cells)
+    if min(height, width) < MIN_TRAINING_SIDE:
+        raise ValueError(
+            f'the map is {width}x{height} cells (width x height); training needs at least '
+            f'{MIN_TRAINING_SIDE} cells per side (one 7-cell receptive field and more)')
+
+
+def estimated_training_seconds(shapes: list[tuple[int, int]] | tuple[tuple[int, int], ...],
+                               iterations: int, channels: int, crop_size: int = 0) -> float:
+    """Rough CPU seconds (one thread) to train scales of ``shapes``
+    (:data:`SECONDS_PER_ITERATION`; the cell term grows with channels squared; a scale trained
+    on crops costs its crop's cells)."""
+    fixed, per_cell = SECONDS_PER_ITERATION
+    scale = (channels / 32) ** 2
+    total = 0.0
+    for height, width in shapes:
+        cropped = crop_size > 0 and max(height, width) > crop_size
+        cells = (min(height, crop_size) * min(width, crop_size) if cropped
+                 else height * width)
+        whole = CROPPED_SECONDS_PER_CELL * height * width if cropped else 0.0
+        total += iterations * (fixed + scale * (per_cell * cells + whole))
+    return total
+
+
+def long_training_warning(shapes: list[tuple[int, int]] | tuple[tuple[int, int], ...],
+                          iterations: int, channels: int, crop_size: int = 0) -> str:
+    """What to tell before a training of scales ``shapes`` that would take long (more than
+    :data:`LONG_TRAINING_SECONDS` by :func:`estimated_training_seconds`), or ''."""
+    seconds = estimated_training_seconds(shapes, iterations, channels, crop_size)
+    if not shapes or seconds <= LONG_TRAINING_SECONDS:
+        return ''
+    height, width = shapes[-1]
+    took = f'{seconds / 3600:.1f} h' if seconds >= 3600 else f'{seconds / 60:.0f} min'
+    return (f'a {width}x{height}-cell map ({height * width:,} cells) at {iterations} iterations '
+            f'a scale takes roughly {took} on one CPU thread (a 32x32 map: about 2 min), '
+            'and memory grows with the cells too: crop the map to the area the robots use, '
+            'train fewer --iterations, or use a GPU (--device cuda)')
+
 
 RESULT_FIELDS = ('output', 'resume', 'progress', 'threads', 'device')
 """Config fields that do not change the trained weights (resume may differ in them)."""
@@ -143,7 +212,19 @@ def validate_config(config: TrainConfig) -> None:
         (config.generator_steps >= 1, 'generator_steps must be at least 1'),
         (config.learning_rate > 0, 'learning_rate must be positive'),
         (config.threads >= 0, 'threads must not be negative'),
+        (0.0 <= config.beta1 < 1.0, 'beta1 must lie in [0, 1)'),
+        (0.0 <= config.beta2 < 1.0, 'beta2 must lie in [0, 1)'),
+        (0.0 < config.lr_decay <= 1.0, 'lr_decay must lie in (0, 1]'),
+        (config.gradient_penalty_weight >= 0, 'gradient_penalty_weight must not be negative'),
+        (config.reconstruction_weight >= 0, 'reconstruction_weight must not be negative'),
+        (config.seed >= 0, 'seed must not be negative'),
+        (config.crop_size == 0 or config.crop_size >= MIN_TRAINING_SIDE,
+         f'crop_size must be 0 (no crops) or at least {MIN_TRAINING_SIDE}'),
     ]
+    for field in dataclasses.fields(config):
+        value = getattr(config, field.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f'{field.name} must be a finite number, got {value}')
     for ok, message in checks:
         if not ok:
             raise ValueError(message)
@@ -209,7 +290,9 @@ def gradient_penalty(
     discriminator: nn.Module, real: torch.Tensor, fake: torch.Tensor, weight: float
 ) -> torch.Tensor:
     """WGAN-GP: weight * mean over cells of (|grad D| - 1)^2 on a random real/fake mix."""
-    mix = torch.rand(1, 1, 1, 1, device=real.device)
+    # Drawn on the CPU generator like every other draw of training, whose state the
+    # checkpoint saves: a resumed run on CUDA then continues the same stream.
+    mix = torch.rand(1, 1, 1, 1).to(real.device)
     blend = (mix * real + (1 - mix) * fake).requires_grad_(True)
     score = discriminator(blend)
     (grads,) = torch.autograd.grad(score, blend, grad_outputs=torch.ones_like(score),
@@ -335,23 +418,33 @@ class Trainer:
                 noises = pyramid.draw_noise(torch.default_generator, coarse_shapes, batch=1)
                 return upsample(pyramid.generate(noises), shape)
 
+        crops = Crops(shape, config.crop_size)
         for iteration in range(config.iterations):
             noise = torch.randn(real.shape).to(device)
             for _ in range(config.discriminator_steps):
                 previous = random_previous()
                 optimizer_d.zero_grad(set_to_none=True)
-                fake = generator(pad(amplitude * noise + _or_zero(previous)), previous).detach()
-                loss_d = (discriminator(fake).mean() - discriminator(real).mean()
-                          + gradient_penalty(discriminator, real, fake,
+                corner = crops.draw()
+                fake = generator(crops.cut_padded(pad(amplitude * noise + _or_zero(previous)),
+                                                  corner),
+                                 crops.cut(previous, corner)).detach()
+                real_crop = crops.cut(real, crops.draw())
+                loss_d = (discriminator(fake).mean() - discriminator(real_crop).mean()
+                          + gradient_penalty(discriminator, real_crop, fake,
                                              config.gradient_penalty_weight))
                 loss_d.backward()
                 optimizer_d.step()
             for _ in range(config.generator_steps):
                 optimizer_g.zero_grad(set_to_none=True)
-                fake = generator(pad(amplitude * noise + _or_zero(previous)), previous)
-                reconstruction = generator(reconstruction_input, reconstruction_previous)
+                corner = crops.draw()
+                fake = generator(crops.cut_padded(pad(amplitude * noise + _or_zero(previous)),
+                                                  corner),
+                                 crops.cut(previous, corner))
+                reconstruction = generator(crops.cut_padded(reconstruction_input, corner),
+                                           crops.cut(reconstruction_previous, corner))
                 loss_g = (-discriminator(fake).mean()
-                          + config.reconstruction_weight * F.mse_loss(reconstruction, real))
+                          + config.reconstruction_weight * F.mse_loss(
+                              reconstruction, crops.cut(real, corner)))
                 loss_g.backward()
                 optimizer_g.step()
             for scheduler in schedulers:
@@ -371,6 +464,48 @@ class Trainer:
         return result, discriminator
 
 
+class Crops:
+    """Random crops of a scale's maps (``TrainConfig.crop_size``); a scale that fits the crop
+    is used whole and draws no random number, so such trainings are as before crops existed."""
+
+    def __init__(self, shape: tuple[int, int], crop_size: int) -> None:
+        self.shape = shape
+        self.active = crop_size > 0 and max(shape) > crop_size
+        self.window = (min(shape[0], crop_size), min(shape[1], crop_size)) if self.active \
+            else shape
+
+    def draw(self) -> tuple[int, int]:
+        """Top-left cell of a random crop (from torch's global generator, so a seeded run
+        repeats and a resumed one continues exactly)."""
+        if not self.active:
+            return 0, 0
+        top = int(torch.randint(self.shape[0] - self.window[0] + 1, (1,)))
+        left = int(torch.randint(self.shape[1] - self.window[1] + 1, (1,)))
+        return top, left
+
+    @overload
+    def cut(self, image: torch.Tensor, corner: tuple[int, int]) -> torch.Tensor: ...
+
+    @overload
+    def cut(self, image: None, corner: tuple[int, int]) -> None: ...
+
+    def cut(self, image: torch.Tensor | None, corner: tuple[int, int]) -> torch.Tensor | None:
+        """The crop at ``corner`` of a (batch, tokens, h, w) map."""
+        if image is None or not self.active:
+            return image
+        top, left = corner
+        return image[..., top:top + self.window[0], left:left + self.window[1]]
+
+    def cut_padded(self, padded: torch.Tensor, corner: tuple[int, int]) -> torch.Tensor:
+        """The generator input of the crop at ``corner``, cut from the whole map's padded
+        input with its margin, so the crop is generated as it is inside the whole map."""
+        if not self.active:
+            return padded
+        top, left = corner
+        margin = 2 * GENERATOR_PADDING
+        return padded[..., top:top + self.window[0] + margin, left:left + self.window[1] + margin]
+
+
 def _or_zero(previous: torch.Tensor | None) -> torch.Tensor | float:
     """The coarser output to add to a generator's noise (none at the coarsest scale)."""
     return 0.0 if previous is None else previous
@@ -382,13 +517,17 @@ def training_metadata(
     pyramid: GeneratorPyramid,
     state: TrainingState,
     map_source: str,
+    cells: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """The JSON metadata of a (possibly partial) training checkpoint."""
+    """The JSON metadata of a (possibly partial) training checkpoint; ``cells``, the map
+    learned, is stored as ``training_map`` (the reference of every TPKL figure)."""
+    stored = {} if cells is None else {'training_map': training_map_rows(cells, scenario.tokens)}
     return {
         'scenario': scenario.name,
         'tokens': list(scenario.tokens),
         'map_source': map_source,
         'map_shape': list(pyramid.size),
+        **stored,
         'seed': config.seed,
         'training_config': config_dict(config),
         'trained_scales': state.trained_scales,

@@ -10,13 +10,24 @@
 
 Everything is written under ``<directory>.tmp-<pid>/`` and moved into place with one
 ``os.replace`` of a finished directory, so a reader (or a killed writer) never sees a
-half-written bag. A bag's directory is ``<record directory>/<episode id>``
+half-written bag. The staging directory's first file is a marker (:data:`STAGING_MARKER`:
+the writer's pid, host and process start time), and clean-up
+(:func:`remove_stale_staging_directories`) removes only staging directories whose marker shows
+a writer of this host that is gone: a directory someone else named ``*.tmp-<pid>`` is never
+touched. A bag's directory is ``<record directory>/<episode id>``
 (:func:`episode_bag_directory`); the id must be a safe name
 (``sessgan_gen.environment.check_environment_id``: no path separators, no '..', at most 128
 characters), checked before anything on disk is touched. An existing directory is replaced
 (``overwrite``) only if it is itself a failure bag (:func:`is_episode_bag`), never a
 directory someone else made. The messages arrive already CDR-serialized (the node serializes them
 with ``rclpy.serialization``); this module imports no rclpy and no message types.
+
+MCAP files get chunk CRCs (:func:`add_mcap_chunk_crcs`; rosbags writes none), and episode.json
+lists the size and SHA-256 digest of every other file of the bag (``files``), so a reader can
+refuse a bag corrupted after it was written (``sessgan_evolver.bag_reading.verify_bag_files``).
+
+A simulator writes only under the bags root it was started with: the record directory an
+evaluate goal names is a relative subdirectory of it (:func:`record_directory_under`).
 
 QoS recorded per topic (what ``ros2 bag play`` will offer on replay): ``map`` and
 ``tf_static`` as reliable, transient local, keep last 1 (late subscribers still get the
@@ -25,10 +36,14 @@ map and static transforms); every other topic reliable, volatile, keep last 10.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
 import shutil
+import socket
+import struct
+import zlib
 from collections.abc import Iterable, Mapping
 from enum import StrEnum
 from pathlib import Path
@@ -70,6 +85,13 @@ EPISODE_FILE = 'episode.json'
 MAP_YAML_FILE = 'map.yaml'
 METADATA_FILE = 'metadata.yaml'
 _BAG_SIDE_FILES = frozenset({EPISODE_FILE, MAP_YAML_FILE, 'map.pgm', METADATA_FILE})
+
+STAGING_MARKER = '.sessgan-staging.json'
+"""The first file of a staging directory: who writes it (pid, host, process start time)."""
+_STAGING_FORMAT = 'sessgan-failure-bag-staging/1'
+
+MAX_RECORD_SUBDIRECTORY_DEPTH = 4
+"""Components a record directory may have below the bags root (``<run>`` is one)."""
 
 # rmw's "infinite" duration as Jazzy's rosbag2 writes it in metadata.yaml.
 _INFINITE = QosTime(sec=9223372036, nsec=854775807)
@@ -145,6 +167,45 @@ def episode_bag_directory(record_directory: str | Path, episode_id: str) -> Path
     return Path(record_directory) / episode_id
 
 
+def check_record_subdirectory(subdirectory: object) -> str:
+    """``subdirectory`` if it names a directory inside a bags root, else BagWriteError saying
+    why: relative, at most :data:`MAX_RECORD_SUBDIRECTORY_DEPTH` '/'-separated components, each
+    a safe name as episode ids are (``check_environment_id``: a letter or digit first, then
+    letters, digits, '.', '_', '-'; no '..', no '.tmp-'), so it can neither be absolute nor
+    climb out of the root."""
+    rule = ("a failure bag's record directory must be a relative subdirectory of the "
+            "simulator's bags root (e.g. 'my-run'): '/'-separated names that start with a "
+            "letter or digit and hold only letters, digits, '.', '_' and '-' (no '..')")
+    if not isinstance(subdirectory, str):
+        raise BagWriteError(f'{rule}; got a {type(subdirectory).__name__}')
+    if not subdirectory:
+        raise BagWriteError(f'{rule}; got an empty one')
+    if subdirectory.startswith('/'):
+        raise BagWriteError(f'{rule}; {subdirectory!r} is an absolute path')
+    parts = subdirectory.split('/')
+    if len(parts) > MAX_RECORD_SUBDIRECTORY_DEPTH:
+        raise BagWriteError(f'{rule}; {subdirectory!r} has {len(parts)} components, at most '
+                            f'{MAX_RECORD_SUBDIRECTORY_DEPTH}')
+    for part in parts:
+        try:
+            check_environment_id(part)
+        except InvalidEnvironmentError as err:
+            raise BagWriteError(f'{rule}; {subdirectory!r} has the component {part!r}') from err
+    return subdirectory
+
+
+def record_directory_under(bags_root: str | Path, subdirectory: str) -> Path:
+    """``<bags_root>/<subdirectory>`` resolved, after :func:`check_record_subdirectory`;
+    BagWriteError also when an existing symbolic link would lead the path out of the root."""
+    check_record_subdirectory(subdirectory)
+    root = Path(bags_root).resolve()
+    directory = (root / subdirectory).resolve()
+    if not directory.is_relative_to(root):
+        raise BagWriteError(f'record directory {subdirectory!r} leads out of the bags root '
+                            f'{root} (to {directory}): refusing it')
+    return directory
+
+
 def is_episode_bag(directory: str | Path) -> bool:
     """True if ``directory`` is a failure bag :func:`write_episode_bag` wrote: a directory of
     plain files holding episode.json and metadata.yaml, and nothing but the bag's own files
@@ -208,13 +269,22 @@ def write_episode_bag(directory: str | Path,
     store = typestore if typestore is not None else jazzy_typestore()
     final.parent.mkdir(parents=True, exist_ok=True)
     staging = final.parent / f'{final.name}.tmp-{os.getpid()}'
-    shutil.rmtree(staging, ignore_errors=True)  # a leftover of a killed earlier process
+    if staging.exists() or staging.is_symlink():
+        # A leftover of a killed earlier process with our pid; anything else stays.
+        if _staging_owner(staging) is None:
+            raise BagWriteError(f'{staging} exists and is not the staging directory of a '
+                                'failure bag: refusing to remove it')
+        shutil.rmtree(staging)
     staging.mkdir()
     bag_path = staging / final.name
     try:
+        _write_staging_marker(staging)
         custom_data = {'sessgan.episode': final.name, 'sessgan.software_version': __version__}
         counts, first_ns, last_ns = _write_bag(bag_path, records, storage, store, custom_data)
         _describe_as_jazzy(bag_path / METADATA_FILE)
+        if storage is BagStorage.MCAP:
+            for mcap_file in bag_path.glob('*.mcap'):
+                add_mcap_chunk_crcs(mcap_file)
         origin_values = [float(value) for value in origin]
         write_map_server(bag_path / MAP_YAML_FILE, np.asarray(map_occupancy), float(resolution),
                          origin_values)
@@ -227,6 +297,7 @@ def write_episode_bag(directory: str | Path,
                           'width': int(np.shape(map_occupancy)[1])}
         episode['messages'] = {'count': sum(counts.values()), 'topics': counts,
                                'first_timestamp_ns': first_ns, 'last_timestamp_ns': last_ns}
+        episode['files'] = file_digests(bag_path)
         (bag_path / EPISODE_FILE).write_text(
             json.dumps(episode, indent=2, sort_keys=True, allow_nan=False) + '\n')
         fsync_tree(bag_path)
@@ -255,17 +326,128 @@ def _check_replaceable(final: Path, overwrite: bool) -> None:
 
 
 def remove_stale_staging_directories(parent: str | Path) -> list[Path]:
-    """Delete ``*.tmp-<pid>`` staging directories under ``parent`` whose writer process is
-    gone (a killed campaign); returns what was removed."""
+    """Delete the ``*.tmp-<pid>`` staging directories under ``parent`` that a failure bag
+    writer of this host left when it was killed; returns what was removed.
+
+    A directory is removed only if its :data:`STAGING_MARKER` names the pid of its name, this
+    host, and a process that is gone (no such pid, or the pid now belongs to a process started
+    at another time). Directories without a valid marker, and those of other hosts (a bags
+    root on a shared file system), are left alone.
+    """
     removed = []
-    for path in Path(parent).glob('*.tmp-*'):
-        pid_text = path.name.rsplit('.tmp-', 1)[-1]
-        if not (path.is_dir() and pid_text.isdigit()):
+    for path in sorted(Path(parent).glob('*.tmp-*')):
+        owner = _staging_owner(path)
+        if owner is None or owner['host'] != socket.gethostname():
             continue
-        if int(pid_text) != os.getpid() and not _process_exists(int(pid_text)):
-            shutil.rmtree(path, ignore_errors=True)
+        if not _writer_alive(owner['pid'], owner['process_start']):
+            shutil.rmtree(path)
             removed.append(path)
     return removed
+
+
+def _write_staging_marker(staging: Path) -> None:
+    pid = os.getpid()
+    owner = {'format': _STAGING_FORMAT, 'pid': pid, 'host': socket.gethostname(),
+             'process_start': _process_start_time(pid)}
+    with open(staging / STAGING_MARKER, 'x', encoding='utf-8') as marker:
+        json.dump(owner, marker)
+
+
+def _staging_owner(path: Path) -> dict[str, Any] | None:
+    """The marker of staging directory ``path`` if it is one this module wrote (format, and
+    the pid of the directory's name), else None."""
+    name_pid = path.name.rsplit('.tmp-', 1)[-1]
+    marker = path / STAGING_MARKER
+    if path.is_symlink() or not path.is_dir() or not name_pid.isdigit():
+        return None
+    if marker.is_symlink() or not marker.is_file():
+        return None
+    try:
+        owner = json.loads(marker.read_text(encoding='utf-8'))
+    except (OSError, ValueError):
+        return None
+    if not (isinstance(owner, dict) and owner.get('format') == _STAGING_FORMAT
+            and owner.get('pid') == int(name_pid) and isinstance(owner.get('host'), str)
+            and isinstance(owner.get('process_start'), (int, type(None)))):
+        return None
+    return owner
+
+
+def _process_start_time(pid: int) -> int | None:
+    """Start time of process ``pid`` in clock ticks after boot (Linux /proc), None if unknown:
+    with the pid it names one process, even after the pid is reused."""
+    try:
+        stat = Path(f'/proc/{pid}/stat').read_text(encoding='utf-8')
+        return int(stat.rsplit(')', 1)[1].split()[19])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def _writer_alive(pid: int, process_start: int | None) -> bool:
+    if not _process_exists(pid):
+        return False
+    now = _process_start_time(pid)
+    return process_start is None or now is None or now == process_start
+
+
+def file_digests(directory: Path) -> dict[str, dict[str, Any]]:
+    """``{name: {'size': bytes, 'sha256': hex}}`` of every file in ``directory`` except
+    episode.json (which holds them)."""
+    digests = {}
+    for path in sorted(directory.iterdir()):
+        if path.name != EPISODE_FILE and path.is_file():
+            digests[path.name] = {'size': path.stat().st_size, 'sha256': sha256_of(path)}
+    return digests
+
+
+def sha256_of(path: Path) -> str:
+    """Hex SHA-256 digest of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, 'rb') as stream:
+        for block in iter(lambda: stream.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+_MCAP_MAGIC = b'\x89MCAP0\r\n'
+_MCAP_CHUNK, _MCAP_FOOTER = 0x06, 0x02
+
+
+def add_mcap_chunk_crcs(path: Path) -> int:
+    """Fill in the ``uncompressed_crc`` (CRC-32 of the chunk's records) of every uncompressed
+    chunk of an MCAP file, in place; returns the number of chunks.
+
+    rosbags' writer leaves the field 0 ("no CRC"), so a reader (rosbags, the mcap library,
+    ``ros2 bag``) could not notice a flipped byte; it checks the CRC when it is set.
+    """
+    chunks = 0
+    with open(path, 'r+b') as stream:
+        if stream.read(len(_MCAP_MAGIC)) != _MCAP_MAGIC:
+            raise BagWriteError(f'{path} is not an MCAP file')
+        while True:
+            start = stream.tell()
+            head = stream.read(9)
+            if len(head) < 9:
+                raise BagWriteError(f'{path}: MCAP record at byte {start} is cut off')
+            opcode, length = struct.unpack('<BQ', head)
+            if opcode == _MCAP_FOOTER:
+                return chunks
+            if opcode != _MCAP_CHUNK:
+                stream.seek(length, os.SEEK_CUR)
+                continue
+            body = stream.read(length)
+            uncompressed_size, = struct.unpack_from('<Q', body, 16)
+            compression_length, = struct.unpack_from('<I', body, 28)
+            compression = body[32:32 + compression_length]
+            records_at = 32 + compression_length + 8
+            records = body[records_at:]
+            if compression or len(records) != uncompressed_size:
+                raise BagWriteError(f'{path}: chunk at byte {start} is compressed '
+                                    f'({compression!r}) or malformed: cannot add its CRC')
+            stream.seek(start + 9 + 24)
+            stream.write(struct.pack('<I', zlib.crc32(records)))
+            stream.seek(start + 9 + length)
+            chunks += 1
 
 
 def _write_bag(bag_path: Path, records: Iterable[BagRecord | tuple[str, str, int, bytes]],

@@ -84,6 +84,26 @@ ROUTE_TIME_FACTOR = 4.0
 START_OVERLAP_TOLERANCE = 1e-4
 """m: a start footprint penetrating an obstacle deeper than this is invalid."""
 
+MAX_TIME_LIMIT = 3600.0
+"""Sim seconds: the longest time limit a user may ask for (30 x the longest scenario default,
+72 000 ticks at 20 Hz). The wall-clock timeout of an episode grows with it, so a limit like
+1e9 s would leave a stalled worker undetected for ever; limits derived from a route or a
+mission's legs are not bounded by it."""
+
+
+def check_time_limit(value: float, name: str = 'time limit') -> float:
+    """``value`` (sim seconds, 0: the default) as a float, or InvalidConfigError naming
+    ``name`` when it is not a number in [0, MAX_TIME_LIMIT]."""
+    try:
+        limit = float(value)
+    except (TypeError, ValueError) as err:
+        raise InvalidConfigError(f'{name} must be a number of sim seconds, got {value!r}') \
+            from err
+    if not (math.isfinite(limit) and 0.0 <= limit <= MAX_TIME_LIMIT):
+        raise InvalidConfigError(f'{name} must lie in [0, {MAX_TIME_LIMIT:.0f}] sim seconds '
+                                 f'(0: the scenario default), got {value!r}')
+    return limit
+
 
 @dataclass(frozen=True)
 class EpisodeConfig:
@@ -676,6 +696,13 @@ class Episode:
         done = self.done
         results = [StepResult(self._observation(each, each.scan_updated), done, each.outcome)
                    for each in records]
+        # Standard navigation metrics: one O(1) update per robot, from the odometry twist just
+        # read for the observation (sessgan_sim.metrics.NavigationAccumulator).
+        for index, each in enumerate(running):
+            twist = results[each.index].observation.twist
+            each.recorder.navigation.add(config.control_period,
+                                         0.0 if touching[index] else clearances[index],
+                                         twist.vx, twist.vy, twist.wz)
         self._latest = [result.observation for result in results]
         finished = clock()
         profile = self.profile
@@ -725,7 +752,7 @@ class Episode:
             simulation_time=record.ticks * record.config.control_period,
             feasible=bool(record.environment.feasible),
             distance_to_goal=self._distance_to_goal(record), outcome=record.outcome,
-            detail=detail)
+            detail=detail, route_length=self._route_length(record))
         mission = record.mission
         if mission is None:
             return snapshot
@@ -739,6 +766,15 @@ class Episode:
             leg_times=mission.leg_times, failed_leg=failed)
 
     # --- internals ------------------------------------------------------------------------
+
+    @staticmethod
+    def _route_length(record: _Record) -> float:
+        """m, the certified route of this robot (r0: the environment's, else its fleet
+        entry's); 0 without one."""
+        environment = record.environment
+        if record.index == 0:
+            return float(environment.route_length or 0.0)
+        return float(environment.fleet[record.index - 1].route_length or 0.0)
 
     def _fleet_outcome(self) -> tuple[Outcome | None, int]:
         """The episode's outcome and the index of the robot it comes from (-1: every robot

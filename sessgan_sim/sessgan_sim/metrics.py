@@ -22,6 +22,10 @@
   paper's formula; fault_risk_score is the same with fault collisions.
 * A *controller failure* (:func:`is_controller_failure`) happens only in a valid test
   (feasible map): a fault collision, or the goal not reached (timeout, stuck).
+* Standard navigation metrics (:class:`NavigationAccumulator`, the list Nav2's benchmark
+  discussions ask for): success, time to goal, path length (``distance_travelled``) and its
+  ratio to the certified route's length, the mean of the per-tick clearance (its minimum is
+  ``min_clearance``), integrated jerk (linear and angular) and mean speed.
 """
 
 from __future__ import annotations
@@ -49,10 +53,27 @@ class Outcome(enum.StrEnum):
     INVALID_ENVIRONMENT = 'invalid_environment'
     CANCELLED = 'cancelled'
     """Cut off by the evaluate client or by the simulator's shutdown: no test result."""
+    HARNESS_ERROR = 'harness_error'
+    """The simulator could not run the episode for a reason of its own (its parameters, the
+    goal's options), not of the map: no test result."""
 
 
 FAILURE_OUTCOMES = frozenset({Outcome.TIMEOUT, Outcome.STUCK})
 """Outcomes that fail a valid test even without a collision: the goal was not reached."""
+
+HARNESS_OUTCOMES = frozenset({Outcome.CONTROLLER_UNRESPONSIVE, Outcome.CANCELLED,
+                              Outcome.HARNESS_ERROR})
+"""Outcomes that say the test harness failed, not the controller under test: a controller
+that sent nothing in time (under load its process may just not have been scheduled), an
+episode cut off, a simulator that could not run it. Such an episode is no result: campaigns,
+evaluate and compare run it again (sessgan_evolver.harness) and never record it, and it is
+no controller failure (no failure bag). A dead simulator or controller process is the other
+harness failure; it has no outcome, the campaign sees the process die."""
+
+
+def is_harness_outcome(outcome: object) -> bool:
+    """True when ``outcome`` (an Outcome or its string) is one of HARNESS_OUTCOMES."""
+    return str(outcome) in HARNESS_OUTCOMES
 
 
 class ContactKind(enum.StrEnum):
@@ -160,6 +181,20 @@ class EpisodeMetrics:
     """s from each completed leg's start to reaching its waypoint, in order."""
     failed_leg: int = -1
     """0-based leg the episode failed on (sessgan_sim.mission.failed_leg); -1: none."""
+    success: bool = False
+    """The goal (a mission's last waypoint) was reached without a fault collision."""
+    time_to_goal: float = math.nan
+    """s until the goal was reached; NaN (None in JSON) when it was not."""
+    path_length_ratio: float = math.nan
+    """distance_travelled / the certified route's length (NaN without a route)."""
+    mean_clearance: float = math.nan
+    """m, mean of the per-tick clearance samples (0 in contact; NaN without a tick)."""
+    linear_jerk: float = 0.0
+    """m/s^2, integrated jerk of the body-frame linear velocity (NavigationAccumulator)."""
+    angular_jerk: float = 0.0
+    """rad/s^2, integrated jerk of the yaw rate."""
+    mean_speed: float = 0.0
+    """m/s, distance_travelled / simulation_time (0 when no time passed)."""
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (outcome as its string value; infinities as None)."""
@@ -174,18 +209,93 @@ class EpisodeMetrics:
 
 
 def is_controller_failure(metrics: Any) -> bool:
-    """A fault of the controller under test: in a valid test (feasible map), a contact it
-    caused, or the goal not reached (timeout, stuck). Works on EpisodeMetrics and on
+    """A fault of the controller under test: in a valid test (feasible map) that the harness
+    did not cut short (HARNESS_OUTCOMES), a contact it caused, or the goal not reached
+    (timeout, stuck). Works on EpisodeMetrics and on
     anything with the same fields (messages, rows)."""
-    if not metrics.feasible:
+    if not metrics.feasible or is_harness_outcome(metrics.outcome):
         return False
     return metrics.fault_collisions > 0 or str(metrics.outcome) in FAILURE_OUTCOMES
+
+
+class NavigationAccumulator:
+    """The per-tick part of the standard navigation metrics: O(1) work and memory a tick.
+
+    Every control tick adds the tick's clearance sample and the robot's body-frame velocity
+    (vx, vy, wz) at its end. Accelerations are the velocity differences over a tick divided by
+    its period, jerks the acceleration differences over a tick divided by it; integrated jerk
+    is the integral of the jerk's magnitude over time, sum |j| * period = sum |delta a|: the
+    total variation of the acceleration (linear: of the (ax, ay) vector, in m/s^2; angular: of
+    the yaw acceleration, in rad/s^2). The robot starts at rest, so the first tick's velocity
+    is measured against zero.
+    """
+
+    __slots__ = ('clearance_sum', 'samples', 'linear_jerk', 'angular_jerk', '_velocity',
+                 '_acceleration')
+
+    def __init__(self) -> None:
+        self.clearance_sum = 0.0
+        self.samples = 0
+        self.linear_jerk = 0.0
+        self.angular_jerk = 0.0
+        self._velocity = (0.0, 0.0, 0.0)
+        self._acceleration: tuple[float, float, float] | None = None
+
+    def add(self, period: float, clearance: float, vx: float, vy: float, wz: float) -> None:
+        """Close a tick of ``period`` s with its clearance (m; 0 in contact) and velocity."""
+        self.clearance_sum += clearance
+        self.samples += 1
+        last = self._velocity
+        acceleration = ((vx - last[0]) / period, (vy - last[1]) / period,
+                        (wz - last[2]) / period)
+        self._velocity = (vx, vy, wz)
+        previous = self._acceleration
+        self._acceleration = acceleration
+        if previous is not None:
+            self.linear_jerk += math.hypot(acceleration[0] - previous[0],
+                                           acceleration[1] - previous[1])
+            self.angular_jerk += abs(acceleration[2] - previous[2])
+
+    @property
+    def mean_clearance(self) -> float:
+        return self.clearance_sum / self.samples if self.samples else math.nan
+
+
+def navigation_figures(navigation: NavigationAccumulator, outcome: Outcome | None,
+                       fault_collisions: int, simulation_time: float, distance: float,
+                       route_length: float) -> dict[str, Any]:
+    """EpisodeMetrics' standard navigation fields from an episode's accumulator and totals."""
+    reached = outcome is Outcome.GOAL_REACHED
+    return {
+        'success': reached and fault_collisions == 0,
+        'time_to_goal': simulation_time if reached else math.nan,
+        'path_length_ratio': distance / route_length if route_length > 0 else math.nan,
+        'mean_clearance': navigation.mean_clearance,
+        'linear_jerk': navigation.linear_jerk,
+        'angular_jerk': navigation.angular_jerk,
+        'mean_speed': distance / simulation_time if simulation_time > 0 else 0.0,
+    }
+
+
+NAVIGATION_COLUMNS = ('success', 'time_to_goal', 'path_length', 'path_length_ratio',
+                      'min_clearance', 'mean_clearance', 'linear_jerk', 'angular_jerk',
+                      'mean_speed')
+"""The standard navigation metrics as CSV columns (path_length: distance_travelled)."""
+
+
+def navigation_columns(metrics: Any) -> dict[str, Any]:
+    """NAVIGATION_COLUMNS of an EpisodeMetrics dict (to_dict's; a missing field is '')."""
+    values = {name: metrics.get(name, '') for name in NAVIGATION_COLUMNS}
+    values['path_length'] = metrics.get('distance_travelled', '')
+    return values
 
 
 class MetricsRecorder:
     """Accumulates an episode's metrics step by step."""
 
     def __init__(self, clearance_range: float, robot: int = 0) -> None:
+        self.navigation = NavigationAccumulator()
+        """Standard navigation metrics (added by the episode once a tick)."""
         self.robot = robot
         """Index of the robot under test whose metrics these are (fleets)."""
         self.proximity_time = 0.0
@@ -234,8 +344,10 @@ class MetricsRecorder:
         self.min_clearance = min(self.min_clearance, clearance)
 
     def snapshot(self, simulation_time: float, feasible: bool, distance_to_goal: float,
-                 outcome: Outcome | None, detail: str) -> EpisodeMetrics:
-        """The metrics so far."""
+                 outcome: Outcome | None, detail: str,
+                 route_length: float = 0.0) -> EpisodeMetrics:
+        """The metrics so far (``route_length``: m, the certified route's, for the path
+        length ratio; 0 without one)."""
         kinds = [event.kind for event in self.contacts]
         faults = self.fault_collisions
         return EpisodeMetrics(
@@ -259,6 +371,8 @@ class MetricsRecorder:
             robot_hit_by_robot_collisions=kinds.count(ContactKind.ROBOT_HIT_BY_ROBOT),
             fault_risk_score=risk_score(faults, self.proximity_time, simulation_time),
             contacts=tuple(self.contacts),
+            **navigation_figures(self.navigation, outcome, faults, simulation_time,
+                                 self.distance_travelled, route_length),
         )
 
 
@@ -271,6 +385,7 @@ def fleet_metrics(robots: list[EpisodeMetrics], outcome: Outcome | None, detail:
     reached their goals, failed_leg: ``failed_robot``); ``outcome`` and ``detail`` the
     fleet's."""
     simulation_time = max(robot.simulation_time for robot in robots)
+    ticks = sum(robot.ticks for robot in robots)
     proximity = sum(robot.proximity_time for robot in robots)
     collisions = sum(robot.collisions for robot in robots)
     faults = sum(robot.fault_collisions for robot in robots)
@@ -291,4 +406,17 @@ def fleet_metrics(robots: list[EpisodeMetrics], outcome: Outcome | None, detail:
                               key=lambda event: (event.time, event.robot))),
         legs=len(robots), legs_completed=sum(robot.legs_completed for robot in robots),
         leg_times=tuple(time for robot in robots for time in robot.leg_times),
-        failed_leg=failed_robot, **summed)
+        failed_leg=failed_robot,
+        # Navigation figures: every robot succeeded, the last arrival, the robots' means
+        # (clearance weighted by their ticks), jerks added up.
+        success=all(robot.success for robot in robots),
+        time_to_goal=(max(robot.time_to_goal for robot in robots)
+                      if all(robot.success or robot.outcome is Outcome.GOAL_REACHED
+                             for robot in robots) else math.nan),
+        path_length_ratio=sum(robot.path_length_ratio for robot in robots) / len(robots),
+        mean_clearance=(sum(robot.mean_clearance * robot.ticks for robot in robots) / ticks
+                        if ticks else math.nan),
+        linear_jerk=sum(robot.linear_jerk for robot in robots),
+        angular_jerk=sum(robot.angular_jerk for robot in robots),
+        mean_speed=sum(robot.mean_speed for robot in robots) / len(robots),
+        **summed)

@@ -18,13 +18,20 @@ episodes. Every parameter is a field of
 
 The node composes the parts in ``sessgan_sim.worker``: it receives work (evaluate goals, free
 mode maps), runs one episode at a time and answers with its metrics.
+
+Failure bags go only under ``bags_root`` (fixed at start-up): a goal's ``record_directory``
+must be a relative subdirectory of it (sessgan_sim.bag_recording.record_directory_under); a
+goal naming anything else (an absolute path, '..') is answered ``invalid_environment`` with the
+reason, and no episode runs.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 import time
+from pathlib import Path
 
 import rclpy
 from geometry_msgs.msg import Twist, TwistStamped
@@ -46,8 +53,9 @@ from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
-from sessgan_sim.episode import Episode
-from sessgan_sim.errors import InvalidConfigError, SessganSimError
+from sessgan_sim.bag_recording import record_directory_under
+from sessgan_sim.episode import Episode, check_time_limit
+from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
 from sessgan_sim.metrics import Outcome, is_controller_failure
 from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSettings
 from sessgan_sim.worker.commands import CommandReceiver
@@ -78,8 +86,9 @@ class SimulatorNode(Node):
         a fleet episode first needs them)."""
         self.stack = Nav2Stack(self, self.callback_group, lambda: self.commands.running)
         self.clock_origin_ns = int(round(self.settings.sim_time_origin * 1e9))
-        self.cleaned_directories: set[str] = set()
-        self.clean_record_directory(self.settings.record_directory)
+        self.bags_root = Path(self.settings.bags_root).resolve()
+        self.cleaned_directories: set[Path] = set()
+        self.free_record_directory()  # removes partial bags a killed worker left there
 
         self.action_server = ActionServer(
             self, EvaluateEnvironment, 'evaluate', execute_callback=self.execute,
@@ -91,7 +100,7 @@ class SimulatorNode(Node):
                                      callback_group=self.callback_group)
         self.get_logger().info(
             f'simulator ready: {self.settings.mode} mode, action '
-            f'{self.resolve_topic_name("evaluate")}')
+            f'{self.resolve_topic_name("evaluate")}, failure bags under {self.bags_root}')
 
     # ---- parameters ------------------------------------------------------------------------
 
@@ -142,6 +151,19 @@ class SimulatorNode(Node):
             if not self.commands.running:  # stopping: the world is (about to be) closed
                 goal_handle.abort()
                 return result
+            record_directory = None
+            try:
+                if request.record_directory:
+                    record_directory = record_directory_under(self.bags_root,
+                                                              request.record_directory)
+            except BagWriteError as err:
+                # Refused (no episode runs): the goal's fault, a harness error, never a result.
+                result.metrics = invalid_metrics(request.environment.id,
+                                                 f'refusing the goal: {err}',
+                                                 Outcome.HARNESS_ERROR)
+                self.get_logger().warning(f'refusing an evaluate goal: {err}')
+                goal_handle.succeed()
+                return result
             try:
                 environment = environment_from_msg(request.environment)
             except (SessganGenError, SessganSimError, ValueError) as err:
@@ -151,7 +173,7 @@ class SimulatorNode(Node):
                 return result
             result.metrics = self.run_episode(
                 environment, robot=request.robot, time_limit=request.time_limit,
-                seed=request.seed, record_directory=request.record_directory,
+                seed=request.seed, record_directory=record_directory,
                 controller=request.controller, goal_handle=goal_handle)
         if not self.context.ok():
             return result  # shut down: the goal handle belongs to a closed context
@@ -184,7 +206,7 @@ class SimulatorNode(Node):
             self.free_seed += 1
             metrics = self.run_episode(
                 environment, robot='', time_limit=0.0, seed=environment.seed,
-                record_directory=self.settings.record_directory,
+                record_directory=self.free_record_directory(),
                 controller='external', goal_handle=None)
             self.get_logger().info(
                 f'free-mode episode {environment.id}: {metrics.outcome}, '
@@ -195,19 +217,24 @@ class SimulatorNode(Node):
     # ---- one episode -----------------------------------------------------------------------
 
     def run_episode(self, environment: Environment, robot: str, time_limit: float, seed: int,
-                    record_directory: str, controller: str, goal_handle) -> EpisodeMetricsMsg:
+                    record_directory: Path | None, controller: str,
+                    goal_handle) -> EpisodeMetricsMsg:
         wall_start = time.monotonic()
         settings = self.settings  # one snapshot for the whole episode
-        recording = Recording() if record_directory else None
+        recording = Recording() if record_directory is not None else None
+        # The goal's options or this simulator's parameters, not the map, are at fault here:
+        # a harness error the client runs again (sessgan_sim.metrics.HARNESS_OUTCOMES).
         try:
+            check_time_limit(time_limit, "the goal's time_limit")
             config = settings.episode_config(robot, time_limit, seed)
             config.validate()
         except (SessganSimError, ValueError) as err:
-            return invalid_metrics(environment.id, str(err))
+            return invalid_metrics(environment.id, str(err), Outcome.HARNESS_ERROR)
         if environment.fleet and (settings.goal_via.uses_action or settings.reset_costmaps):
             return invalid_metrics(environment.id, (
                 "a fleet episode sends each robot's goal on its goal_pose: goal_interface "
-                f'{settings.goal_interface!r} and reset_costmaps serve one robot'))
+                f'{settings.goal_interface!r} and reset_costmaps serve one robot'),
+                Outcome.HARNESS_ERROR)
         episode = self.episode
         observation = episode.reset(environment, config)
         config = episode.config  # resolved: scenario defaults filled in
@@ -273,14 +300,15 @@ class SimulatorNode(Node):
             # long-running stack never sees sim time go back (its tf buffer stays valid).
             self.clock_origin_ns = clock.stamp_ns(episode.time + config.control_period)
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
-        if (recording is not None and metrics.outcome is not Outcome.CANCELLED
-                and is_controller_failure(metrics)):
+        if (recording is not None and record_directory is not None
+                and metrics.outcome is not Outcome.CANCELLED and is_controller_failure(metrics)):
             self.clean_record_directory(record_directory)
             facts = EpisodeFacts(seed=seed, controller=controller,
                                  namespace=self.get_namespace(),
                                  sim_time_origin_ns=clock.origin_ns, settings=settings)
-            message.bag_path = write_failure_bag(record_directory, environment, config, metrics,
-                                                 recording, facts, self.get_logger())
+            message.bag_path, message.bag_error = write_failure_bag(
+                record_directory, environment, config, metrics, recording, facts,
+                self.get_logger())
         return message
 
     def run_fleet(self, episode: Episode, environment: Environment, clock: EpisodeClock,
@@ -325,11 +353,24 @@ class SimulatorNode(Node):
                 command_type.__name__))
         return self.fleet_steppers[:robots]
 
-    def clean_record_directory(self, record_directory: str) -> None:
+    def clean_record_directory(self, record_directory: Path) -> None:
         """Remove partial bags a killed worker left, once per directory and process."""
-        if record_directory and record_directory not in self.cleaned_directories:
+        if record_directory not in self.cleaned_directories:
             self.cleaned_directories.add(record_directory)
             remove_partial_bags(record_directory, self.get_logger())
+
+    def free_record_directory(self) -> Path | None:
+        """Where free-mode failure bags go (``record_directory`` under ``bags_root``, cleaned
+        of partial bags); None when none are recorded or it leads out of the root."""
+        if not self.settings.record_directory:
+            return None
+        try:
+            directory = record_directory_under(self.bags_root, self.settings.record_directory)
+        except BagWriteError as err:
+            self.get_logger().error(f'recording no failure bags: {err}')
+            return None
+        self.clean_record_directory(directory)
+        return directory
 
     def log_timing(self, environment_id: str, metrics, profile, loop_seconds: float) -> None:
         """One line per episode: where the wall time of a tick goes (benchmarks parse it)."""
@@ -392,16 +433,28 @@ def metrics_msg(environment_id: str, metrics, wall_time: float) -> EpisodeMetric
     msg.legs_completed = int(metrics.legs_completed)
     msg.leg_times = [float(value) for value in metrics.leg_times]
     msg.failed_leg = int(metrics.failed_leg)
+    for name in NAVIGATION_FIELDS:
+        setattr(msg, name, float(getattr(metrics, name)))
+    msg.success = bool(metrics.success)
     return msg
 
 
-def invalid_metrics(environment_id: str, detail: str) -> EpisodeMetricsMsg:
+NAVIGATION_FIELDS = ('time_to_goal', 'path_length_ratio', 'mean_clearance', 'linear_jerk',
+                     'angular_jerk', 'mean_speed')
+"""EpisodeMetrics' float navigation fields, copied as they are (NaN: not reached / none)."""
+
+
+def invalid_metrics(environment_id: str, detail: str,
+                    outcome: Outcome = Outcome.INVALID_ENVIRONMENT) -> EpisodeMetricsMsg:
+    """The result of an episode that could not start: ``outcome`` invalid_environment (the
+    map's fault) or harness_error (this simulator's or the goal's)."""
     msg = EpisodeMetricsMsg()
     msg.environment_id = environment_id
-    msg.outcome = EpisodeMetricsMsg.OUTCOME_INVALID_ENVIRONMENT
+    msg.outcome = outcome.value
     msg.detail = detail
     msg.legs = 1
     msg.failed_leg = -1
+    msg.time_to_goal = msg.path_length_ratio = msg.mean_clearance = math.nan
     return msg
 
 

@@ -25,9 +25,9 @@ from sessgan_gen.json_data import to_json_data
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
 from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
-from sessgan_sim.bag_recording import BagStorage
-from sessgan_sim.episode import EpisodeConfig
-from sessgan_sim.errors import InvalidConfigError, SessganSimError
+from sessgan_sim.bag_recording import BagStorage, check_record_subdirectory
+from sessgan_sim.episode import EpisodeConfig, check_time_limit
+from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
 from sessgan_sim.robots import create_robot, get_robot_class
 from sessgan_sim.sensors import LidarConfig
 
@@ -62,9 +62,11 @@ class GoalInterface(StrEnum):
         return self in (GoalInterface.NAVIGATE_TO_POSE, GoalInterface.BOTH)
 
 
-STRUCTURAL_SETTINGS = frozenset({'use_stamped_cmd_vel', 'free_mode', 'sim_time_origin'})
+STRUCTURAL_SETTINGS = frozenset({'use_stamped_cmd_vel', 'free_mode', 'sim_time_origin',
+                                 'bags_root'})
 """Settings fixed at start-up: the cmd_vel type, the free-mode subscription and the clock's
-starting point cannot change while the node runs."""
+starting point cannot change while the node runs; nor can the bags root (no client may move
+where the simulator writes)."""
 
 EPISODE_SETTINGS = frozenset({
     'robot', 'robot_params', 'time_limit', 'control_rate', 'physics_rate', 'lidar_beams',
@@ -151,8 +153,12 @@ class SimulatorSettings:
     """Free mode: robots under test on every map (a fleet episode: r1, r2, ... drawn beside
     the map's own start and goal); 1: one robot. The evaluate action's environments bring
     their own fleet."""
+    bags_root: str = 'bags'
+    """Directory under which every failure bag is written; relative: to the simulator's
+    working directory (fixed at start-up). An evaluate goal's record_directory, and
+    record_directory below, name a subdirectory of it."""
     record_directory: str = ''
-    """Free mode: directory for failure bags; empty: none."""
+    """Free mode: subdirectory of bags_root for failure bags (e.g. 'free'); empty: none."""
     bag_storage: str = BagStorage.MCAP.value
     """Failure bag storage: mcap or sqlite3."""
 
@@ -196,10 +202,18 @@ class SimulatorSettings:
         for name in ('sim_time_origin', 'time_limit', 'lidar_rate', 'lidar_noise_std',
                      'lidar_range_min', 'stuck_timeout'):
             _not_negative(name, getattr(self, name))
+        check_time_limit(self.time_limit, "parameter 'time_limit'")
         for name in ('collision_limit', 'seed'):
             if getattr(self, name) < 0:
                 raise InvalidConfigError(f'parameter {name!r} must be >= 0, got '
                                          f'{getattr(self, name)}')
+        if not self.bags_root:
+            raise InvalidConfigError("parameter 'bags_root' must name a directory, got ''")
+        if self.record_directory:
+            try:
+                check_record_subdirectory(self.record_directory)
+            except BagWriteError as err:
+                raise InvalidConfigError(f"parameter 'record_directory': {err}") from err
         if self.agent_behaviour not in AGENT_BEHAVIOURS:
             raise InvalidConfigError(f"parameter 'agent_behaviour' must be one of "
                                      f"{', '.join(AGENT_BEHAVIOURS)}; got "
@@ -334,7 +348,8 @@ def resimulation_settings(episode: Mapping[str, Any]) -> tuple[SimulatorSettings
     for the user (what cannot be exact).
 
     The recorded settings are taken as they were, except what only concerns the recording
-    worker (free mode, its record directory); the clock starts at the recorded origin.
+    worker (free mode, its bags root and record directory); the clock starts at the recorded
+    origin.
     InvalidConfigError when the recorded settings are unusable, or when they no longer give
     the recorded episode config (a bag of another software version).
     """
@@ -345,7 +360,7 @@ def resimulation_settings(episode: Mapping[str, Any]) -> tuple[SimulatorSettings
                      're-simulating with the default simulator')
         recorded = {}
     values = {name: value for name, value in recorded.items()
-              if name not in ('free_mode', 'record_directory')}
+              if name not in ('free_mode', 'bags_root', 'record_directory')}
     values['sim_time_origin'] = float(episode.get('sim_time_origin', 0.0) or 0.0)
     settings = SimulatorSettings.from_values(values)
     if settings.step_mode is StepMode.CLOCKED:

@@ -21,9 +21,14 @@ import time
 from bench_simulator_node import bench_graph, reference_episode, run_episodes, start_worker
 
 from sessgan_evolver.process_supervisor import worker_cores
+from sessgan_gen.ros_spin import run_command
 
 
-def main() -> None:
+def main() -> int:
+    return run_command(measure)
+
+
+def measure() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--episodes', type=int, default=40)
@@ -38,10 +43,10 @@ def main() -> None:
     try:
         with bench_graph('sessgan-load-') as (node, graph):
             core = worker_cores(1)[0] or 0
-            start_worker(graph, 0, core, core, batch=not args.default)
+            worker = start_worker(graph, core, core, batch=not args.default)
             results: list = []
             start = time.monotonic()
-            run_episodes(node, ['/bench0'], message, args.episodes, results, expect=None)
+            run_episodes(node, [worker], message, args.episodes, results, expect=None)
             wall = time.monotonic() - start
     finally:
         for process in busy:
@@ -53,7 +58,8 @@ def main() -> None:
     print(f'{args.episodes} episodes with {args.load} busy loops, '
           f'{"default" if args.default else "batch"} scheduling: {dict(outcomes)}, '
           f'{sum(metrics.ticks for metrics in results)} ticks in {wall:.1f} s')
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

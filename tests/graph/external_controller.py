@@ -4,7 +4,12 @@ It imports nothing from SESS-GAN, proving that any stack plugs into the simulato
 topic contract (scan, odom, goal_pose in; cmd_vel out). Policy: turn toward the goal, drive
 forward when facing it, slow down near obstacles ahead. ``--nan`` sends NaN velocities instead
 (a broken controller), ``--silent`` never answers, ``--blind`` drives straight ahead whatever
-the scan says (a faulty controller that must fail a valid test).
+the scan says (a faulty controller that must fail a valid test), ``--mute-first-scan`` leaves
+the first scan it gets unanswered and then drives as usual (a controller that missed one tick,
+as a starved process does: its episode ends controller_unresponsive, the next ones do not),
+``--alternate`` is blind in every other episode (the first, third, ...: a fault that shows now
+and then; an episode begins where the odometry's stamp goes back or its position jumps, to the
+next episode's start).
 """
 
 import math
@@ -25,6 +30,9 @@ class GoToGoal(Node):
         self.behaviour = behaviour
         self.goal = None
         self.pose = None
+        self.scans = 0
+        self.episodes = 0
+        self.last_stamp = None
         self.cmd_publisher = self.create_publisher(Twist, 'cmd_vel', 10)
         self.create_subscription(PoseStamped, 'goal_pose', self.on_goal, 10)
         self.create_subscription(Odometry, 'odom', self.on_odom, 10)
@@ -34,18 +42,27 @@ class GoToGoal(Node):
         self.goal = (msg.pose.position.x, msg.pose.position.y)
 
     def on_odom(self, msg: Odometry) -> None:
+        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        position = (msg.pose.pose.position.x, msg.pose.pose.position.y)
+        if (self.last_stamp is None or stamp <= self.last_stamp or self.pose is None
+                or math.dist(position, self.pose[:2]) > 0.5):
+            self.episodes += 1
+        self.last_stamp = stamp
         q = msg.pose.pose.orientation
         yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
         self.pose = (msg.pose.pose.position.x, msg.pose.pose.position.y, yaw)
 
     def on_scan(self, msg: LaserScan) -> None:
-        if self.behaviour == 'silent':
+        self.scans += 1
+        if self.behaviour == 'silent' or (self.behaviour == 'mute-first-scan'
+                                          and self.scans == 1):
             return
         cmd = Twist()
         if self.behaviour == 'nan':
             cmd.linear.x = float('nan')
             cmd.angular.z = float('inf')
-        elif self.behaviour == 'blind':
+        elif self.behaviour == 'blind' or (self.behaviour == 'alternate'
+                                            and self.episodes % 2 == 1):
             cmd.linear.x = 0.5
         elif self.goal is not None and self.pose is not None:
             x, y, yaw = self.pose
@@ -61,8 +78,8 @@ class GoToGoal(Node):
 
 
 def main() -> None:
-    behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind') if flag in sys.argv),
-                     'go')
+    behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind', '--mute-first-scan',
+                                                  '--alternate') if flag in sys.argv), 'go')
     rclpy.init(args=sys.argv)
     node = GoToGoal(behaviour)
     try:

@@ -168,3 +168,54 @@ def test_a_restarted_pair_that_never_gets_ready_is_quarantined(evaluator, monkey
         run_with(evaluator, script)
     assert any("did not log 'simulator ready' within 1 s" in line for line in evaluator.logs)
     assert pool.pairs == {} and '/w0' in pool.quarantined
+
+
+@pytest.mark.parametrize('outcome', ['controller_unresponsive', 'cancelled', 'harness_error'])
+def test_a_harness_outcome_of_a_live_pair_is_rerun_not_recorded(evaluator, outcome):
+    """Under load a controller that is alive may still miss its 2 s: no result, run again."""
+    pair = evaluator.pool.pairs['/w0']
+
+    def script(number, result):
+        result.finish(finished(outcome if number == 0 else 'goal_reached'))
+
+    assert run_with(evaluator, script) == ['goal_reached']
+    assert len(evaluator.goals) == 2 and pair.restarts == 0
+    assert evaluator.harness_reruns == 1
+    assert any(f'{outcome}' in line and 'a harness failure, not a result; running it again'
+               in line for line in evaluator.logs)
+
+
+def test_a_controller_silent_on_every_try_stops_the_run(evaluator):
+    from sessgan_evolver.errors import HarnessFailureError
+
+    def script(number, result):
+        result.finish(finished('controller_unresponsive'))
+
+    with pytest.raises(HarnessFailureError, match='silent on every one of 3 tries'):
+        run_with(evaluator, script)
+    assert len(evaluator.goals) == 3
+
+
+def test_a_lost_bag_reported_by_the_worker_reaches_the_metrics(evaluator):
+    def script(number, result):
+        done = finished('timeout')
+        done.result.metrics.bag_error = 'cannot write the failure bag: [Errno 28] No space left'
+        result.finish(done)
+
+    environment = SimpleNamespace(id='factory-g000-m00-s1', occupancy=np.zeros((32, 32)))
+    handled: set[int] = set()
+
+    def spin(seconds: float = 0.02) -> None:
+        time.sleep(seconds)
+        for number, (_, result) in enumerate(evaluator.goals):
+            if number not in handled:
+                handled.add(number)
+                script(number, result)
+
+    evaluator.spin = spin
+    evaluator.discover_workers()
+    results = []
+    evaluator.evaluate([EpisodeJob(0, 0, 0, environment, 1)],
+                       lambda job, metrics: results.append(metrics))
+    assert [metrics['bag_error'] for metrics in results] == [
+        'cannot write the failure bag: [Errno 28] No space left']

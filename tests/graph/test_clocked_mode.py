@@ -119,7 +119,8 @@ def test_free_mode_runs_an_episode_for_every_map(node_processes, ros_node, tmp_p
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     simulator = start_simulator(node_processes, '/free', 'free_mode:=true', 'seed:=40',
-                                'dummy_agents:=0', f'record_directory:={tmp_path / "bags"}')
+                                'dummy_agents:=0', f'bags_root:={tmp_path}',
+                                'record_directory:=bags')
     node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
                           '__ns:=/free', '-p', 'use_sim_time:=true'], name='external')
     publisher = ros_node.create_publisher(

@@ -130,13 +130,13 @@ def test_a_flyer_below_the_low_obstacles_sees_them_as_walls_and_its_bag_has_rang
     from sessgan_sim.bag_recording import jazzy_typestore
 
     namespace = '/drone_low'
-    start_simulator(node_processes, namespace, 'dummy_agents:=0')
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', f'bags_root:={tmp_path}')
     # Told to cruise at 5 cm: its route crosses the band as free space, but flying below the
     # obstacles its scan plane meets them: it stops in front of the band and never gets over.
     start_controller(node_processes, namespace, 'velocity_projection', 'cruise_altitude:=0.05',
                      'takeoff_altitude:=0.02')
     metrics, _ = evaluate(ros_node, namespace, band_msg('band-low'), time_limit=30.0,
-                          record_directory=str(tmp_path / 'bags'), timeout=300)
+                          record_directory='bags', timeout=300)
     assert metrics.feasible
     assert metrics.outcome == 'stuck', (metrics.outcome, metrics.detail)
     assert metrics.bag_path, 'a controller failure in a valid test is recorded'

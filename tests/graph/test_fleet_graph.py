@@ -66,12 +66,12 @@ def test_lockstep_waits_for_every_robot_and_the_bag_holds_both(node_processes, r
     from sessgan_gen.ros_conversion import environment_to_msg
 
     namespace = '/fleet_bag'
-    start_simulator(node_processes, namespace, 'dummy_agents:=0')
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', f'bags_root:={tmp_path}')
     for index in range(2):
         start_navigator(node_processes, f'{namespace}/r{index}', 'diff_drive')
     # Too little time to arrive: a timeout is a failure, so the episode leaves a bag.
     metrics, _ = evaluate(ros_node, namespace, environment_to_msg(crossing_environment()),
-                          time_limit=4.0, record_directory=str(tmp_path / 'bags'), timeout=300)
+                          time_limit=4.0, record_directory='bags', timeout=300)
     assert metrics.outcome == 'timeout', (metrics.outcome, metrics.detail)
     assert metrics.ticks == 80 and metrics.bag_path
     counts = {topic.topic: topic.message_count for topic in read_bag_topics(metrics.bag_path)}

@@ -101,3 +101,39 @@ def test_an_unreadable_checkpoint_parameter_ends_the_node_with_the_reason(node_p
         assert generator.wait(timeout=60) == 1, generator.output()
         assert 'cannot start the generator' in generator.output()
         assert reason in generator.output(), generator.output()
+
+
+def test_a_facility_generator_serves_the_facilitys_size(node_processes, ros_node, tmp_path):
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from sessgan_interfaces.srv import GenerateEnvironments
+    from tests.unit.gen.facility_checkpoint import (
+        FACILITY_HEIGHT,
+        FACILITY_WIDTH,
+        train_facility_checkpoint,
+    )
+
+    checkpoint, _ = train_facility_checkpoint(tmp_path)
+    generator = start_generator(node_processes, '/gen_e', f'checkpoint:={checkpoint}',
+                                'seed:=2')
+    generator.wait_for_output(r'published environment factory-s2', timeout=60)
+    received = []
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    ros_node.create_subscription(OccupancyGrid, '/gen_e/environment', received.append, qos)
+    assert spin_until(ros_node, lambda: received, timeout=20), 'no map received'
+    assert (received[0].info.width, received[0].info.height) == (FACILITY_WIDTH, FACILITY_HEIGHT)
+
+    client = ros_node.create_client(GenerateEnvironments, '/gen_e/generate_environments')
+    weights = list(checkpoint.read_bytes())
+    served = call_service(ros_node, client, GenerateEnvironments.Request(
+        scenario='factory', seeds=[1], weights=weights))
+    assert served.success, served.message
+    grid = served.environments[0].map.info
+    assert (grid.width, grid.height) == (FACILITY_WIDTH, FACILITY_HEIGHT)
+    asked = call_service(ros_node, client, GenerateEnvironments.Request(
+        scenario='factory', seeds=[1], weights=weights, width=36, height=24))
+    assert asked.success, asked.message
+    assert (asked.environments[0].map.info.width, asked.environments[0].map.info.height) == (
+        36, 24)

@@ -64,7 +64,7 @@ def test_nav2_like_stack_lives_through_ten_clocked_episodes(node_processes, ros_
 def test_builtin_controller_lives_through_ten_lockstep_episodes(node_processes, ros_node,
                                                                 tmp_path):
     namespace = '/long_lockstep'
-    start_simulator(node_processes, namespace, 'dummy_agents:=0')
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', f'bags_root:={tmp_path}')
     start_controller(node_processes, namespace, 'nearness_diagram')
     bags = tmp_path / 'bags'
     cut_short = []
@@ -74,7 +74,7 @@ def test_builtin_controller_lives_through_ten_lockstep_episodes(node_processes, 
             # Two seconds cannot reach the goal: a timeout in a valid test, a controller
             # failure whose bag records where this episode's clock started.
             metrics, _ = evaluate(ros_node, namespace, environment, seed=3, time_limit=2.0,
-                                  record_directory=str(bags))
+                                  record_directory='bags')
             assert metrics.outcome == 'timeout' and metrics.bag_path, metrics.detail
             cut_short.append((metrics.ticks, round(metrics.distance_travelled, 9),
                               round(metrics.min_clearance, 9)))

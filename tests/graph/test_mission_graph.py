@@ -87,11 +87,11 @@ def test_mission_failure_bag_replays_and_resimulates(node_processes, ros_node, t
 
     environment = mission_environment()
     namespace = '/mission_bag'
-    start_simulator(node_processes, namespace)
+    start_simulator(node_processes, namespace, f'bags_root:={tmp_path}')
     start_navigator(node_processes, namespace, 'diff_drive')
     # Enough time for the first leg and the dwell (about 20 s), not for the way home.
     metrics, _ = evaluate(ros_node, namespace, environment_to_msg(environment), time_limit=25.0,
-                          record_directory=str(tmp_path / 'bags'), timeout=300)
+                          record_directory='bags', timeout=300)
     assert metrics.outcome == 'timeout', (metrics.outcome, metrics.detail)
     assert (metrics.legs, metrics.legs_completed, metrics.failed_leg) == (2, 1, 1)
     assert 'failed on leg 2 of 2 (home)' in metrics.detail

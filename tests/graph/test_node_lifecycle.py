@@ -21,6 +21,7 @@ from tests.graph.test_simulator_graph import (
     start_simulator,
 )
 from tests.ros_processes import spin_until
+from tests.unit.evolver.killed_bag_writer import killed_writer_staging
 
 pytestmark = pytest.mark.graph
 
@@ -83,10 +84,11 @@ def start_episode(ros_node, namespace: str, environment, record_directory: str):
     return client, handle, feedback
 
 
-def start_blind_robot(node_processes, namespace: str):
+def start_blind_robot(node_processes, namespace: str, bags_root):
     """A clocked worker (real time, so an episode can be cut off midway) and a controller that
     drives straight into the wall: a controller failure in a valid test once it hits."""
-    simulator = start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked')
+    simulator = start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
+                                f'bags_root:={bags_root}')
     node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
                           '-r', f'__ns:={namespace}', '-p', 'use_sim_time:=true'], name='blind')
     return simulator
@@ -95,10 +97,10 @@ def start_blind_robot(node_processes, namespace: str):
 def test_cancelled_episode_is_reported_and_leaves_no_bag(node_processes, ros_node, tmp_path):
     from action_msgs.msg import GoalStatus
 
-    start_blind_robot(node_processes, '/cancel')
+    start_blind_robot(node_processes, '/cancel', tmp_path)
     bags = tmp_path / 'bags'
     _, handle, feedback = start_episode(ros_node, '/cancel', environment_msg(
-        room(), 'factory', 'room'), str(bags))
+        room(), 'factory', 'room'), 'bags')
     # Cancel once it has hit the wall (the episode would be a failure).
     assert spin_until(ros_node, lambda: feedback and feedback[-1].collisions > 0, timeout=90), \
         'no collision reported before the cancel'
@@ -116,10 +118,10 @@ def test_cancelled_episode_is_reported_and_leaves_no_bag(node_processes, ros_nod
 
 def test_simulator_signalled_mid_episode_exits_and_writes_no_bag(node_processes, ros_node,
                                                                  tmp_path):
-    simulator = start_blind_robot(node_processes, '/midquit')
+    simulator = start_blind_robot(node_processes, '/midquit', tmp_path)
     bags = tmp_path / 'bags'
     _, _, feedback = start_episode(ros_node, '/midquit', environment_msg(
-        room(), 'factory', 'room'), str(bags))
+        room(), 'factory', 'room'), 'bags')
     assert spin_until(ros_node, lambda: feedback and feedback[-1].collisions > 0, timeout=90), \
         'no collision reported before the signal'
     assert_exits_cleanly(simulator, signal.SIGINT)
@@ -129,16 +131,20 @@ def test_simulator_signalled_mid_episode_exits_and_writes_no_bag(node_processes,
 
 def test_simulator_removes_partial_bags_of_killed_workers_at_start_up(node_processes, tmp_path):
     bags = tmp_path / 'bags'
-    dead_pid = subprocess.Popen(['true'])  # a pid that no longer runs
-    dead_pid.wait()
-    stale = bags / f'g000-m01-s5.tmp-{dead_pid.pid}'
-    (stale / 'g000-m01-s5').mkdir(parents=True)
-    (stale / 'g000-m01-s5' / 'partial.mcap').write_bytes(b'\0' * 1024)
-    live = bags / f'g000-m02-s5.tmp-{os.getpid()}'  # a writer that still runs: kept
+    bags.mkdir()
+    stale = killed_writer_staging(bags)  # a writer killed mid-bag: its marked staging directory
+    # Named like a dead writer's staging directory, but without its marker (issue 19: it was
+    # deleted): kept, as is what a live writer stages and a finished bag.
+    victim = bags / f'victim.tmp-{2**22 + 12345}'
+    victim.mkdir()
+    (victim / 'precious.txt').write_text('keep me')
+    live = bags / f'g000-m02-s5.tmp-{os.getpid()}'
     live.mkdir()
-    kept = bags / 'g000-m03-s5'  # a finished bag: kept
+    kept = bags / 'g000-m03-s5'
     kept.mkdir()
-    simulator = start_simulator(node_processes, '/cleanup', f'record_directory:={bags}')
+    simulator = start_simulator(node_processes, '/cleanup', f'bags_root:={tmp_path}',
+                                'record_directory:=bags')
     assert not stale.exists(), simulator.output()
     assert live.exists() and kept.exists()
+    assert (victim / 'precious.txt').read_text() == 'keep me'
     assert 'removed a partial bag' in simulator.output()

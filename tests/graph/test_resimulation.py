@@ -70,12 +70,12 @@ def factory_example():
 
 def test_failure_found_with_non_default_settings_resimulates_exactly(node_processes, ros_node,
                                                                      tmp_path):
-    start_simulator(node_processes, '/rs', *NON_DEFAULT)
+    start_simulator(node_processes, '/rs', *NON_DEFAULT, f'bags_root:={tmp_path}')
     start_controller(node_processes, '/rs', 'nearness_diagram')
     # Ten seconds are not enough to cross the factory: a failure in a valid test (a timeout,
     # or a collision before it), whose trajectory depends on every setting above.
     metrics, _ = evaluate(ros_node, '/rs', factory_example(), time_limit=10.0,
-                          record_directory=str(tmp_path / 'bags'), timeout=300)
+                          record_directory='bags', timeout=300)
     assert metrics.bag_path, (metrics.outcome, metrics.detail)
     episode = json.loads((tmp_path / 'bags' / 'factory-example' / 'episode.json').read_text())
     assert episode['simulator']['lidar_beams'] == 90 and episode['mode'] == 'lockstep'
@@ -103,11 +103,12 @@ def test_failure_found_with_non_default_settings_resimulates_exactly(node_proces
 def test_failure_with_an_external_controller_resimulates_with_one_flag(node_processes, ros_node,
                                                                        tmp_path):
     # An external controller under /ext_rs: it drives blind into the wall.
-    simulator = start_simulator(node_processes, '/ext_rs', *NON_DEFAULT)
+    simulator = start_simulator(node_processes, '/ext_rs', *NON_DEFAULT,
+                                f'bags_root:={tmp_path}')
     node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
                           '-r', '__ns:=/ext_rs', '-p', 'use_sim_time:=true'], name='blind')
     metrics, _ = evaluate(ros_node, '/ext_rs', environment_msg(room(), 'factory', 'wall'),
-                          time_limit=20.0, record_directory=str(tmp_path / 'bags'))
+                          time_limit=20.0, record_directory='bags')
     assert metrics.fault_collisions > 0 and metrics.bag_path, metrics.detail
 
     # Without the flag: a clear error naming it.

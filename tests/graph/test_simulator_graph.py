@@ -148,14 +148,61 @@ def test_unsafe_environment_ids_are_refused_and_touch_no_files(node_processes, r
                       for path in files.rglob('*'))
 
     before = snapshot()
-    start_simulator(node_processes, '/ids', 'dummy_agents:=0', 'controller_startup_timeout:=2.0')
+    start_simulator(node_processes, '/ids', 'dummy_agents:=0', 'controller_startup_timeout:=2.0',
+                    f'bags_root:={files / "bags"}')
     for unsafe in ('../victim', str(outside), ''):
         metrics, _ = evaluate(ros_node, '/ids', environment_msg(room(), 'factory', unsafe),
-                              record_directory=str(record), timeout=30)
+                              record_directory='run', timeout=30)
         assert metrics.outcome == 'invalid_environment', (unsafe, metrics.outcome)
         assert 'environment id' in metrics.detail, metrics.detail
         assert not metrics.bag_path
     assert snapshot() == before
+
+
+def test_a_client_cannot_write_or_delete_outside_the_bags_root(node_processes, ros_node,
+                                                              tmp_path):
+    """Issue 19: a goal's record_directory '/…/outside' made the simulator write a bag there
+    and delete a foreign 'victim.tmp-999999/'. Now absolute and escaping record directories
+    are refused (harness_error: the goal's fault, never a result; nothing runs), and inside
+    the root only a killed
+    writer's marked staging directory is removed, never an unmarked one."""
+    from tests.unit.evolver.killed_bag_writer import killed_writer_staging
+
+    files = tmp_path / 'files'  # tmp_path itself holds the processes' logs
+    root = files / 'root'
+    outside = files / 'outside'
+    for directory in (outside, root / 'run'):
+        victim = directory / 'victim.tmp-999999'
+        victim.mkdir(parents=True)
+        (victim / 'precious.txt').write_text('keep me')
+    stale = killed_writer_staging(root / 'run')
+
+    def snapshot():
+        return sorted((str(path), path.read_bytes() if path.is_file() else b'')
+                      for path in files.rglob('*'))
+
+    before = snapshot()
+    start_simulator(node_processes, '/rooted', 'dummy_agents:=0', f'bags_root:={root}')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
+                          '-r', '__ns:=/rooted', '-p', 'use_sim_time:=true'], name='blind')
+    for unsafe in (str(outside), '../outside', 'run/../../outside', str(root / 'run')):
+        metrics, _ = evaluate(ros_node, '/rooted', environment_msg(room(), 'factory', 'room'),
+                              record_directory=unsafe, time_limit=20.0, timeout=30)
+        assert metrics.outcome == 'harness_error', (unsafe, metrics.outcome)
+        assert 'refusing the goal' in metrics.detail and 'bags root' in metrics.detail, \
+            metrics.detail
+        assert not metrics.bag_path and metrics.ticks == 0
+    assert snapshot() == before
+    # The same episode with a subdirectory of the root: a failure, recorded there.
+    metrics, _ = evaluate(ros_node, '/rooted', environment_msg(room(), 'factory', 'room'),
+                          record_directory='run', time_limit=20.0)
+    assert metrics.fault_collisions > 0 and metrics.bag_path == str(root / 'run' / 'room'), \
+        (metrics.outcome, metrics.detail, metrics.bag_path)
+    after = snapshot()
+    assert not stale.exists()  # the killed writer's partial bag
+    assert [entry for entry in after
+            if not entry[0].startswith(str(root / 'run' / 'room'))] == [
+        entry for entry in before if not entry[0].startswith(str(stale))]
 
 
 @pytest.mark.parametrize('scenario, controller', [
@@ -179,11 +226,11 @@ def test_builtin_controller_reaches_goal_on_example_map(node_processes, ros_node
 def test_a_failure_in_a_valid_test_leaves_a_complete_bag(node_processes, ros_node, tmp_path):
     from sessgan_evolver.bag_reading import read_episode_bag
 
-    start_simulator(node_processes, '/blind', 'dummy_agents:=0')
+    start_simulator(node_processes, '/blind', 'dummy_agents:=0', f'bags_root:={tmp_path}')
     node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
                           '-r', '__ns:=/blind', '-p', 'use_sim_time:=true'], name='blind')
     metrics, _ = evaluate(ros_node, '/blind', environment_msg(room(), 'factory', 'room'),
-                          record_directory=str(tmp_path / 'bags'), time_limit=20.0)
+                          record_directory='bags', time_limit=20.0)
     assert metrics.feasible
     assert metrics.fault_collisions > 0 and metrics.static_collisions > 0, metrics.detail
     assert metrics.bag_path, 'a controller failure in a valid test is recorded'
@@ -201,7 +248,7 @@ def test_collisions_in_an_invalid_test_are_not_recorded_as_failures(node_process
     from sessgan_gen.token_map import read_token_map
 
     # A 0.5 m zig-zag corridor leaves the 0.4 m robot 5 cm per side: no certified route.
-    start_simulator(node_processes, '/dogleg', 'dummy_agents:=0')
+    start_simulator(node_processes, '/dogleg', 'dummy_agents:=0', f'bags_root:={tmp_path}')
     # Without its protective field (which stops it short of the corner ahead), as the
     # reference implementation of Nearness-Diagram drives.
     start_controller(node_processes, '/dogleg', 'nearness_diagram', 'braking_deceleration:=0.0')
@@ -211,7 +258,7 @@ def test_collisions_in_an_invalid_test_are_not_recorded_as_failures(node_process
     # Drive it from the start room anyway: the robot hits the corridor's corners.
     msg.start.position.x, msg.start.position.y = 1.25, 14.25
     msg.goal.position.x, msg.goal.position.y = 6.75, 8.25
-    metrics, _ = evaluate(ros_node, '/dogleg', msg, record_directory=str(tmp_path / 'bags'),
+    metrics, _ = evaluate(ros_node, '/dogleg', msg, record_directory='bags',
                           timeout=300)
     assert not metrics.feasible
     assert metrics.collisions > 0, (metrics.outcome, metrics.detail)

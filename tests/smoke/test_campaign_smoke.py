@@ -18,7 +18,8 @@ pytestmark = pytest.mark.smoke
 # Small but real: two workers, three generations, each episode at most 20 sim seconds.
 TINY = ['--scenario', 'factory', '--generations', '3', '--population', '3',
         '--maps-per-member', '1', '--workers', '2', '--time-limit', '20', '--seed', '5']
-IGNORED_COLUMNS = {'wall_time', 'bag_path'}
+IGNORED_COLUMNS = {'wall_time', 'bag_path', 'harness_reruns'}
+"""Columns that differ between runs with the same results (harness re-runs are no result)."""
 
 
 def campaign(tmp_path: Path, run: str, *extra: str) -> list[str]:
@@ -118,6 +119,8 @@ def test_a_worker_process_killed_mid_episode_is_restarted_and_the_episode_rerun(
     assert 'gave no result within' not in log, 'the death was noticed only at the timeout'
     rows = episode_rows(tmp_path / 'runs' / 'disturbed')
     assert 'controller_unresponsive' not in {row['outcome'] for row in rows}
+    with open(tmp_path / 'runs' / 'disturbed' / 'metrics_generations.csv') as handle:
+        assert sum(int(row['harness_reruns']) for row in csv.DictReader(handle)) >= 1
     assert rows == episode_rows(straight)
     for kind in ('members', 'generations'):  # fitness, and what evolution made of it
         assert episode_rows(tmp_path / 'runs' / 'disturbed', kind) == \
@@ -169,3 +172,31 @@ def test_campaign_rejects_bad_settings_clearly(ros_workspace, tmp_path):
              *arguments], capture_output=True, text=True, timeout=60, cwd=REPO_ROOT)
         assert result.returncode == 2, result.stderr
         assert message in result.stderr
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_stops_a_ros_campaign_cleanly_with_the_resume_hint(ros_workspace, tmp_path,
+                                                                   signum):
+    """Ctrl-C (SIGINT to the terminal's process group) during generation 0 ends the campaign
+    as SIGTERM does: exit 130, the --resume hint, no traceback."""
+    stderr_path = tmp_path / 'campaign.err'
+    with open(stderr_path, 'wb') as stderr:
+        run = subprocess.Popen(campaign(tmp_path, 'interrupted', '--generations', '1'),
+                               stdout=subprocess.DEVNULL, stderr=stderr,
+                               start_new_session=True)
+    try:
+        checkpoint = tmp_path / 'runs' / 'interrupted' / 'checkpoints' / 'generation_0000.pt'
+        deadline = time.monotonic() + 300
+        while not checkpoint.exists():  # episodes are being run
+            assert run.poll() is None, stderr_path.read_text()[-3000:]
+            assert time.monotonic() < deadline, 'generation 0 never started'
+            time.sleep(0.1)
+        time.sleep(2.0)
+        os.killpg(run.pid, signum)
+        assert run.wait(timeout=120) == 130, stderr_path.read_text()[-3000:]
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+    log = stderr_path.read_text(errors='replace')
+    assert 'continue later with --resume --run interrupted' in log, log[-3000:]
+    assert 'Traceback' not in log and 'ExternalShutdownException' not in log, log[-3000:]

@@ -26,6 +26,15 @@ def test_campaign_in_process_then_fresh_seeds_then_compare(ros_workspace, tmp_pa
                     '--bags-root', 'bags'], tmp_path)
     assert 'report:' in campaign.stdout
     assert (tmp_path / 'runs' / 'tiny' / 'report' / 'report.md').exists()
+    # Its failure bags (4 s are too short to cross a factory) as a regression suite: in
+    # process every one fails again, exactly.
+    bags = sorted((tmp_path / 'bags' / 'tiny').rglob('episode.json'))
+    assert bags and 'regression suite:' in campaign.stdout
+    suite = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'suite', 'runs/tiny/suite.yaml',
+                            '--output', 'ci', '--record', 'none'], cwd=tmp_path,
+                           capture_output=True, text=True, timeout=600)
+    assert suite.returncode == 1, suite.stdout + suite.stderr[-3000:]
+    assert f'{len(bags)} scenarios: {len(bags)} fail' in suite.stdout
 
     run(['evaluate', '--run', 'runs/tiny', '--member', 'final', '--shipped', '--episodes', '2',
          '--time-limit', '4', '--output', 'fresh'], tmp_path)

@@ -69,12 +69,13 @@ def test_map_commands_report_bad_input_clearly(tmp_path, capsys):
     assert train_main(['--map-yaml', str(tmp_path / 'missing.yaml'), '--output',
                        str(tmp_path / 'x.pt')]) == 1
     assert 'missing.yaml' in capsys.readouterr().err
-    assert export_main(['--output', str(tmp_path / 'a.yaml')]) == 1
+    # Bad options are usage errors: exit 2, nothing written.
+    assert export_main(['--output', str(tmp_path / 'a.yaml')]) == 2
     assert 'exactly one of' in capsys.readouterr().err
     assert export_main(['--generate', '--bag', str(tmp_path), '--output',
-                        str(tmp_path / 'a.yaml')]) == 1
+                        str(tmp_path / 'a.yaml')]) == 2
     assert 'got --generate, --bag' in capsys.readouterr().err
-    assert export_main(['--bag', str(tmp_path), '--output', str(tmp_path / 'a.yaml')]) == 1
+    assert export_main(['--bag', str(tmp_path), '--output', str(tmp_path / 'a.yaml')]) == 2
     assert 'no map.yaml' in capsys.readouterr().err
-    assert export_main(['--bag', str(tmp_path), '--output', str(tmp_path / 'a.pgm')]) == 1
+    assert export_main(['--bag', str(tmp_path), '--output', str(tmp_path / 'a.pgm')]) == 2
     assert 'must name a .yaml' in capsys.readouterr().err

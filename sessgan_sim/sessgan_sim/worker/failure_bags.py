@@ -32,10 +32,11 @@ class EpisodeFacts:
     """Every parameter of the worker that ran it."""
 
 
-def write_failure_bag(record_directory: str, environment, config, metrics,
-                      recording: Recording, facts: EpisodeFacts, log) -> str:
-    """Write ``<record_directory>/<environment id>/``; returns its path, or '' when it could
-    not be written (the reason goes to ``log.error``). ``config``: the resolved episode
+def write_failure_bag(record_directory: str | Path, environment, config, metrics,
+                      recording: Recording, facts: EpisodeFacts, log) -> tuple[str, str]:
+    """Write ``<record_directory>/<environment id>/``; returns (its path, ''), or ('', why)
+    when it could not be written (a full disk, ...: the reason also goes to ``log.error``,
+    and the client gets it as the result's bag_error). ``config``: the resolved episode
     config."""
     metadata = {
         'environment_id': environment.id, 'scenario': environment.scenario,
@@ -61,17 +62,18 @@ def write_failure_bag(record_directory: str, environment, config, metrics,
             metadata, environment.occupancy, environment.resolution, environment.origin,
             storage=facts.settings.bag_storage, overwrite=True)
     except (BagWriteError, OSError, ValueError) as err:
-        log.error(f'cannot write the failure bag of {environment.id!r} in {record_directory}: '
-                  f'{err}')
-        return ''
+        reason = f'cannot write the failure bag of {environment.id!r} in {record_directory}: {err}'
+        log.error(reason)
+        return '', reason
     log.info(f'failure bag written: {path}')
-    return str(path)
+    return str(path), ''
 
 
-def remove_partial_bags(record_directory: str, log) -> None:
+def remove_partial_bags(record_directory: str | Path, log) -> None:
     """Remove the ``<id>.tmp-<pid>`` staging directories a killed worker left behind in
-    ``record_directory`` (missing directories are fine)."""
-    if not record_directory or not Path(record_directory).is_dir():
+    ``record_directory``: only those whose marker proves them a dead writer's of this host
+    (``remove_stale_staging_directories``; missing directories are fine)."""
+    if not str(record_directory) or not Path(record_directory).is_dir():
         return
     try:
         removed = remove_stale_staging_directories(record_directory)

@@ -10,6 +10,7 @@ and nothing waits forever.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,7 +27,36 @@ command, between unconditional resends of the goal)."""
 SETTLE_PERIOD = 0.5
 """Wall seconds a fleet's controllers that just came up get before the first tick."""
 FEEDBACK_PERIOD = 0.25
-"""Sim seconds between evaluate feedback messages."""
+"""Sim seconds between evaluate feedback messages (at least FEEDBACK_WALL_PERIOD apart)."""
+FEEDBACK_WALL_PERIOD = 0.2
+"""Wall seconds between evaluate feedback messages at least: a lockstep episode runs at 50x
+real time, where feedback every 0.25 sim s cost a sixth of the simulator's messaging (an
+action feedback message costs about 0.2 ms of CPU, tests/benchmarks/bench_simulator_node.py)
+and told a client watching progress nothing it could follow. Shorter than FEEDBACK_PERIOD, so
+a real-time (clocked) episode keeps its cadence despite jitter."""
+
+
+class FeedbackSchedule:
+    """When the next evaluate feedback is due: FEEDBACK_PERIOD sim seconds and
+    FEEDBACK_WALL_PERIOD wall seconds (``clock``) after the last, the first one FEEDBACK_PERIOD
+    sim seconds into the episode."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self._next_sim_time = FEEDBACK_PERIOD
+        self._next_wall_time = -math.inf
+
+    def due(self, sim_time: float) -> bool:
+        """Whether feedback goes out at episode time ``sim_time`` (seconds); if so, the next
+        is scheduled from now."""
+        if sim_time < self._next_sim_time - 1e-9:
+            return False
+        now = self._clock()
+        if now < self._next_wall_time:
+            return False
+        self._next_sim_time = sim_time + FEEDBACK_PERIOD
+        self._next_wall_time = now + FEEDBACK_WALL_PERIOD
+        return True
 
 
 @dataclass
@@ -103,7 +133,7 @@ class EpisodeStepper:
         timeout = settings.controller_timeout
         startup_timeout = settings.controller_startup_timeout
         dt = episode.config.control_period
-        feedback_every = max(1, int(round(FEEDBACK_PERIOD / dt)))
+        feedback = FeedbackSchedule()
         topics, commands = self.topics, self.commands
         topics.forget_goal()
         command = None
@@ -111,7 +141,6 @@ class EpisodeStepper:
         wall_origin = time.monotonic()
         next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
         first = True
-        ticks = 0
         commands.take_all()  # stale answers of an earlier episode
         while not episode.done:
             if goal_handle is not None and goal_handle.is_cancel_requested:
@@ -172,13 +201,12 @@ class EpisodeStepper:
                 recording.add(topics.names['cmd_vel'], self.command_msgtype, stamp_ns, command)
             goal = observation.goal
             observation = episode.step(values).observation
-            ticks += 1
             if new_goal is not None and observation.goal != goal and not episode.done:
                 failure = new_goal(observation.goal, clock.stamp_ns(observation.time))
                 if failure:
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
                     break
-            if goal_handle is not None and ticks % feedback_every == 0:
+            if goal_handle is not None and feedback.due(observation.time):
                 self.publish_feedback(goal_handle, episode, observation)
         if not lockstep:
             # The final state, so subscribers and bags see where the robot ended. Not in
@@ -262,7 +290,7 @@ class FleetStepper:
         lockstep = settings.step_mode is StepMode.LOCKSTEP
         timeout = settings.controller_timeout
         dt = episode.config.control_period
-        feedback_every = max(1, int(round(FEEDBACK_PERIOD / dt)))
+        feedback = FeedbackSchedule()
         steppers = self.steppers
         stamp_ns = clock.stamp_ns(0.0)
         for stepper, observation in zip(steppers, observations, strict=True):
@@ -275,7 +303,6 @@ class FleetStepper:
         wall_origin = time.monotonic()
         next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
         first = True
-        ticks = 0
         while not episode.done:
             if goal_handle is not None and goal_handle.is_cancel_requested:
                 episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
@@ -336,8 +363,7 @@ class FleetStepper:
             if lockstep:
                 commands = [None] * len(steppers)  # each tick waits for fresh ones
             observations = [result.observation for result in episode.step_fleet(values)]
-            ticks += 1
-            if goal_handle is not None and ticks % feedback_every == 0:
+            if goal_handle is not None and feedback.due(observations[0].time):
                 EpisodeStepper.publish_feedback(goal_handle, episode, observations[0])
         if not lockstep:
             stamp_ns = clock.stamp_ns(observations[0].time)

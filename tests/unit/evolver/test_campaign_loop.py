@@ -35,6 +35,8 @@ class Interrupted(Exception):
 class InProcessEvaluator:
     """Generator and simulator in this process: what the ROS graph does, minus the messages."""
 
+    harness_reruns = 0
+
     def __init__(self, interrupt_at_generation: int | None = None) -> None:
         self.sampler = EnvironmentSampler()
         self.interrupt_at_generation = interrupt_at_generation

@@ -40,6 +40,20 @@ def test_same_seed_same_episode_and_the_trace_matches_the_metrics(factory):
     assert first.metrics['bag_path'] == '' and first.metrics['wall_time'] > 0
 
 
+def test_the_runner_clock_times_the_run_and_the_parts_of_its_ticks(factory):
+    # A clock that advances one second a reading: the parts of every tick take one reading
+    # each, so each part's total is the tick count (benchmarks pass time.thread_time).
+    readings = iter(range(1_000_000))
+    with EpisodeRunner('factory', time_limit=1.0,
+                       clock=lambda: float(next(readings))) as runner:
+        run = runner.run(factory, seed=1)
+        profile = runner.profile
+    ticks = run.metrics['ticks']
+    assert ticks == profile.ticks == 20
+    assert profile.physics == profile.sensors == profile.metrics == ticks
+    assert run.wall_time == 4 * ticks + 1  # four readings a tick between the runner's two
+
+
 def test_bad_settings_are_named(factory):
     with pytest.raises(EpisodeRunnerError, match='unknown controller'):
         EpisodeRunner('factory', controller='no_such_controller')

@@ -243,14 +243,17 @@ def test_missing_and_corrupt_bags_raise_bag_read_error(tmp_path):
     assert read_episode_bag(target).episode is None
 
 
-def test_stale_staging_directories_of_dead_writers_are_removed(tmp_path):
+def test_unmarked_staging_directories_are_never_removed(tmp_path):
+    """Names alone prove nothing (issue 19): directories named like the staging directory of
+    a dead or live writer, without the marker a writer creates first, stay (the marked ones
+    of killed writers: tests/unit/evolver/test_bag_integrity.py)."""
     dead = tmp_path / f'episode.tmp-{2**22 + 12345}'
     dead.mkdir()
     alive = tmp_path / f'other.tmp-{os.getpid()}'
     alive.mkdir()
     (tmp_path / 'kept').mkdir()
-    assert remove_stale_staging_directories(tmp_path) == [dead]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ['kept', alive.name]
+    assert remove_stale_staging_directories(tmp_path) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(['kept', alive.name, dead.name])
 
 
 def test_episode_json_is_plain_json(tmp_path):

@@ -281,7 +281,17 @@ def test_a_corrupt_line_inside_metrics_is_an_error(tmp_path):
         store.read_rows()
 
 
-@pytest.mark.parametrize('name', ['', '../escape', 'a/b', '.hidden'])
+@pytest.mark.parametrize('name', ['', '../escape', 'a/b', '.hidden', 'run\n', 'run\nx', 'a..b',
+                                  'run.tmp-5', 'x' * 129])
 def test_invalid_run_names_are_rejected(tmp_path, name):
-    with pytest.raises(RunStoreError):
+    """A trailing newline too (a regex ending in '$' matched before it); and the names a
+    simulator would refuse as record directory (bags/<run>/)."""
+    with pytest.raises(RunStoreError, match='run name'):
         RunStore(tmp_path, name)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_checkpoint_name_with_a_trailing_newline_is_no_checkpoint(tmp_path):
+    store = RunStore(tmp_path, 'run')
+    (store.checkpoints_dir / 'generation_0001.pt\n').write_bytes(b'not a checkpoint')
+    assert store.checkpoints() == []

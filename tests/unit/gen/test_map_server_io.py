@@ -141,7 +141,7 @@ def test_p2_and_16_bit_and_absolute_image_path(tmp_path):
     ({'negate': 2}, "'negate' must be 0, 1"),
     ({'free_thresh': 0.7}, 'free_thresh < occupied_thresh'),
     ({'mode': 'fancy'}, "'mode' must be one of"),
-    ({'image': 'map.png'}, 'only PGM'),
+    ({'image': 'map.png'}, 'does not exist'),
     ({'image': 'other.pgm'}, 'does not exist'),
 ])
 def test_malformed_yaml_is_reported(tmp_path, keys, message):

@@ -73,17 +73,27 @@ def test_training_sets_noise_amplitudes_and_reports_each_scale():
     assert results[-1]['reconstruction_accuracy'] == pytest.approx(expected)
 
 
-def test_same_seed_same_weights_other_seed_other_weights():
-    first = train(tiny_config()).pyramid.state_dict()
-    second = train(tiny_config()).pyramid.state_dict()
+DEVICES = [
+    'cpu',
+    # CI has no GPU: this case runs wherever CUDA is (the README says where it last ran).
+    pytest.param('cuda', marks=pytest.mark.skipif(not torch.cuda.is_available(),
+                                                  reason='no CUDA device')),
+]
+
+
+@pytest.mark.parametrize('device', DEVICES)
+def test_same_seed_same_weights_other_seed_other_weights(device):
+    first = train(tiny_config(device=device)).pyramid.state_dict()
+    second = train(tiny_config(device=device)).pyramid.state_dict()
     for key in first:
         assert torch.equal(first[key], second[key]), key
-    other = train(tiny_config(seed=8)).pyramid.state_dict()
+    other = train(tiny_config(seed=8, device=device)).pyramid.state_dict()
     assert not torch.equal(first['generators.1.tail.weight'], other['generators.1.tail.weight'])
 
 
-def test_resume_after_a_scale_equals_an_uninterrupted_run(tmp_path):
-    config = tiny_config()
+@pytest.mark.parametrize('device', DEVICES)
+def test_resume_after_a_scale_equals_an_uninterrupted_run(tmp_path, device):
+    config = tiny_config(device=device)
     full = train(config).pyramid.state_dict()
     partial = train(config, stop_after_scale=1)
     path = tmp_path / 'partial.pt'
@@ -134,3 +144,59 @@ def test_checkpoint_metadata_of_a_trained_pyramid():
     assert metadata['complete'] is True and metadata['tokens'] == ['G', 'W']
     assert metadata['training_config']['iterations'] == 2
     assert len(checkpoint_bytes(trainer.pyramid, metadata)) < 200_000
+
+
+def test_a_crop_is_generated_as_it_is_inside_the_whole_map():
+    from sessgan_gen.model import ScaleGenerator, init_weights, pad
+    from sessgan_gen.training import Crops
+
+    torch.manual_seed(3)
+    generator = ScaleGenerator(2, 4)
+    generator.apply(init_weights)
+    generator.eval()
+    noisy = torch.randn(1, 2, 40, 30)
+    previous = torch.softmax(torch.randn(1, 2, 40, 30), dim=1)
+    crops = Crops((40, 30), 16)
+    assert crops.active and crops.window == (16, 16)
+    with torch.no_grad():
+        whole = generator(pad(noisy), previous)
+        for _ in range(5):
+            top, left = corner = crops.draw()
+            crop = generator(crops.cut_padded(pad(noisy), corner), crops.cut(previous, corner))
+            torch.testing.assert_close(crop, whole[..., top:top + 16, left:left + 16])
+    assert crops.cut(None, (0, 0)) is None
+
+
+def test_maps_that_fit_the_crop_train_as_without_crops():
+    uncropped = train(tiny_config(crop_size=0)).pyramid.state_dict()
+    fitting = train(tiny_config(crop_size=16)).pyramid.state_dict()
+    for key in uncropped:
+        assert torch.equal(uncropped[key], fitting[key]), key
+
+
+def test_crop_training_runs_repeats_and_costs_less_per_update():
+    from sessgan_gen.training import estimated_training_seconds
+
+    cells = np.zeros((40, 40), dtype=np.int64)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 1
+    cells[10:30:6, 5:35] = 1
+
+    def trained(crop_size: int) -> Trainer:
+        config = tiny_config(crop_size=crop_size)
+        seed_everything(config.seed)
+        trainer = Trainer(cells, FACTORY, config)
+        trainer.run()
+        return trainer
+
+    first, again = trained(16), trained(16)
+    for key, value in first.pyramid.state_dict().items():
+        assert torch.equal(value, again.pyramid.state_dict()[key]), key
+    whole = trained(0).pyramid.state_dict()
+    assert any(not torch.equal(value, whole[key])
+               for key, value in first.pyramid.state_dict().items())
+    assert first.pyramid.reconstruct().shape == (40, 40)
+    shapes = [(32, 32), (64, 64), (128, 128)]
+    assert estimated_training_seconds(shapes, 100, 32, 48) < 0.5 * estimated_training_seconds(
+        shapes, 100, 32, 0)
+    with pytest.raises(ValueError, match='crop_size'):
+        validate_config(tiny_config(crop_size=4))

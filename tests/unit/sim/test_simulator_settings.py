@@ -8,6 +8,7 @@ import pytest
 
 from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.simulator_settings import (
+    STRUCTURAL_SETTINGS,
     GoalInterface,
     SimulatorSettings,
     StepMode,
@@ -109,7 +110,7 @@ def recorded_episode(settings: SimulatorSettings, scenario: str = 'factory') -> 
 def test_resimulation_rebuilds_the_recorded_settings_and_clock():
     recorded = SimulatorSettings.from_values({
         'lidar_beams': 90, 'lidar_fov_deg': 270.0, 'robot_params': 'max_linear_speed=0.6',
-        'free_mode': True, 'record_directory': '/tmp/bags'})
+        'free_mode': True, 'bags_root': '/srv/bags', 'record_directory': 'free'})
     episode = recorded_episode(recorded)
     assert episode['episode_config']['robot_params']['max_linear_speed'] == 0.6
     assert episode['episode_config']['robot_params']['max_reverse_speed'] == 0.3  # the model's
@@ -118,7 +119,21 @@ def test_resimulation_rebuilds_the_recorded_settings_and_clock():
     assert settings.robot_params == 'max_linear_speed=0.6'
     assert settings.sim_time_origin == 12.35
     assert not settings.free_mode and settings.record_directory == ''  # the worker's own
+    assert settings.bags_root == 'bags'
     assert notes == []
+
+
+@pytest.mark.parametrize('record_directory', ['/tmp/bags', '../outside', 'run/../..', 'a b'])
+def test_the_free_mode_record_directory_must_stay_under_the_bags_root(record_directory):
+    with pytest.raises(InvalidConfigError, match="parameter 'record_directory'.*relative"):
+        SimulatorSettings.from_values({'record_directory': record_directory})
+    assert SimulatorSettings.from_values({'record_directory': 'free/run1'}).bags_root == 'bags'
+
+
+def test_the_bags_root_is_fixed_at_start_up_and_not_empty():
+    assert 'bags_root' in STRUCTURAL_SETTINGS  # a read-only parameter: no client moves it
+    with pytest.raises(InvalidConfigError, match="parameter 'bags_root'"):
+        SimulatorSettings.from_values({'bags_root': ''})
 
 
 def test_resimulation_refuses_settings_that_no_longer_build_the_recorded_episode():

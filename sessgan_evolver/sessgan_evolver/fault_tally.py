@@ -1,0 +1,182 @@
+"""Valid failures and distinct faults a campaign has found so far: what its user reads first.
+
+Faults are counted as ``compare`` counts them (sessgan_evolver.faults: a valid failure's
+fault key, two failures with one key are one fault); a campaign re-runs nothing, so its
+faults are *distinct*, not confirmed. An episode run in process reaches the
+:class:`FaultTracker` with its trace (as the evaluator's observer); an episode of a ROS
+worker comes back as a metrics message without contact places, so its key is read from the
+episode's failure bag (contacts from episode.json, where the robot ended from its odometry).
+A valid failure with neither (failure bags off, or written on another machine) still counts
+as a failure; its fault is *unplaced* and counted apart.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json
+from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
+from sessgan_evolver.errors import BagReadError, FaultError
+from sessgan_evolver.faults import (
+    FaultKey,
+    FaultRule,
+    fault_key,
+    first_fault_event,
+    is_valid_failure,
+    key_of_failure,
+)
+from sessgan_gen.environment import Environment
+from sessgan_sim.bag_recording import jazzy_typestore
+
+UNPLACED = '?'
+"""The fault label of a valid failure whose place is unknown (no trace, no bag)."""
+
+
+def trace_from_bag(bag: str | Path) -> tuple[EpisodeTrace, dict[str, Any]]:
+    """The robot's path (odometry; a fleet's robot r0) as a trace, and the episode.json
+    metrics (with the contact events) of a failure bag. BagReadError if it holds neither."""
+    episode = read_episode_json(bag) or {}
+    metrics = episode.get('metrics')
+    if not isinstance(metrics, dict):
+        raise BagReadError(f'bag {bag} has no metrics in its episode.json')
+    store = jazzy_typestore()
+    paths: dict[str, list[tuple[float, float, float]]] = {}
+    for message in iter_bag_messages(bag):
+        if message.topic.rsplit('/', 1)[-1] != 'odom':
+            continue
+        odom: Any = store.deserialize_cdr(message.data, message.msgtype)
+        stamp = odom.header.stamp
+        paths.setdefault(message.topic, []).append(
+            (float(stamp.sec) + 1e-9 * float(stamp.nanosec),
+             float(odom.pose.pose.position.x), float(odom.pose.pose.position.y)))
+    rows = next((path for topic, path in paths.items() if topic.endswith('/r0/odom')),
+                next(iter(paths.values()), []))
+    if not rows:
+        raise BagReadError(f'bag {bag} has no odometry')
+    table = np.asarray(rows, dtype=float)
+    poses = np.column_stack([table[:, 1:3], np.zeros(len(table))])
+    trace = EpisodeTrace(times=table[:, 0], poses=poses, twists=np.zeros((len(table), 3)),
+                         commands=np.zeros((max(len(table) - 1, 0), 4)),
+                         agents=np.zeros((len(table), 0, 2)))
+    return trace, metrics
+
+
+def key_from_bag(environment: Environment, bag: str | Path, rule: FaultRule) -> FaultKey:
+    """The fault key of a valid failure from its failure bag (module docstring)."""
+    trace, metrics = trace_from_bag(bag)
+    return fault_key(environment, first_fault_event(metrics, trace), rule)
+
+
+class FaultTracker:
+    """Fault labels of a campaign's episodes, however they ran (module docstring)."""
+
+    def __init__(self, rule: FaultRule | None = None) -> None:
+        self.rule = rule or FaultRule()
+        self._traced: dict[str, FaultKey | None] = {}
+        """Keys of in-process episodes by environment id, until their result is told."""
+
+    def observe(self, environment: Environment, seed: int, run: EpisodeRun,
+                origin: str = '') -> None:
+        """An InProcessEvaluator's observer: keeps the key from the episode's trace."""
+        self._traced[environment.id] = key_of_failure(environment, run.metrics, run.trace,
+                                                      self.rule)
+
+    def attach(self, evaluator: object) -> None:
+        """Observe every episode of ``evaluator`` if it runs them in process (it has an
+        ``observer``), beside the observer it had."""
+        if not hasattr(evaluator, 'observer'):
+            return
+        previous = evaluator.observer
+
+        def observe(environment: Environment, seed: int, run: EpisodeRun, origin: str) -> None:
+            self.observe(environment, seed, run, origin)
+            if previous is not None:
+                previous(environment, seed, run, origin)
+
+        evaluator.observer = observe
+
+    def label_of(self, environment: Environment, metrics: Mapping[str, Any]) -> str:
+        """'' for an episode that is no valid failure, else its fault label (UNPLACED when
+        neither a trace nor a readable failure bag says where it happened)."""
+        traced = self._traced.pop(environment.id, None)
+        if not is_valid_failure(metrics):
+            return ''
+        if traced is not None:
+            return traced.label
+        bag = str(metrics.get('bag_path') or '')
+        if not bag or not Path(bag).exists():
+            return UNPLACED
+        try:
+            return key_from_bag(environment, bag, self.rule).label
+        except (BagReadError, FaultError):
+            return UNPLACED
+
+
+@dataclass
+class FaultTally:
+    """Cumulative counts over a campaign's episodes, in the order they were recorded."""
+
+    episodes: int = 0
+    valid_failures: int = 0
+    unplaced: int = 0
+    """Valid failures whose fault could not be placed (not among ``faults``)."""
+    faults: dict[str, int] = field(default_factory=dict)
+    """Distinct fault label -> 1-based episode that first showed it."""
+    first_failure: int | None = None
+    """1-based episode of the first valid failure."""
+
+    def add(self, label: str) -> None:
+        """One more episode with its fault label ('' for no valid failure)."""
+        self.episodes += 1
+        if not label:
+            return
+        self.valid_failures += 1
+        if self.first_failure is None:
+            self.first_failure = self.episodes
+        if label == UNPLACED:
+            self.unplaced += 1
+        else:
+            self.faults.setdefault(label, self.episodes)
+
+    @classmethod
+    def from_rows(cls, rows: Iterable[Mapping[str, Any]]) -> FaultTally:
+        """The tally of recorded episode rows (their 'fault' column), e.g. on resume."""
+        tally = cls()
+        for row in rows:
+            tally.add(str(row.get('fault') or ''))
+        return tally
+
+    @property
+    def distinct_faults(self) -> int:
+        return len(self.faults)
+
+    def per_episode(self, count: int) -> float:
+        return count / self.episodes if self.episodes else 0.0
+
+    def columns(self) -> dict[str, int]:
+        """The cumulative counts as columns of a generation row."""
+        return {'episodes_so_far': self.episodes, 'valid_failures_so_far': self.valid_failures,
+                'distinct_faults_so_far': self.distinct_faults,
+                'unplaced_failures_so_far': self.unplaced}
+
+    def line(self) -> str:
+        """The console's lead: cumulative counts and their rate per episode."""
+        text = (f'{self.valid_failures} valid failures '
+                f'({self.per_episode(self.valid_failures):.3f}/episode), '
+                f'{self.distinct_faults} distinct faults '
+                f'({self.per_episode(self.distinct_faults):.3f}/episode)')
+        if self.unplaced:
+            text += f' + {self.unplaced} unplaced'
+        return text + f' in {self.episodes} episodes'
+
+
+def map_digest(cells: np.ndarray) -> str:
+    """A short digest of a map's cells: a resumed search checks it proposes the same maps."""
+    array = np.ascontiguousarray(np.asarray(cells, dtype=np.int16))
+    return hashlib.sha256(array.tobytes() + str(array.shape).encode()).hexdigest()[:16]

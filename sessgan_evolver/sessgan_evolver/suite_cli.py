@@ -1,0 +1,352 @@
+"""`ros2 run sessgan_evolver suite <suite.yaml | bags dir | bag>`: a regression suite for CI.
+
+Re-runs every recorded scenario (a suite file written by ``campaign`` or ``evaluate``, a
+directory of failure bags, or one bag) against the robot under test and writes
+<output>/junit.xml (one testcase per scenario: verdict, detail, metrics as properties, the new
+bag), summary.md and scenarios.csv.
+
+By default each scenario runs in this process with a built-in controller (the recorded one,
+or --controller) in lockstep: exact, so one result is its verdict. With --external the
+episodes go to the simulators already running under /w0, /w1, ... (each beside your
+controller; every discovered ``evaluate`` action server is used, in parallel): their timing
+depends on the machine, so each scenario runs 1 + --retries times and is pass, fail or flaky
+(mixed). A harness outcome (controller_unresponsive, cancelled, a map the simulator could not
+build) is no result: it is run again, and after --harness-tries in a row the scenario is a
+harness error (JUnit <error>), never a pass or a fail.
+
+Exit codes: 0 every scenario passed (flaky ones too, unless --fail-on-flaky); 1 a scenario
+failed; 2 bad input (a missing bag, a bag of another scenario, malformed YAML, an empty
+suite: nothing is run or written); 3 a harness error and no failure; 130 interrupted (Ctrl-C:
+what ran is reported, the rest is marked not_run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shlex
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sessgan_evolver.errors import SessganEvolverError, SuiteError
+from sessgan_evolver.regression_suite import (
+    EXIT_HARNESS,
+    EXIT_USAGE,
+    Attempt,
+    AttemptKind,
+    ScenarioProgress,
+    Suite,
+    SuiteEntry,
+    Verdict,
+    classify,
+    exit_code,
+    load_suite_source,
+    write_outputs,
+)
+from sessgan_gen.errors import SessganGenError
+from sessgan_gen.progress import ProgressPrinter
+
+RECORD_CHOICES = ('all', 'failures', 'none')
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog='ros2 run sessgan_evolver suite', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('source', type=Path,
+                        help='a suite file (YAML), a directory of failure bags, or one bag')
+    parser.add_argument('--output', type=Path, default=None,
+                        help='folder for junit.xml, summary.md, scenarios.csv and bags/ '
+                             '(default: runs/suite-<suite name>)')
+    parser.add_argument('--controller', default='',
+                        help="built-in controller to test (default: each bag's recorded one)")
+    parser.add_argument('--external', action='store_true',
+                        help='run the episodes on the simulators already running (every '
+                             'discovered evaluate action server, e.g. /w0/evaluate), each '
+                             'beside the controller under test')
+    parser.add_argument('--workers', default='',
+                        help='--external: only these namespaces, comma-separated (/w0,/w1)')
+    parser.add_argument('--retries', type=int, default=0,
+                        help='--external: re-runs per scenario beyond the first (verdicts: '
+                             'pass, fail, flaky); in process episodes are exact and run once')
+    parser.add_argument('--harness-tries', type=int, default=3,
+                        help='harness outcomes in a row before a scenario is a harness error')
+    parser.add_argument('--record', choices=RECORD_CHOICES, default='failures',
+                        help='bags of the re-runs to keep: all, failures (default) or none '
+                             '(--external: the simulators record failures only)')
+    parser.add_argument('--fail-on-flaky', action='store_true',
+                        help='exit 1 when a scenario is flaky, too')
+    parser.add_argument('--episode-timeout', type=float, default=0.0,
+                        help='--external: wall seconds per episode before it is retried on '
+                             'another worker (default: from the time limit and map size)')
+    args = parser.parse_args(argv)
+    if args.retries < 0:
+        parser.error('--retries must be >= 0')
+    if args.harness_tries < 1:
+        parser.error('--harness-tries must be >= 1')
+    if args.external and args.record == 'all':
+        parser.error('--record all needs the in-process runner: external simulators record '
+                     'failures only')
+    if args.controller and args.external:
+        parser.error('--controller picks a built-in controller; with --external the '
+                     'controller is the one running beside each simulator')
+    return args
+
+
+def safe_name(text: str) -> str:
+    """``text`` as a directory name a simulator accepts in a record directory (a letter or
+    digit, then letters, digits, '.', '_' or '-'; sessgan_sim.bag_recording)."""
+    name = ''.join(c if c.isascii() and (c.isalnum() or c in '-_.') else '_' for c in text)
+    while '..' in name:
+        name = name.replace('..', '.')
+    name = name.lstrip('-_.')
+    return name[:100] or 'scenario'
+
+
+# ---- in process --------------------------------------------------------------------------
+
+
+@dataclass
+class PreparedEntry:
+    """What runs a scenario in process, built before anything runs (bad input: exit 2)."""
+
+    entry: SuiteEntry
+    environment: Any
+    seed: int
+    controller: str
+    settings: Any
+    time_limit: float
+
+
+def prepare_in_process(entry: SuiteEntry, controller: str) -> tuple[PreparedEntry, list[str]]:
+    """The environment, seed, controller and lockstep settings of ``entry``; SuiteError
+    naming the entry when it cannot be re-simulated in process."""
+    from sessgan_controllers.registry import CONTROLLERS
+    from sessgan_evolver.replay_cli import bag_environment
+    from sessgan_sim.errors import SessganSimError
+    from sessgan_sim.simulator_settings import resimulation_settings
+
+    where = f'scenario {entry.name} ({entry.bag})'
+    episode = entry.episode
+    name = controller or str(episode.get('controller') or '')
+    if name not in CONTROLLERS:
+        raise SuiteError(f'{where}: recorded with controller {name!r}, not a built-in one '
+                         f'({", ".join(sorted(CONTROLLERS))}): pass --controller or run it '
+                         'with --external beside your controller')
+    try:
+        settings, notes = resimulation_settings(episode)
+        environment = bag_environment(entry.bag, dict(episode))
+    except (SessganSimError, SessganGenError, OSError, KeyError, ValueError) as err:
+        raise SuiteError(f'{where}: cannot rebuild the recorded episode: {err}') from err
+    if settings.mode != 'lockstep':
+        settings = dataclasses.replace(settings, mode='lockstep')
+        notes = [n for n in notes if 'clocked' not in n]
+        notes.append(f'{entry.name}: recorded in clocked mode, re-run in lockstep in process')
+    return PreparedEntry(entry, environment, int(episode.get('episode_seed', environment.seed)),
+                         name, settings, float(episode.get('time_limit') or 0.0)), notes
+
+
+class InProcessRunner:
+    """Runs scenarios with built-in controllers in this process; one evaluator (one
+    simulator) per distinct (scenario, controller, settings, time limit)."""
+
+    def __init__(self, record: str, bags_directory: Path) -> None:
+        self.record = record
+        self.bags_directory = bags_directory
+        self._evaluators: dict[tuple, Any] = {}
+
+    def evaluator(self, prepared: PreparedEntry) -> Any:
+        from sessgan_evolver.in_process import InProcessEvaluator
+
+        key = (prepared.environment.scenario, prepared.controller,
+               repr(prepared.settings), prepared.time_limit)
+        if key not in self._evaluators:
+            self._evaluators[key] = InProcessEvaluator(
+                prepared.environment.scenario, prepared.controller, prepared.time_limit,
+                settings=prepared.settings)
+        return self._evaluators[key]
+
+    def run(self, prepared: PreparedEntry, number: int) -> Attempt:
+        evaluator = self.evaluator(prepared)
+        keep = self.record != 'none'
+        run = evaluator.runner.run(prepared.environment, prepared.seed, trace=keep,
+                                   keep_scans=keep)
+        metrics = dict(run.metrics)
+        kind = classify(metrics)
+        bag = ''
+        if run.trace is not None and (self.record == 'all' or (
+                self.record == 'failures' and kind is AttemptKind.FAIL)):
+            directory = (self.bags_directory / safe_name(prepared.entry.name)
+                         / f'attempt-{number}')
+            bag = str(evaluator.write_bag(directory, prepared.environment, prepared.seed, run,
+                                          f'suite scenario {prepared.entry.name}'))
+            metrics['bag_path'] = bag
+        return Attempt(kind, metrics, bag)
+
+    def close(self) -> None:
+        for evaluator in self._evaluators.values():
+            evaluator.close()
+        self._evaluators.clear()
+
+
+def run_in_process(progresses: list[ScenarioProgress], prepared: list[PreparedEntry],
+                   runner: InProcessRunner, report: Callable[[], None]) -> None:
+    for progress, entry in zip(progresses, prepared):
+        while progress.needed():
+            progress.add(runner.run(entry, len(progress.attempts) + 1))
+        report()
+
+
+# ---- external ----------------------------------------------------------------------------
+
+
+def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
+                 output: Path, report: Callable[[], None]) -> None:
+    """Dispatch every scenario's attempts to the running simulators (the campaign's
+    RosEvaluator: parallel, a worker that refuses or stalls gets the job taken away), in
+    rounds until every scenario has its verdict."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
+    from sessgan_evolver.campaign_cli import RosEvaluator
+    from sessgan_evolver.process_supervisor import ProcessSupervisor
+    from sessgan_evolver.replay_cli import bag_environment
+
+    environments = []
+    for progress in progresses:
+        try:
+            environments.append(bag_environment(progress.entry.bag, dict(progress.entry.episode)))
+        except (SessganGenError, OSError, KeyError, ValueError) as err:
+            raise SuiteError(f'scenario {progress.entry.name} ({progress.entry.bag}): cannot '
+                             f'read the recorded map: {err}') from err
+    config = CampaignConfig(scenario=progresses[0].entry.scenario or 'factory',
+                            external=True, episode_timeout=args.episode_timeout,
+                            record_failures=args.record != 'none')
+
+    class SuiteEvaluator(RosEvaluator):
+        rerun_harness_outcomes = False  # every attempt is judged (classify)
+
+        def goal_for(self, job):
+            goal = super().goal_for(job)
+            episode = progresses[job.member].entry.episode
+            goal.time_limit = float(episode.get('time_limit') or 0.0)
+            goal.robot = str(episode.get('robot') or '')
+            goal.controller = 'external'  # stored with the bag: not the recorded controller
+            # A directory per attempt: the simulator names a bag after the environment.
+            goal.record_directory = (
+                f'suite-{safe_name(output.name)}/{safe_name(progresses[job.member].entry.name)}'
+                f'/attempt-{job.index}' if args.record != 'none' else '')
+            return goal
+
+    def log(message: str) -> None:
+        print(f'[suite] {message}', file=sys.stderr, flush=True)
+
+    rclpy.init(args=['--ros-args'])
+    node = rclpy.create_node('sessgan_suite')
+    supervisor = ProcessSupervisor(output / 'logs')
+    try:
+        evaluator = SuiteEvaluator(node, config, Path('suite'), 'external', supervisor, log)
+        if args.workers:
+            evaluator.allowed = {f'{name.strip().rstrip("/")}/evaluate'
+                                 for name in args.workers.split(',') if name.strip()}
+        evaluator.wait_for_workers(1, timeout=60.0)
+
+        def on_result(job, metrics: dict) -> None:
+            progress = progresses[job.member]
+            progress.add(Attempt(classify(metrics), metrics, str(metrics.get('bag_path') or '')))
+            if progress.done:
+                report()
+
+        while True:
+            jobs = [EpisodeJob(0, index, len(progress.attempts) + k, environments[index],
+                               int(progress.entry.episode.get('episode_seed',
+                                                              environments[index].seed)))
+                    for index, progress in enumerate(progresses)
+                    for k in range(progress.needed())]
+            if not jobs:
+                return
+            evaluator.evaluate(jobs, on_result)
+    except ExternalShutdownException:
+        raise KeyboardInterrupt from None  # rclpy's SIGINT handler shut the context down
+    finally:
+        supervisor.stop_all()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+# ---- the command -------------------------------------------------------------------------
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    args = parse_args(arguments)
+    runner = InProcessRunner(args.record, Path())
+    try:
+        suite: Suite = load_suite_source(args.source)
+        prepared: list[PreparedEntry] = []
+        if not args.external:
+            for entry in suite.entries:
+                item, notes = prepare_in_process(entry, args.controller)
+                try:  # a controller that cannot drive the recorded robot, ...
+                    runner.evaluator(item)
+                except SessganEvolverError as err:
+                    raise SuiteError(f'scenario {entry.name} ({entry.bag}): {err}') from err
+                prepared.append(item)
+                for note in notes:
+                    print(f'note: {note}', file=sys.stderr)
+    except (SessganEvolverError, SessganGenError) as err:
+        runner.close()
+        print(f'error: {err}', file=sys.stderr)
+        return EXIT_USAGE
+    output = args.output or Path('runs') / f'suite-{safe_name(suite.name)}'
+    runner.bags_directory = output / 'bags'
+    if not args.external and args.retries:
+        print('note: in-process lockstep episodes are exact: each scenario runs once '
+              '(--retries applies to --external)', file=sys.stderr)
+    wanted = 1 + args.retries if args.external else 1
+    progresses = [ScenarioProgress(entry, wanted, args.harness_tries)
+                  for entry in suite.entries]
+    printer = ProgressPrinter()
+    printer.start(f'suite {suite.name}', len(progresses))
+
+    def report() -> None:
+        done = [p for p in progresses if p.done]
+        counts = {v: sum(1 for p in done if p.verdict is v) for v in Verdict}
+        printer.update(len(done), ', '.join(f'{counts[v]} {v.value}' for v in Verdict
+                                            if counts[v]))
+
+    started = time.monotonic()
+    interrupted = False
+    status = None
+    try:
+        if args.external:
+            run_external(progresses, args, output, report)
+        else:
+            run_in_process(progresses, prepared, runner, report)
+    except KeyboardInterrupt:
+        interrupted = True
+        print('\ninterrupted: reporting the scenarios that ran', file=sys.stderr)
+    except (SessganEvolverError, SessganGenError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        status = EXIT_HARNESS
+    finally:
+        runner.close()
+        printer.close()
+    elapsed = time.monotonic() - started
+    command = 'ros2 run sessgan_evolver suite ' + shlex.join(arguments)
+    outputs = write_outputs(output, suite.name, progresses, elapsed, command,
+                            interrupted or status is not None)
+    counts = {v: sum(1 for p in progresses if p.verdict is v) for v in Verdict}
+    print(f'{len(progresses)} scenarios: ' + ', '.join(
+        f'{counts[v]} {v.value}' for v in Verdict if counts[v]))
+    print(f'junit: {outputs.junit}\nsummary: {outputs.markdown}\ncsv: {outputs.csv}')
+    code = exit_code(progresses, args.fail_on_flaky, interrupted)
+    return status if status is not None and code == 0 else code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,102 @@
+"""Benchmark: training on facility maps of 32x32, 64x64 and 128x128 cells.
+
+Not a test (pytest does not collect it); run it and read the figures::
+
+    python tests/benchmarks/bench_facility_training.py                  # 32, 64, 128; defaults
+    python tests/benchmarks/bench_facility_training.py --sizes 128 --crop-size 0   # no crops
+
+The maps are the factory example map tiled 1x1, 2x2 and 4x4 (no third-party map). Each is
+trained with the factory's default configuration (``train --scenario factory --map-file``:
+1,000 iterations a scale, 32 channels, crops of ``TrainConfig.crop_size``), then sampled at
+its own size; printed per size: training seconds (and per scale), TPKL of the samples to the
+map they learned, 8x8/16x16 uniqueness, and the share of samples that are valid tests (a
+certified route for the factory robot). The shipped 32x32 factory generator's figures on
+the same samples count are printed first, as the realism to match.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'sessgan_gen'))
+
+from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint  # noqa: E402
+from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report  # noqa: E402
+from sessgan_gen.model import GeneratorPyramid  # noqa: E402
+from sessgan_gen.navigation import make_environment  # noqa: E402
+from sessgan_gen.sampling import sample_seeds, sample_token_maps  # noqa: E402
+from sessgan_gen.scenarios import get_scenario  # noqa: E402
+from sessgan_gen.seeding import seed_everything  # noqa: E402
+from sessgan_gen.token_map import load_example_map  # noqa: E402
+from sessgan_gen.training import TrainConfig, Trainer, resolve_config  # noqa: E402
+
+FACTORY = get_scenario('factory')
+
+
+def facility_map(side: int) -> np.ndarray:
+    """The factory example map tiled to ``side`` x ``side`` cells (a multiple of 32)."""
+    example = load_example_map('factory').cells
+    repeats = side // example.shape[0]
+    if repeats < 1 or repeats * example.shape[0] != side:
+        raise SystemExit(f'--sizes takes multiples of {example.shape[0]}, got {side}')
+    return np.tile(example, (repeats, repeats))
+
+
+def figures(pyramid: GeneratorPyramid, reference: np.ndarray, samples: int) -> str:
+    """Valid-test share of ``samples`` maps; TPKL to ``reference`` and uniqueness of as many
+    of them as hold the cells of ``samples`` 32x32 maps (both figures depend on the cells
+    pooled, so every size is measured on the same number of cells)."""
+    maps = list(sample_token_maps(pyramid, sample_seeds(0, samples)))
+    valid = sum(make_environment(cells, FACTORY, f'bench-{i}').feasible
+                for i, cells in enumerate(maps))
+    pooled = maps[:max(2, -(-samples * 32 * 32 // maps[0].size))]
+    unique = uniqueness_report(pooled)
+    per_size = ', '.join(f'{s}x{s} {v:.1f} %' for s, v in unique.per_size.items())
+    return (f'TPKL {tile_pattern_kl(reference, pooled):.3f} and uniqueness {unique.mean:.1f} % '
+            f'({per_size}) of {len(pooled)} maps, valid tests {valid}/{samples}')
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--sizes', type=int, nargs='+', default=[32, 64, 128])
+    parser.add_argument('--iterations', type=int, default=0,
+                        help="iterations per scale (0: the factory's default)")
+    parser.add_argument('--crop-size', type=int, default=TrainConfig.crop_size,
+                        help='TrainConfig.crop_size (0: no crops)')
+    parser.add_argument('--threads', type=int, default=1, help='torch threads')
+    parser.add_argument('--samples', type=int, default=20, help='maps sampled per generator')
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+
+    shipped, _ = load_checkpoint(default_checkpoint_path('factory'), scenario='factory')
+    print(f'shipped factory 32x32 generator: '
+          f'{figures(shipped, load_example_map("factory").cells, args.samples)}', flush=True)
+    for side in args.sizes:
+        cells = facility_map(side)
+        config = resolve_config(TrainConfig(scenario='factory', iterations=args.iterations,
+                                            crop_size=args.crop_size, threads=args.threads,
+                                            progress=False))
+        seed_everything(config.seed)
+        trainer = Trainer(cells, FACTORY, config)
+        started, cpu_started = time.perf_counter(), time.process_time()
+        trainer.run()
+        seconds = time.perf_counter() - started
+        cpu = time.process_time() - cpu_started
+        scales = '; '.join(f'{r["shape"][0]}x{r["shape"][1]} {r["seconds"]:.0f} s'
+                           for r in trainer.state.scale_results)
+        # On a busy machine CPU seconds (one thread) are what a quiet core would take.
+        print(f'{side}x{side}: trained in {seconds:.0f} s wall, {cpu:.0f} s CPU '
+              f'({config.iterations} it/scale, crop '
+              f'{config.crop_size}, {args.threads} thread(s); {scales}); '
+              f'{figures(trainer.pyramid, cells, args.samples)}', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""`suite --external` against a controller running as its own process beside a simulator:
+a faulty controller fails the suite (every attempt, exit 1, a bag per failure), the fixed one
+passes it (exit 0), one that fails every other episode is flaky, and a silent one is a harness
+error (exit 3), never a pass or a fail."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+import pytest
+
+from tests.graph.test_simulator_graph import EXTERNAL_CONTROLLER, room, start_simulator
+
+pytestmark = pytest.mark.graph
+
+
+def room_bag(directory: Path) -> Path:
+    """A bag of an empty room (no agents), recorded in process."""
+    from sessgan_evolver.in_process import InProcessEvaluator
+    from sessgan_gen.navigation import make_environment
+    from sessgan_sim.simulator_settings import SimulatorSettings
+
+    environment = make_environment(room(), 'factory', 'room')
+    with InProcessEvaluator('factory', 'nearness_diagram', time_limit=60.0,
+                            settings=SimulatorSettings(dummy_agents=0)) as evaluator:
+        run = evaluator.runner.run(environment, 1, trace=True, keep_scans=True)
+        return evaluator.write_bag(directory / 'room', environment, 1, run, 'test')
+
+
+def start_external(node_processes, *behaviour: str):
+    return node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), *behaviour,
+                                 '--ros-args', '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'],
+                                name='external' + ''.join(behaviour))
+
+
+def suite(*options: str) -> subprocess.CompletedProcess:
+    return subprocess.run(['ros2', 'run', 'sessgan_evolver', 'suite', *options],
+                          capture_output=True, text=True, timeout=400)
+
+
+def junit_case(junit: Path) -> tuple[dict[str, str], dict[str, str]]:
+    suite_element = ElementTree.parse(junit).getroot().find('testsuite')
+    assert suite_element is not None
+    case = suite_element.find('testcase')
+    assert case is not None
+    return dict(suite_element.attrib), {p.get('name') or '': p.get('value') or ''
+                                        for p in case.iter('property')}
+
+
+def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, tmp_path):
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
+    blind = start_external(node_processes, '--blind')
+
+    failed = suite(str(bag), '--external', '--retries', '1', '--output',
+                   str(tmp_path / 'blind'))
+    assert failed.returncode == 1, failed.stdout + failed.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'blind' / 'junit.xml')
+    assert (counts['tests'], counts['failures'], counts['errors']) == ('1', '1', '0')
+    assert props['verdict'] == 'fail' and props['attempts'] == '2', props
+    assert props['attempt_outcomes'].count('fail:') == 2, props
+    assert Path(props['bag']).is_dir() and Path(props['bag']).is_relative_to(tmp_path / 'sim')
+    assert len(list((tmp_path / 'sim').rglob('episode.json'))) == 2  # a bag per attempt
+
+    os.killpg(blind.process.pid, signal.SIGINT)
+    blind.process.wait(timeout=15)
+    start_external(node_processes)
+    fixed = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'fixed'))
+    assert fixed.returncode == 0, fixed.stdout + fixed.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'fixed' / 'junit.xml')
+    assert (counts['tests'], counts['failures']) == ('1', '0')
+    assert props['verdict'] == 'pass' and props['attempt_outcomes'] == (
+        'pass:goal_reached pass:goal_reached'), props
+    # The straight line of an empty room is shorter than the certified route's grid steps.
+    assert props['success'] == '1' and float(props['path_length_ratio']) > 0.5
+    assert not (tmp_path / 'sim' / 'suite-fixed').exists()  # --record failures
+
+
+def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error(
+        node_processes, tmp_path):
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'controller_timeout:=1.0',
+                    f'bags_root:={tmp_path / "sim"}')
+    alternating = start_external(node_processes, '--alternate')
+    flaky = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'flaky'),
+                  '--record', 'none')
+    assert flaky.returncode == 0, flaky.stdout + flaky.stderr[-3000:]  # flaky is no failure
+    counts, props = junit_case(tmp_path / 'flaky' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '0')
+    assert props['verdict'] == 'flaky', props
+    outcomes = props['attempt_outcomes'].split()
+    assert len(outcomes) == 2 and 'pass:goal_reached' in outcomes, props
+    assert sum(outcome.startswith('fail:') for outcome in outcomes) == 1, props
+    case = ElementTree.parse(tmp_path / 'flaky' / 'junit.xml').getroot().find('.//testcase')
+    assert case is not None and len(case.findall('flakyFailure')) == 1
+
+    os.killpg(alternating.process.pid, signal.SIGINT)
+    alternating.process.wait(timeout=15)
+    start_external(node_processes, '--silent')
+    silent = suite(str(bag), '--external', '--harness-tries', '2', '--output',
+                   str(tmp_path / 'silent'))
+    assert silent.returncode == 3, silent.stdout + silent.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'silent' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '1')
+    assert props['verdict'] == 'error' and props['attempt_outcomes'] == (
+        'harness:controller_unresponsive harness:controller_unresponsive'), props
+    assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))
+
+
+def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, tmp_path):
+    import time
+
+    import yaml
+
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
+    start_external(node_processes)
+    count = 40  # far more than run before the signal
+    suite_file = tmp_path / 'suite.yaml'
+    suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
+        {'name': f'n{index:02d}', 'bag': str(bag)} for index in range(count)]}))
+    process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
+                                str(suite_file), '--external', '--output', str(tmp_path / 'out')],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    time.sleep(15.0)
+    os.killpg(process.pid, signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stdout + stderr[-3000:]  # every one that ran passed
+    assert 'interrupted' in stderr and 'Traceback' not in stderr, stderr[-3000:]
+    root = ElementTree.parse(tmp_path / 'out' / 'junit.xml').getroot()
+    suite_element = root.find('testsuite')
+    assert suite_element is not None
+    skipped = int(suite_element.get('skipped') or 0)
+    assert 0 < skipped < count and suite_element.get('failures') == '0', suite_element.attrib

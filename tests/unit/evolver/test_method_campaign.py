@@ -1,0 +1,246 @@
+"""campaign --method: ask/tell methods through the campaign's Evaluator, budget, run files,
+fault counting and exact resume by replay; fault keys read from failure bags."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from sessgan_evolver.campaign import (
+    DEFAULT_METHOD,
+    SESSGAN_METHOD,
+    Campaign,
+    CampaignConfig,
+    CampaignError,
+)
+from sessgan_evolver.campaign_cli import (
+    campaign_parser,
+    config_from_args,
+    make_campaign,
+    report_result,
+)
+from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
+from sessgan_evolver.errors import FreshSeedError
+from sessgan_evolver.fault_tally import UNPLACED, FaultTally, FaultTracker, key_from_bag
+from sessgan_evolver.faults import FaultRule, key_of_failure
+from sessgan_evolver.fresh_seed import campaign_sources, used_seeds
+from sessgan_evolver.in_process import InProcessEvaluator
+from sessgan_evolver.method_campaign import MethodCampaign
+from sessgan_evolver.run_store import RunStore
+
+pytestmark = pytest.mark.unit
+torch.set_num_threads(1)
+
+
+class Interrupted(Exception):
+    pass
+
+
+class ScriptedEvaluator:
+    """Runs no simulator: an episode fails (a wall contact where the robot starts) when its
+    map seed is even, so the test knows every outcome; traced like the in-process evaluator
+    (it has an ``observer``)."""
+
+    def __init__(self, interrupt_after: int | None = None) -> None:
+        self.observer = None
+        self.interrupt_after = interrupt_after
+        self.episodes = 0
+
+    def evaluate(self, jobs, on_result):
+        for job in jobs:
+            if self.episodes == self.interrupt_after:
+                raise Interrupted()
+            self.episodes += 1
+            environment = job.environment
+            fails = environment.seed % 2 == 0 and environment.feasible
+            x, y = environment.start.x, environment.start.y
+            metrics = {
+                'outcome': 'collision_limit' if fails else 'goal_reached',
+                'feasible': environment.feasible, 'collisions': int(fails),
+                'fault_collisions': int(fails), 'proximity_time': 1.0,
+                'simulation_time': 10.0, 'risk_score': 0.1 * fails,
+                'fault_risk_score': 0.1 * fails,
+                'contacts': [{'kind': 'static', 'x': x, 'y': y, 'time': 1.0}] if fails else []}
+            trace = EpisodeTrace(times=np.array([0.0]), poses=np.array([[x, y, 0.0]]),
+                                 twists=np.zeros((1, 3)), commands=np.zeros((0, 4)),
+                                 agents=np.zeros((1, 0, 2)))
+            if self.observer is not None:
+                self.observer(environment, job.seed, EpisodeRun(metrics, trace, 0.0), '')
+            on_result(job, metrics)
+
+
+def method_config(**values) -> CampaignConfig:
+    return CampaignConfig(**{'method': 'latent', 'budget': 8, 'population': 3, 'seed': 3,
+                             **values})
+
+
+def episode_rows(run_dir) -> list[dict]:
+    return [row for row in RunStore(run_dir.parent, run_dir.name).read_rows('episode')]
+
+
+def test_a_method_campaign_spends_its_budget_and_counts_the_faults(tmp_path):
+    campaign = MethodCampaign(method_config(), 'run', tmp_path / 'runs', tmp_path / 'bags',
+                              log=lambda _: None)
+    result = campaign.run(ScriptedEvaluator())
+    rows = episode_rows(result.run_dir)
+    assert len(rows) == 8  # batches of 3, 2, 2 and 1 (cut short): the budget, not more
+    assert [row['episode'] for row in rows] == list(range(1, 9))
+    failing = [row for row in rows if row['map_seed'] % 2 == 0 and row['feasible']]
+    assert failing, 'the scripted evaluator should have failed some episodes'
+    assert {row['fault'] for row in failing} - {''} and '' not in {r['fault'] for r in failing}
+    assert all(row['fault'] == '' for row in rows if row not in failing)
+    last = result.generations[-1]
+    assert last['episodes_so_far'] == 8
+    assert last['valid_failures_so_far'] == len(failing)
+    assert last['distinct_faults_so_far'] == len({row['fault'] for row in failing})
+    assert all(row['cheap_wall_time'] > 0 and row['episodes_wall_time'] >= 0
+               for row in result.generations)
+    config = json.loads((result.run_dir / 'config.json').read_text())['config']
+    assert (config['method'], config['budget']) == ('latent', 8)
+    report = result.report_path.read_text()
+    assert report.index('## Faults found') < report.index('## Summary')
+    assert f'**{len(failing)} valid failures and ' in report
+    assert '| mean fault risk score |' in report
+    assert (result.report_path.parent / 'faults_found.png').stat().st_size > 0
+
+
+def test_an_interrupted_method_campaign_resumes_with_identical_rows(tmp_path):
+    straight = MethodCampaign(method_config(), 'straight', tmp_path / 'runs',
+                              tmp_path / 'bags', log=lambda _: None).run(ScriptedEvaluator())
+    killed = MethodCampaign(method_config(), 'killed', tmp_path / 'runs', tmp_path / 'bags',
+                            log=lambda _: None)
+    with pytest.raises(Interrupted):
+        killed.run(ScriptedEvaluator(interrupt_after=5))  # inside the third batch
+    assert len(episode_rows(killed.store.run_dir)) == 5
+    # As if killed between the second batch's episode rows and its generation row: those
+    # rows are dropped and the batch run again.
+    path = killed.store.metrics_jsonl_path
+    lines = path.read_text().splitlines()
+    assert json.loads(lines[-1])['kind'] == 'generation'
+    path.write_text('\n'.join(lines[:-1]) + '\n')
+    with pytest.raises(CampaignError, match='pass --resume'):
+        MethodCampaign(method_config(), 'killed', tmp_path / 'runs', tmp_path / 'bags',
+                       log=lambda _: None).run(ScriptedEvaluator())
+    logged: list[str] = []
+    resumed = MethodCampaign(method_config(), 'killed', tmp_path / 'runs', tmp_path / 'bags',
+                             log=logged.append).run(ScriptedEvaluator(), resume=True)
+    assert any('resuming' in line and 'batch 1' in line for line in logged), logged
+    assert episode_rows(resumed.run_dir) == episode_rows(straight.run_dir)
+    timing = {'cheap_wall_time', 'episodes_wall_time'}
+    assert [{k: v for k, v in row.items() if k not in timing} for row in resumed.generations] \
+        == [{k: v for k, v in row.items() if k not in timing} for row in straight.generations]
+
+
+def test_evaluate_refuses_a_method_run_as_a_generator_but_excludes_its_seeds(tmp_path):
+    result = MethodCampaign(method_config(), 'run', tmp_path / 'runs', tmp_path / 'bags',
+                            log=lambda _: None).run(ScriptedEvaluator())
+    with pytest.raises(FreshSeedError, match='latent campaign: it evolves no generator'):
+        campaign_sources(result.run_dir)
+    map_seeds, sim_seeds = used_seeds([result.run_dir])
+    rows = episode_rows(result.run_dir)
+    assert map_seeds == {row['map_seed'] for row in rows}
+    assert sim_seeds == {row['sim_seed'] for row in rows}
+
+
+def test_resume_refuses_a_run_whose_maps_the_method_does_not_propose(tmp_path):
+    campaign = MethodCampaign(method_config(), 'run', tmp_path / 'runs', tmp_path / 'bags',
+                              log=lambda _: None)
+    campaign.run(ScriptedEvaluator())
+    path = campaign.store.metrics_jsonl_path
+    lines = path.read_text().splitlines()
+    first = json.loads(lines[0])
+    first['map_digest'] = '0' * 16
+    path.write_text('\n'.join([json.dumps(first), *lines[1:]]) + '\n')
+    with pytest.raises(CampaignError, match='another map than the one recorded'):
+        MethodCampaign(method_config(), 'run', tmp_path / 'runs', tmp_path / 'bags',
+                       log=lambda _: None).run(ScriptedEvaluator(), resume=True)
+
+
+def test_methods_are_validated_and_each_runs_as_its_own_campaign(tmp_path):
+    with pytest.raises(CampaignError, match='method must be one of'):
+        CampaignConfig(method='hill_climbing').validate()
+    with pytest.raises(CampaignError, match='budget must be >= 0'):
+        CampaignConfig(budget=-1).validate()
+    with pytest.raises(CampaignError, match='pays for no sessgan generation'):
+        CampaignConfig(budget=5, population=3, maps_per_member=2).validate()
+    with pytest.raises(CampaignError, match='MethodCampaign'):
+        Campaign(method_config(), 'a', tmp_path, tmp_path)
+    with pytest.raises(CampaignError, match='sessgan runs as'):
+        MethodCampaign(CampaignConfig(), 'b', tmp_path, tmp_path)
+    with pytest.raises(CampaignError, match='population must be >= 2'):
+        MethodCampaign(method_config(population=1), 'c', tmp_path, tmp_path)
+    assert CampaignConfig(budget=14, population=3, maps_per_member=2) \
+        .with_budget_generations().generations == 2
+    assert CampaignConfig(generations=4, population=3, maps_per_member=2) \
+        .resolved_budget() == 24
+    assert method_config(budget=0, generations=2).resolved_budget() == 2 * 3 * 3
+
+
+def test_the_command_defaults_to_the_default_method_and_records_the_chosen_one(tmp_path):
+    assert config_from_args(campaign_parser().parse_args([])).method == DEFAULT_METHOD
+    assert CampaignConfig().method == SESSGAN_METHOD
+    config = config_from_args(campaign_parser().parse_args(['--method', 'random',
+                                                            '--budget', '5']))
+    assert (config.method, config.budget) == ('random', 5)
+    assert isinstance(make_campaign(config, 'r', tmp_path, tmp_path, print, {}),
+                      MethodCampaign)
+    sessgan = config_from_args(campaign_parser().parse_args(['--method', 'sessgan']))
+    assert isinstance(make_campaign(sessgan, 's', tmp_path, tmp_path, print, {}), Campaign)
+
+
+def test_the_last_line_leads_with_failures_and_faults(tmp_path, capsys):
+    result = MethodCampaign(method_config(method='random', budget=5), 'run', tmp_path / 'runs',
+                            tmp_path / 'bags', log=lambda _: None).run(ScriptedEvaluator())
+    logged: list[str] = []
+    report_result(result, logged.append)
+    last = result.generations[-1]
+    assert logged[0].split(': ', 1)[1].startswith(
+        f'{last["valid_failures_so_far"]} valid failures')
+    assert logged[0].index('fault risk') < logged[0].index('; risk')
+
+
+def test_fault_tally_counts_failures_faults_and_unplaced_ones():
+    tally = FaultTally.from_rows([{'fault': ''}, {'fault': 'a'}, {'fault': UNPLACED},
+                                  {'fault': 'a'}, {'fault': 'b'}, {}])
+    assert (tally.episodes, tally.valid_failures, tally.distinct_faults, tally.unplaced) == \
+        (6, 4, 2, 1)
+    assert tally.faults == {'a': 2, 'b': 5}
+    assert tally.first_failure == 2
+    assert tally.line().startswith('4 valid failures (0.667/episode), 2 distinct faults '
+                                   '(0.333/episode) + 1 unplaced in 6 episodes')
+
+
+def test_a_failure_without_trace_or_bag_is_unplaced_and_a_success_has_no_fault(tmp_path):
+    tracker = FaultTracker()
+    environment = object.__new__(type('E', (), {'id': 'x'}))
+    assert tracker.label_of(environment, {'feasible': True, 'outcome': 'goal_reached',
+                                          'fault_collisions': 0}) == ''
+    assert tracker.label_of(environment, {'feasible': True, 'outcome': 'timeout',
+                                          'fault_collisions': 0, 'bag_path': ''}) == UNPLACED
+
+
+@pytest.mark.parametrize(('time_limit', 'seeds', 'kinds'), [
+    (3.0, [2, 3], {'timeout'}), (40.0, [1, 36], {'collision_agent', 'collision_static'})])
+def test_the_fault_key_of_a_failure_bag_is_the_key_of_its_trace(tmp_path, time_limit, seeds,
+                                                                kinds):
+    """A ROS worker's result carries no contact places: the campaign reads them from the
+    failure bag. Keys from bags equal keys from the traces of the same episodes (timeouts:
+    where the robot ended; map seeds 1 and 36 at 40 s: Nearness-Diagram's contacts with an
+    agent and a wall)."""
+    from sessgan_gen.environment_sampler import EnvironmentSampler
+
+    rule = FaultRule()
+    found = set()
+    with InProcessEvaluator('factory', '', time_limit, record_directory=tmp_path) as evaluator:
+        for environment in EnvironmentSampler().sample(seeds, None, 'factory'):
+            run = evaluator.run_environment(environment, 7)
+            key = key_of_failure(environment, run.metrics, run.trace, rule)
+            assert key is not None
+            assert key_from_bag(environment, run.metrics['bag_path'], rule) == key
+            found.add(key.kind)
+            tracker = FaultTracker(rule)  # as the campaign over ROS: no trace, the bag
+            assert tracker.label_of(environment, run.metrics) == key.label
+    assert found == kinds

@@ -1,0 +1,122 @@
+"""Importing a facility's own map for training: a SLAM map's unknown margin is cropped away,
+a map that is mostly wall or unknown is warned about, PNG images load, and bad inputs (an
+empty YAML, a map too small or too large to learn) say what is wrong."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from sessgan_gen.errors import MapFormatError
+from sessgan_gen.map_server_io import import_facility_map, read_map_server
+from sessgan_gen.model import pyramid_scale_shapes
+from sessgan_gen.training import check_training_map, long_training_warning
+
+pytestmark = pytest.mark.unit
+
+FREE, WALL, UNKNOWN = 254, 0, 205  # map_saver's shades
+
+
+def slam_map(folder, name='slam', room=(120, 160), image=(240, 300), at=(50, 70),
+             origin=(-5.0, -3.0, 0.0), suffix='.pgm'):
+    """A SLAM-like map: a free room with 2-pixel walls at image row/column ``at`` (top
+    first), surrounded by unknown space; map_saver's YAML (free_thresh 0.196, so its unknown
+    grey 205 reads as unknown). Returns the YAML path."""
+    pixels = np.full(image, UNKNOWN, dtype=np.uint8)
+    top, left = at
+    height, width = room
+    pixels[top:top + height, left:left + width] = WALL
+    pixels[top + 2:top + height - 2, left + 2:left + width - 2] = FREE
+    Image.fromarray(pixels, mode='L').save(folder / f'{name}{suffix}')
+    document = {'image': f'{name}{suffix}', 'resolution': 0.05, 'origin': list(origin),
+                'negate': 0, 'occupied_thresh': 0.65, 'free_thresh': 0.196}
+    (folder / f'{name}.yaml').write_text(yaml.safe_dump(document))
+    return folder / f'{name}.yaml'
+
+
+def test_a_slam_map_is_cropped_to_its_known_region(tmp_path):
+    imported = import_facility_map(slam_map(tmp_path), 'factory')
+    # 160 x 120 known pixels of 0.05 m: 8 m x 6 m, 16 x 12 cells of 0.5 m.
+    assert imported.token_map.cells.shape == (12, 16)
+    cells = imported.token_map.cells
+    assert cells[0].tolist() == [1] * 16 and cells[:, 0].tolist() == [1] * 12
+    assert (cells[1:-1, 1:-1] == 0).all()  # the room's floor, all of it
+    assert imported.free_fraction == pytest.approx(10 * 14 / (12 * 16))
+    assert imported.known_fraction == 1.0 and imported.warnings() == []
+    # OccupancyGrid rows count from the bottom: the room starts 240 - 50 - 120 = 70 rows up.
+    assert imported.known_box == (70, 190, 70, 230)
+    assert imported.origin == pytest.approx((-5.0 + 70 * 0.05, -3.0 + 70 * 0.05, 0.0))
+    assert 'cropped to its known region of 160x120 px' in imported.summary()
+
+
+def test_a_rotated_origin_moves_along_the_maps_axes(tmp_path):
+    imported = import_facility_map(slam_map(tmp_path, origin=(1.0, 2.0, np.pi / 2)), 'factory')
+    x, y, yaw = imported.origin
+    # Along the map's x axis (pointing up in the world) 3.5 m, along its y axis (pointing -x)
+    # 3.5 m.
+    assert (x, y, yaw) == pytest.approx((1.0 - 3.5, 2.0 + 3.5, np.pi / 2))
+
+
+def test_little_free_space_and_much_unknown_inside_are_warned_about(tmp_path):
+    # A room that is almost all wall: its floor is a 6-pixel strip.
+    walls = slam_map(tmp_path, 'walls', room=(120, 160))
+    pixels = np.asarray(Image.open(tmp_path / 'walls.pgm')).copy()
+    pixels[52:168, 72:228] = WALL
+    pixels[100:106, 72:228] = FREE
+    Image.fromarray(pixels, mode='L').save(tmp_path / 'walls.pgm')
+    warnings = import_facility_map(walls, 'factory').warnings()
+    assert len(warnings) == 1 and 'free floor' in warnings[0]
+    # A room whose inner half was never mapped.
+    patchy = slam_map(tmp_path, 'patchy')
+    pixels = np.asarray(Image.open(tmp_path / 'patchy.pgm')).copy()
+    pixels[52:168, 72:150] = UNKNOWN
+    Image.fromarray(pixels, mode='L').save(tmp_path / 'patchy.pgm')
+    assert any('unknown and counts as wall' in w
+               for w in import_facility_map(patchy, 'factory').warnings())
+
+
+def test_a_map_with_nothing_known_is_refused(tmp_path):
+    path = slam_map(tmp_path, room=(0, 0))
+    with pytest.raises(MapFormatError, match='every cell of the map is unknown'):
+        import_facility_map(path, 'factory')
+
+
+def test_png_images_load_like_their_pgm(tmp_path):
+    pgm = read_map_server(slam_map(tmp_path, 'as_pgm'))
+    png = read_map_server(slam_map(tmp_path, 'as_png', suffix='.png'))
+    np.testing.assert_array_equal(png.occupancy, pgm.occupancy)
+    # A colour PNG: the shade is the mean of the channels (map_server's rule).
+    Image.fromarray(np.array([[[254, 254, 254], [0, 0, 0], [200, 210, 205]]], dtype=np.uint8),
+                    mode='RGB').save(tmp_path / 'colour.png')
+    (tmp_path / 'colour.yaml').write_text(yaml.safe_dump({
+        'image': 'colour.png', 'resolution': 0.05, 'origin': [0, 0, 0],
+        'free_thresh': 0.196, 'occupied_thresh': 0.65}))
+    assert read_map_server(tmp_path / 'colour.yaml').occupancy.tolist() == [[0, 100, -1]]
+    (tmp_path / 'broken.png').write_bytes(b'\x89PNG not really')
+    (tmp_path / 'broken.yaml').write_text(yaml.safe_dump({
+        'image': 'broken.png', 'resolution': 0.05, 'origin': [0, 0, 0]}))
+    with pytest.raises(MapFormatError, match='cannot read map image'):
+        read_map_server(tmp_path / 'broken.yaml')
+
+
+def test_an_empty_yaml_says_it_is_empty(tmp_path):
+    (tmp_path / 'empty.yaml').write_text('')
+    with pytest.raises(MapFormatError, match='the file is empty'):
+        read_map_server(tmp_path / 'empty.yaml')
+
+
+def test_a_map_too_small_to_learn_is_named():
+    check_training_map(np.zeros((8, 12)))
+    with pytest.raises(ValueError, match='the map is 1x1 cells .* at least 8 cells per side'):
+        check_training_map(np.zeros((1, 1)))
+
+
+def test_a_long_training_is_warned_about_and_a_short_one_is_not():
+    huge = pyramid_scale_shapes(600, 600)  # a 6,000 x 6,000 image at 0.05 m
+    warning = long_training_warning(huge, 1000, 32)
+    assert '600x600-cell map' in warning and ' h on one CPU thread' in warning
+    assert 'memory' in warning
+    assert long_training_warning(pyramid_scale_shapes(32, 32), 1000, 32) == ''
+    assert long_training_warning(huge, 2, 4) == ''

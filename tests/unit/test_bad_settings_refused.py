@@ -1,0 +1,109 @@
+"""Every command refuses a setting it cannot work with before it writes anything: exit 2, a
+message naming the option, no run or output directory."""
+
+from __future__ import annotations
+
+import pytest
+
+from sessgan_evolver import campaign_cli, compare_cli, evaluate_cli
+from sessgan_evolver.campaign import CampaignConfig, CampaignError
+from sessgan_gen import export_cli, report_cli, train_cli
+from sessgan_sim.episode import MAX_TIME_LIMIT
+
+pytestmark = pytest.mark.unit
+
+BAD_CAMPAIGN_SETTINGS = [
+    (['--time-limit', '-5'], 'time_limit'),
+    (['--time-limit', 'nan'], 'time_limit'),
+    (['--time-limit', 'inf'], 'time_limit'),
+    (['--time-limit', '1e9'], 'time_limit'),
+    (['--episode-timeout', '-1'], 'episode_timeout'),
+    (['--episode-timeout', 'nan'], 'episode_timeout'),
+    (['--harness-tries', '0'], 'harness_tries'),
+    (['--harness-tries', '21'], 'harness_tries'),
+    (['--controller', 'nope'], 'nope'),
+    (['--controller', 'race_controller'], 'does not drive'),
+]
+
+
+@pytest.mark.parametrize('in_process', [True, False])
+@pytest.mark.parametrize(('arguments', 'named'), BAD_CAMPAIGN_SETTINGS)
+def test_campaign_refuses_a_bad_setting_before_the_run_directory(tmp_path, capsys, monkeypatch,
+                                                                  arguments, named, in_process):
+    def no_ros(*args):
+        raise AssertionError('the campaign started ROS with a bad setting')
+
+    monkeypatch.setattr(campaign_cli, 'init_rclpy', no_ros)
+    status = campaign_cli.main([
+        *(['--in-process'] if in_process else []), '--scenario', 'factory', '--run', 'bad',
+        '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags'),
+        *arguments])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert named in err and 'Traceback' not in err
+    assert not (tmp_path / 'runs').exists() and not (tmp_path / 'bags').exists()
+
+
+def test_the_time_limit_bound_is_documented_and_inclusive():
+    CampaignConfig(time_limit=MAX_TIME_LIMIT).validate()
+    with pytest.raises(CampaignError, match=f'time_limit must lie in \\[0, {MAX_TIME_LIMIT:.0f}'):
+        CampaignConfig(time_limit=MAX_TIME_LIMIT + 1).validate()
+    # An external stack is not started by the campaign: its name is free.
+    CampaignConfig(external=True, controller='my_stack').validate()
+
+
+@pytest.mark.parametrize(('arguments', 'named'), [
+    (['--time-limit', '-5'], '--time-limit'), (['--time-limit', 'nan'], '--time-limit'),
+    (['--time-limit', '1e9'], '--time-limit'), (['--controller', 'nope'], 'nope'),
+    (['--repeats', '-1'], '--repeats'), (['--fault-records', '-2'], '--fault-records'),
+    (['--coarse-cells', '0'], 'coarse_cells'), (['--seed', '-1'], '--seed')])
+def test_evaluate_refuses_a_bad_setting_before_its_output(tmp_path, capsys, arguments, named):
+    status = evaluate_cli.main(['--episodes', '1', '--output', str(tmp_path / 'out'),
+                                *arguments])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert named in err and not (tmp_path / 'out').exists()
+
+
+@pytest.mark.parametrize(('arguments', 'named'), [
+    (['--time-limit', '-5'], 'time_limit'), (['--time-limit', 'inf'], 'time_limit'),
+    (['--controller', 'nope'], 'nope'), (['--max-fault-records', '-2'], 'max_fault_records'),
+    (['--checkpoint', '/nonexistent.pt'], 'does not exist'),
+    (['--station-dwell-time', 'nan'], 'station_dwell_time')])
+def test_compare_refuses_a_bad_setting_before_its_output(tmp_path, capsys, arguments, named):
+    status = compare_cli.main(['--output', str(tmp_path / 'out'), *arguments])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert named in err and not (tmp_path / 'out').exists()
+
+
+@pytest.mark.parametrize(('arguments', 'named'), [
+    (['--beta1', 'nan'], 'beta1'), (['--lr-decay', '0'], 'lr_decay'),
+    (['--coarsest-coverage', 'inf'], 'coarsest_coverage'), (['--seed', '-1'], 'seed')])
+def test_train_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments, named):
+    output = tmp_path / 'out' / 'generator.pt'
+    status = train_cli.main(['--output', str(output), '--iterations', '1', *arguments])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert named in err and not (tmp_path / 'out').exists()
+
+
+@pytest.mark.parametrize(('arguments', 'named'), [
+    (['--generate', '--seed', '-1'], '--seed'), (['--generate', '--width', '-3'], '--width'),
+    (['--generate', '--scenario', 'moon'], 'moon'),
+    (['--map-file', '/nonexistent.txt'], '--map-file')])
+def test_export_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments, named):
+    status = export_cli.main(['--output', str(tmp_path / 'out' / 'map.yaml'), *arguments])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert named in err and not (tmp_path / 'out').exists()
+
+
+@pytest.mark.parametrize(('arguments', 'named'), [
+    (['--samples', '0'], '--samples'), (['--scenarios', 'moon'], 'moon'),
+    (['--threads', '-1'], '--threads')])
+def test_report_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments, named):
+    status = report_cli.main(['--output-dir', str(tmp_path / 'out'), *arguments])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert named in err and not (tmp_path / 'out').exists()

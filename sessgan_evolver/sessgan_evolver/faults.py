@@ -236,3 +236,45 @@ def confirm(entry: FaultEntry, original_metrics: Mapping[str, Any], rerun: Rerun
         exact += int(exactly_equal(metrics, original_metrics))
     entry.confirmation = Confirmation(repeats, reproduced, exact, wall)
     return entry.confirmation
+
+
+SITUATION_CELLS = 0.1
+"""Share of map cells two failing maps must differ in to be different fault situations."""
+
+
+def same_situation(key: FaultKey, occupancy: np.ndarray, other: FaultKey,
+                   other_occupancy: np.ndarray, share: float = SITUATION_CELLS) -> bool:
+    """Whether two faults are one *fault situation*: the same kind and coarse cell on maps
+    that differ in fewer than ``share`` of their cells (a local variant of a failing map is
+    the same situation, though the exact-context rule counts it as a new fault)."""
+    return (key.kind == other.kind and key.row == other.row and key.col == other.col
+            and np.shape(occupancy) == np.shape(other_occupancy)
+            and float(np.mean(np.asarray(occupancy) != np.asarray(other_occupancy))) < share)
+
+
+@dataclass
+class SituationArchive:
+    """Fault situations found so far: a representative fault and its map for each."""
+
+    share: float = SITUATION_CELLS
+    known: list[tuple[FaultKey, np.ndarray]] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.known)
+
+    def add(self, key: FaultKey, occupancy: np.ndarray) -> bool:
+        """Remember the fault ``key`` on ``occupancy``; True when it is a new situation."""
+        occupancy = np.asarray(occupancy)
+        if any(same_situation(key, occupancy, other, other_occupancy, self.share)
+               for other, other_occupancy in self.known):
+            return False
+        self.known.append((key, occupancy.copy()))
+        return True
+
+    def known_on(self, occupancy: np.ndarray, cells: set[tuple[int, int]]) -> int:
+        """How many known situations lie in one of the coarse ``cells`` of a map that differs
+        from theirs in fewer than ``share`` of its cells (where a failure would repeat one)."""
+        occupancy = np.asarray(occupancy)
+        return sum((key.row, key.col) in cells and np.shape(other) == np.shape(occupancy)
+                   and float(np.mean(other != occupancy)) < self.share
+                   for key, other in self.known)

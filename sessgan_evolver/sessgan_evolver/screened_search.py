@@ -8,9 +8,15 @@ the start and goal and changing the map only in detail, a child fails 41-45 % of
 and where the map changed around the fault place the failure is a new distinct fault
 (sessgan_evolver.faults keys it by the map around it). So:
 
-* **Parents**: every test that showed a new distinct fault, with its start and goal. A
-  parent is picked by Thompson sampling on its children's record (new faults / children),
-  so productive lineages get more budget and exhausted ones fade.
+* **Novelty is by fault situation** (sessgan_evolver.faults.same_situation, the rule the
+  fault-finding benchmark counts by): a failure is new only when no known fault has its kind
+  and coarse cell on a map within 10 % of its cells. A local variant of a failing map that
+  fails at the same place is a new distinct fault by the exact-context rule, but the same
+  situation: it earns no credit and makes no parent.
+* **Parents**: every test that showed a new fault situation, with its start and goal. A
+  parent is picked by Thompson sampling on its children's record (new situations /
+  children), so productive lineages get more budget; a parent whose last ``retire_after``
+  children showed no new situation is retired.
 * **Operators** (:class:`Operator`), also by Thompson sampling on their record in this
   run: the parent's noise mutated only around its fault place (``local``), or on the finest
   scale everywhere, the parent's start and goal kept (re-certified on the child's map) with
@@ -25,7 +31,8 @@ and where the map changed around the fault place the failure is a new distinct f
   P(valid failure) over route-local features (sessgan_evolver.screening.OnlineLogistic,
   refitted on this run's episodes; route length until it has seen ``surrogate_warmup``
   episodes and some failures) times a novelty factor that halves for every known fault
-  place (same coarse cell, same surrounding map) along the route.
+  along the route: known places (same coarse cell, same surrounding map) or known
+  situations (same coarse cell, map within 10 %), whichever are more.
 
 Proposals carry the Environment the screen certified, so the robot under test runs exactly
 the start and goal that were screened. Every random choice flows from the method's seed;
@@ -45,6 +52,7 @@ from sessgan_evolver.errors import FaultError, SearchMethodError
 from sessgan_evolver.faults import (
     FaultKey,
     FaultRule,
+    SituationArchive,
     is_valid_failure,
     key_of_failure,
     place_context,
@@ -59,6 +67,7 @@ from sessgan_evolver.screening import (
     certify_candidate,
     certify_route,
     environment_of,
+    route_coarse_cells,
     route_features,
 )
 from sessgan_evolver.search_methods import (
@@ -135,11 +144,14 @@ class ScreenedConfig:
     """Episodes before the surrogate ranks candidates (route length before)."""
     retries: int = 4
     """Extra candidates drawn for a test whose candidates were all dropped."""
+    retire_after: int = 3
+    """A parent whose last this many children showed no new fault situation gets no more."""
     rule: FaultRule = field(default_factory=FaultRule)
     """How fault places are keyed (the archive's novelty)."""
 
     def validate(self) -> None:
-        for name in ('batch', 'fresh_candidates', 'child_candidates', 'reference_maps'):
+        for name in ('batch', 'fresh_candidates', 'child_candidates', 'reference_maps',
+                     'retire_after'):
             if getattr(self, name) < 1:
                 raise SearchMethodError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('surrogate_warmup', 'retries'):
@@ -181,7 +193,7 @@ class Test:
 
 @dataclass
 class Parent:
-    """A test that showed a new distinct fault, and its children's record."""
+    """A test that showed a new fault situation, and its children's record."""
 
     test: Test
     key: FaultKey
@@ -189,11 +201,19 @@ class Parent:
     """The start and goal it failed with."""
     children: int = 0
     new_faults: int = 0
+    """Children that showed a new fault situation."""
+    barren: int = 0
+    """Children since its last child with a new fault situation."""
+
+    def credit(self, new: bool) -> None:
+        self.children += 1
+        self.new_faults += new
+        self.barren = 0 if new else self.barren + 1
 
 
 @dataclass
 class Record:
-    """Trials and successes (a child with a new distinct fault) of a parent or operator."""
+    """Trials and successes (a child with a new fault situation) of a parent or operator."""
 
     trials: int = 0
     successes: int = 0
@@ -218,6 +238,7 @@ class ScreenedSearch:
         self.example = checkpoint_training_map(scenario, checkpoint)
         self.rng = method_rng(seed, self.name)
         self.archive = FaultArchive(self.config.rule)
+        self.situations = SituationArchive()
         self.surrogate = OnlineLogistic(len(FEATURE_NAMES) + 1)
         self.parents: list[Parent] = []
         self.operators = {operator.name: operator for operator in self.config.operators}
@@ -273,9 +294,19 @@ class ScreenedSearch:
         # A generator whose samples all fail the screen: run the last like random does.
         return self._screen(draw, self.config.fresh_candidates) or draw(1)[0]
 
+    def _pick_parent(self) -> int | None:
+        """Thompson sampling over the parents not retired (None: all are)."""
+        live = [index for index, parent in enumerate(self.parents)
+                if parent.barren < self.config.retire_after]
+        if not live:
+            return None
+        records = self._parent_records()
+        return live[int(np.argmax([records[index].draw(self.rng) for index in live]))]
+
     def _child_test(self) -> Test | None:
-        draws = [record.draw(self.rng) for record in self._parent_records()]
-        index = int(np.argmax(draws))
+        index = self._pick_parent()
+        if index is None:
+            return None
         parent = self.parents[index]
         names = list(self.operators)
         operator = self.operators[names[int(np.argmax(
@@ -300,7 +331,7 @@ class ScreenedSearch:
         if test is None:
             # No child worth an episode: a failed trial of the parent and the operator, and
             # the slot goes to a fresh sample.
-            parent.children += 1
+            parent.credit(False)
             self.operator_records[operator.name].trials += 1
         return test
 
@@ -362,7 +393,9 @@ class ScreenedSearch:
 
     def _score(self, test: Test, certified: CertifiedCandidate) -> float:
         assert test.features is not None
-        novelty = 0.5 ** self.archive.known_places_on(certified)
+        cells = route_coarse_cells(certified, self.config.rule)
+        novelty = 0.5 ** max(self.archive.known_places_on(certified, cells),
+                             self.situations.known_on(certified.occupancy, cells))
         if self.told < self.config.surrogate_warmup or not self.surrogate.trained:
             # Longer routes expose more (the screening pilot): rank by length in metres.
             return novelty * float(test.features[0])
@@ -386,11 +419,11 @@ class ScreenedSearch:
             if test.features is not None:
                 self.surrogate.add(self._row(test), failed)
             key = self._fault_key(result) if failed else None
-            new = key is not None and self.archive.add(key)
+            if key is not None:
+                self.archive.add(key)
+            new = key is not None and self.situations.add(key, result.environment.occupancy)
             if test.parent is not None:
-                parent = self.parents[test.parent]
-                parent.children += 1
-                parent.new_faults += new
+                self.parents[test.parent].credit(new)
                 record = self.operator_records[test.operator]
                 record.trials += 1
                 record.successes += new

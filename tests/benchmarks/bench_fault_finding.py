@@ -12,8 +12,9 @@ report's own table, the figures the goals are stated in:
 * every method's confirmed distinct faults against random sampling's (the ``screened``
   search's goal: 2.8x), its cheap work's share of its search wall time, and a stricter
   count, *fault situations*: confirmed faults of a run grouped when they have the same kind
-  and coarse cell on maps that differ in fewer than ``SITUATION_CELLS`` of their cells (a
-  local variant of the same failing map counts once).
+  and coarse cell on maps that differ in fewer than 10 % of their cells (a local variant of
+  the same failing map counts once; ``sessgan_evolver.faults.same_situation``, the rule the
+  screened search's novelty uses).
 
 ``--budget`` takes a comma-separated list (one comparison per budget). Usage (CPU-heavy; run
 with nice)::
@@ -43,6 +44,7 @@ from sessgan_evolver.comparison import (  # noqa: E402
     method_table,
     run_comparison,
 )
+from sessgan_evolver.faults import SituationArchive  # noqa: E402
 from sessgan_evolver.search_methods import METHODS  # noqa: E402
 
 
@@ -69,24 +71,14 @@ def describe_ratio(runs, method: str, other: str, key: str) -> str:
             f'{", ".join(per_seed)})')
 
 
-SITUATION_CELLS = 0.1
-"""Share of map cells two failing maps must differ in to be different fault situations."""
-
-
 def fault_situations(run) -> int:
-    """Confirmed distinct faults of a run grouped into situations (module docstring)."""
-    representatives: list[tuple[str, int, int, np.ndarray]] = []
+    """Confirmed distinct faults of a run grouped into situations (module docstring;
+    sessgan_evolver.faults.same_situation, the rule the screened search's novelty uses)."""
+    situations = SituationArchive()
     for entry in run.faults:
-        if entry.confirmation is None or not entry.confirmation.confirmed:
-            continue
-        occupancy = np.asarray(run.records[entry.first].environment.occupancy)
-        key = entry.key
-        if not any(kind == key.kind and row == key.row and col == key.col
-                   and other.shape == occupancy.shape
-                   and np.mean(other != occupancy) < SITUATION_CELLS
-                   for kind, row, col, other in representatives):
-            representatives.append((key.kind, key.row, key.col, occupancy))
-    return len(representatives)
+        if entry.confirmation is not None and entry.confirmation.confirmed:
+            situations.add(entry.key, run.records[entry.first].environment.occupancy)
+    return len(situations)
 
 
 def describe_method(runs, method: str) -> str:

@@ -8,7 +8,14 @@ import pytest
 import torch
 
 from sessgan_evolver.episode_runner import EpisodeTrace
-from sessgan_evolver.faults import FaultEvent, FaultKey, FaultRule, fault_key
+from sessgan_evolver.faults import (
+    FaultEvent,
+    FaultKey,
+    FaultRule,
+    SituationArchive,
+    fault_key,
+    same_situation,
+)
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.screened_search import RELOCATE, Operator, ScreenedConfig, ScreenedSearch
 from sessgan_evolver.screening import (
@@ -291,3 +298,104 @@ def test_a_fresh_test_is_the_environment_make_environment_gives_its_seed():
         assert drawn.route_min_clearance == proposal.environment.route_min_clearance
         assert drawn.extra == proposal.environment.extra and drawn.feasible
         assert (drawn.occupancy == proposal.environment.occupancy).all()
+
+
+
+def test_situations_group_faults_at_one_place_on_nearly_the_same_map():
+    occupancy = np.zeros((20, 20), dtype=np.int8)
+    key = FaultKey('stuck', 1, 2, 'a')
+    archive = SituationArchive()
+    assert archive.add(key, occupancy) and len(archive) == 1
+    near = occupancy.copy()
+    near.flat[:39] = 100  # 9.75 % of the cells differ: the same situation
+    # Another context digest (a new fault by the exact rule) on a nearly equal map: no news.
+    assert same_situation(FaultKey('stuck', 1, 2, 'b'), near, key, occupancy)
+    assert not archive.add(FaultKey('stuck', 1, 2, 'b'), near)
+    far = occupancy.copy()
+    far.flat[:40] = 100  # 10 %: another situation
+    assert not same_situation(key, far, key, occupancy)
+    assert archive.add(FaultKey('stuck', 1, 3, 'a'), occupancy)  # another coarse cell
+    assert archive.add(FaultKey('timeout', 1, 2, 'a'), occupancy)  # another kind
+    assert len(archive) == 3
+    assert archive.known_on(near, {(1, 2)}) == 2 and archive.known_on(far, {(1, 2)}) == 0
+    assert archive.known_on(occupancy, {(0, 0)}) == 0
+
+
+def failing_at(proposals, where):
+    """Every test fails, stuck at ``where(environment)`` (a point in metres)."""
+    results = []
+    for proposal in proposals:
+        environment = proposal.environment
+        assert environment is not None and environment.feasible
+        results.append(Evaluated(proposal, environment, {
+            'feasible': True, 'collisions': 0, 'fault_collisions': 0, 'outcome': 'stuck'},
+            ended_at(*where(environment))))
+    return results
+
+
+def at_goal(environment):
+    return environment.goal.x, environment.goal.y
+
+
+def with_parents(config: ScreenedConfig) -> ScreenedSearch:
+    """A search whose first batch all failed (each fresh test a parent)."""
+    search = ScreenedSearch('factory', 1, config=config)
+    search.tell(failing_at(search.ask(), at_goal))
+    assert search.parents
+    return search
+
+
+def test_a_near_duplicate_failure_earns_no_credit_and_a_failure_at_a_new_place_does():
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25,
+                            operators=(Operator('local', 0.8, local=True),))
+    search = with_parents(config)
+    record = search.operator_records['local']
+    proposals = search.ask()
+    children = [(proposal, search.parents[test.parent])
+                for proposal, test in zip(proposals, search._pending) if test.parent is not None]
+    assert children
+    for proposal, parent in children:
+        # Its parent's start and goal on a map changed only around the parent's fault.
+        assert proposal.environment.goal == parent.test.environment.goal
+        assert np.mean(proposal.environment.occupancy
+                       != parent.test.environment.occupancy) < 0.1
+    faults = len(search.archive.keys)
+    search.tell(failing_at(proposals, at_goal))
+    # Each child failed where its parent did: a new distinct fault by the exact rule (the map
+    # around the place changed) but the same situation, so no credit.
+    assert len(search.archive.keys) >= faults + len(children)
+    assert record.trials >= len(children) and record.successes == 0
+    assert all(parent.new_faults == 0 and parent.barren >= 1 for _, parent in children)
+    assert not any(parent.test.parent is not None for parent in search.parents)
+    # Children failing at their start, in another coarse cell than the goal: new, credited.
+    proposals = search.ask()
+    size = search.spec.cell_size * config.rule.coarse_cells
+
+    def cell(pose):
+        return int(pose.x // size), int(pose.y // size)
+    moved = [search.parents[test.parent] for proposal, test in zip(proposals, search._pending)
+             if test.parent is not None
+             and cell(proposal.environment.start) != cell(proposal.environment.goal)]
+    assert moved
+    search.tell(failing_at(proposals, lambda e: (e.start.x, e.start.y)))
+    assert record.successes >= 1
+    assert any(parent.new_faults >= 1 and parent.barren == 0 for parent in moved)
+    assert any(parent.test.parent is not None for parent in search.parents)
+
+
+def test_a_parent_whose_children_repeat_known_situations_is_retired():
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25, retire_after=2)
+    search = with_parents(config)
+    first = search.parents[0]
+    first.credit(False)
+    assert first.barren == 1 and search._pick_parent() is not None
+    for parent in search.parents:
+        parent.credit(False)
+        parent.credit(False)
+    # Every parent retired: each slot is a fresh sample.
+    assert search._pick_parent() is None and search._child_test() is None
+    assert all(p.origin == 'fresh sample' for p in search.ask())
+    # A new situation revives a parent's streak: only it is picked.
+    first.credit(True)
+    first.credit(False)
+    assert first.barren == 1 and search._pick_parent() == 0

@@ -535,10 +535,21 @@ def run_campaign(argv: list[str]) -> int:
         print(f'error: {err}', file=sys.stderr)
         return 1
 
-    # SIGINT and SIGTERM raise KeyboardInterrupt (run_command), so the children are stopped.
-    if config.in_process:
-        return run_in_process(campaign, config, controller, run_name, args.resume, log)
+    # SIGINT and SIGTERM raise KeyboardInterrupt (run_command), so the children are stopped;
+    # caught here, so a signal while the graph stops or the report is written gives the hint too.
+    try:
+        if config.in_process:
+            return run_in_process(campaign, config, controller, run_name, args.resume, log)
+        return run_with_ros(campaign, config, controller, run_name, args.resume, log)
+    except KeyboardInterrupt:
+        log('interrupted: stopping every process this campaign started (continue later with '
+            f'--resume --run {run_name}{" --in-process" if config.in_process else ""})')
+        return INTERRUPTED_STATUS
 
+
+def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, controller: str,
+                 run_name: str, resume: bool, log: Callable[[str], None]) -> int:
+    """The campaign on the ROS graph: its generator and workers (or yours, --external)."""
     import rclpy
     init_rclpy(['--ros-args'])
     node = rclpy.create_node('sessgan_evolver')
@@ -561,11 +572,7 @@ def run_campaign(argv: list[str]) -> int:
         if needs_generator:
             evaluator.wait_for_generator(timeout=120.0)
         evaluator.wait_for_workers(1 if config.external else config.workers, timeout=120.0)
-        result = campaign.run(evaluator, resume=args.resume)
-    except KeyboardInterrupt:
-        log('interrupted: stopping every process this campaign started '
-            f'(continue later with --resume --run {run_name})')
-        return INTERRUPTED_STATUS
+        result = campaign.run(evaluator, resume=resume)
     except (HarnessFailureError, OSError) as err:
         # OSError: the run directory cannot be written (a full disk): nothing more can be.
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')
@@ -596,9 +603,6 @@ def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
                 fleet=config.fleet(), size=(config.height, config.width),
                 harness_tries=config.harness_tries, log=log) as evaluator:
             result = campaign.run(evaluator, resume=resume)
-    except KeyboardInterrupt:
-        log(f'interrupted (continue later with --resume --run {run_name} --in-process)')
-        return INTERRUPTED_STATUS
     except (HarnessFailureError, OSError) as err:
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name} '
             '--in-process')

@@ -120,10 +120,10 @@ def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, tmp
     bag = room_bag(tmp_path / 'recorded')
     start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
     start_external(node_processes)
-    count = 40  # far more than run before the signal
+    count = 400  # far more than run before the signal (40 ran in 12 s on a quiet machine)
     suite_file = tmp_path / 'suite.yaml'
     suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
-        {'name': f'n{index:02d}', 'bag': str(bag)} for index in range(count)]}))
+        {'name': f'n{index:03d}', 'bag': str(bag)} for index in range(count)]}))
     process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
                                 str(suite_file), '--external', '--output', str(tmp_path / 'out')],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

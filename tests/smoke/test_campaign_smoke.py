@@ -181,7 +181,9 @@ def test_ctrl_c_stops_a_ros_campaign_cleanly_with_the_resume_hint(ros_workspace,
     as SIGTERM does: exit 130, the --resume hint, no traceback."""
     stderr_path = tmp_path / 'campaign.err'
     with open(stderr_path, 'wb') as stderr:
-        run = subprocess.Popen(campaign(tmp_path, 'interrupted', '--generations', '1'),
+        # Far more generations than run before the signal: on a quiet machine one generation
+        # and the report took less than the 2 s the test waits.
+        run = subprocess.Popen(campaign(tmp_path, 'interrupted', '--generations', '100'),
                                stdout=subprocess.DEVNULL, stderr=stderr,
                                start_new_session=True)
     try:

@@ -78,10 +78,10 @@ def test_ctrl_c_stops_the_suite_and_reports_what_ran(ros_workspace, tmp_path):
                             record_directory=tmp_path / 'bags') as evaluator:
         bag = evaluator.run_environment(environment, 0).metrics['bag_path']
     assert bag
-    count = 40  # far more than run before the signal
+    count = 400  # far more than run before the signal (also on a quiet machine)
     suite_file = tmp_path / 'suite.yaml'
     suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
-        {'name': f'n{index:02d}', 'bag': bag} for index in range(count)]}))
+        {'name': f'n{index:03d}', 'bag': bag} for index in range(count)]}))
     process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
                                 str(suite_file), '--output', 'out', '--record', 'none'],
                                cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

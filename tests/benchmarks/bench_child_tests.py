@@ -18,6 +18,8 @@ making one:
 * ``keep_noise_S``, ``keep_fine_S``: the same mutation (all scales / the finest alone), the
   parent's start and goal kept and re-certified (``certify_route``);
 * ``keep_local_S``: the finest scale mutated only around the parent's fault place.
+* ``keep_two_finest_S``, ``keep_noise_S``: the two finest / all scales mutated everywhere, start
+  and goal kept (``--ways`` picks ways; default all).
 
 Per way: the share of children that are valid tests, P(valid failure) and P(new distinct
 fault) per child run (new: not seen before in the whole benchmark), and the share of run
@@ -40,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[2]
 for package in ('sessgan_gen', 'sessgan_sim', 'sessgan_evolver', 'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
-from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
+from sessgan_evolver.faults import FaultKey, FaultRule, SituationArchive  # noqa: E402
 from sessgan_evolver.in_process import InProcessEvaluator  # noqa: E402
 from sessgan_evolver.map_operators import mutate_noise, mutate_noise_region  # noqa: E402
 from sessgan_evolver.screening import certify_route, environment_of  # noqa: E402
@@ -61,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--fresh', type=int, default=200)
     parser.add_argument('--children', type=int, default=2)
     parser.add_argument('--seed', type=int, default=12)
+    parser.add_argument('--ways', default='', help="comma-separated ways ('': all)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     spec = get_scenario(args.scenario)
@@ -78,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
 
     started = time.perf_counter()
     archive: set[FaultKey] = set()
+    situations = SituationArchive()
     parents = []
     with InProcessEvaluator(args.scenario, args.controller, simulate_invalid=False,
                             observer=log) as evaluator:
@@ -93,11 +97,13 @@ def main(argv: list[str] | None = None) -> int:
             record = run(environment, sim_seed)
             if record.fault is not None:
                 archive.add(record.fault)
+                situations.add(record.fault, environment.occupancy)
                 parents.append((noise, environment, map_seed, sim_seed, record.fault))
+        fresh_situations = len(situations)
         print(f'{args.fresh} fresh tests, {len(parents)} valid failures '
               f'({time.perf_counter() - started:.0f} s)', file=sys.stderr, flush=True)
 
-        stats: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0, 0])
+        stats: dict[str, list[float]] = defaultdict(lambda: [0, 0, 0, 0, 0, 0, 0.0])
         for noise, environment, map_seed, sim_seed, key in parents:
             route = ((environment.start.x, environment.start.y, environment.start.yaw),
                      (environment.goal.x, environment.goal.y, environment.goal.yaw))
@@ -108,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
                       min(1.0, ((key.row + 1) * side + rule.context_cells) / height),
                       min(1.0, ((key.col + 1) * side + rule.context_cells) / width))
             last = (len(noise) - 1,)
+            middle = (len(noise) - 2, len(noise) - 1)
 
             def kept(child_noise, child_sim: int | None = None):
                 occupancy = tokens_to_occupancy(express(child_noise), spec)
@@ -133,7 +140,21 @@ def main(argv: list[str] | None = None) -> int:
                 'keep_fine_0.3': lambda: kept(mutate_noise(noise, rng, 0.3, scales=last)),
                 'keep_local_0.8': lambda: kept(mutate_noise_region(noise, rng, 0.8, region,
                                                                    last)),
+                'keep_noise_0.5': lambda: kept(mutate_noise(noise, rng, 0.5)),
+                'keep_two_finest_0.4': lambda: kept(mutate_noise(noise, rng, 0.4,
+                                                                 scales=middle)),
+                'keep_two_finest_0.7': lambda: kept(mutate_noise(noise, rng, 0.7,
+                                                                 scales=middle)),
+                'keep_two_finest_0.9': lambda: kept(mutate_noise(noise, rng, 0.9,
+                                                                 scales=middle)),
+                'keep_noise_0.7': lambda: kept(mutate_noise(noise, rng, 0.7)),
             }
+            if args.ways:
+                unknown = set(args.ways.split(',')) - set(ways)
+                if unknown:
+                    parser.error(f'unknown ways {sorted(unknown)}; known: {sorted(ways)}')
+                ways = {name: make for name, make in ways.items()
+                        if name in args.ways.split(',')}
             for name, make in ways.items():
                 for _ in range(args.children):
                     made = make()
@@ -144,22 +165,27 @@ def main(argv: list[str] | None = None) -> int:
                     record = run(made[0], made[1])
                     counts[1] += 1
                     counts[2] += record.valid_failure
+                    counts[6] += float(np.mean(np.asarray(made[0].occupancy)
+                                               != np.asarray(environment.occupancy)))
                     if record.fault is not None:
                         counts[3] += record.fault not in archive
                         counts[4] += record.fault == key
+                        counts[5] += situations.add(record.fault, made[0].occupancy)
                         archive.add(record.fault)
     print(f'\n{args.scenario}, {args.controller or spec.controller}: {args.fresh} fresh tests '
           f'(seed {args.seed}), {len(parents)} parents, {args.children} children each per '
           f'way, {time.perf_counter() - started:.0f} s\n')
-    print('| way | children | valid tests | P(valid failure) per run | P(new distinct fault) '
-          "per run | parent's fault again |")
-    print('|---|---:|---:|---:|---:|---:|')
-    print(f'| fresh sample | {args.fresh} | | {len(parents) / args.fresh:.3f} | '
-          f'{len(parents) / args.fresh:.3f} | |')
-    for name, (made, ran, failed, new, same) in stats.items():
+    print('| way | children | valid tests | cells changed | P(valid failure) per run | '
+          "P(new distinct fault) per run | P(new fault situation) per run | parent's fault "
+          'again |')
+    print('|---|---:|---:|---:|---:|---:|---:|---:|')
+    print(f'| fresh sample | {args.fresh} | | | {len(parents) / args.fresh:.3f} | '
+          f'{len(parents) / args.fresh:.3f} | {fresh_situations / args.fresh:.3f} | |')
+    for name, (made, ran, failed, new, same, situation, changed) in stats.items():
         ran_or_one = max(ran, 1)
-        print(f'| {name} | {made} | {ran / max(made, 1):.2f} | {failed / ran_or_one:.3f} | '
-              f'{new / ran_or_one:.3f} | {same / ran_or_one:.3f} |')
+        print(f'| {name} | {made:.0f} | {ran / max(made, 1):.2f} | {changed / ran_or_one:.1%} | '
+              f'{failed / ran_or_one:.3f} | {new / ran_or_one:.3f} | '
+              f'{situation / ran_or_one:.3f} | {same / ran_or_one:.3f} |')
     return 0
 
 

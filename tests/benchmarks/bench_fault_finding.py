@@ -44,7 +44,7 @@ from sessgan_evolver.comparison import (  # noqa: E402
     method_table,
     run_comparison,
 )
-from sessgan_evolver.faults import SituationArchive  # noqa: E402
+from sessgan_evolver.faults import SITUATION_CELLS, SituationArchive  # noqa: E402
 from sessgan_evolver.search_methods import METHODS  # noqa: E402
 
 
@@ -71,14 +71,35 @@ def describe_ratio(runs, method: str, other: str, key: str) -> str:
             f'{", ".join(per_seed)})')
 
 
-def fault_situations(run) -> int:
+def fault_situations(run, share: float = SITUATION_CELLS) -> int:
     """Confirmed distinct faults of a run grouped into situations (module docstring;
-    sessgan_evolver.faults.same_situation, the rule the screened search's novelty uses)."""
-    situations = SituationArchive()
+    sessgan_evolver.faults.same_situation, the rule the screened search's novelty uses);
+    ``share``: the map difference below which two faults at one place are one situation."""
+    situations = SituationArchive(share)
     for entry in run.faults:
         if entry.confirmation is not None and entry.confirmation.confirmed:
             situations.add(entry.key, run.records[entry.first].environment.occupancy)
     return len(situations)
+
+
+STRICT_SHARE = 0.25
+"""A stricter situation rule, printed beside the project's, so a gain that only holds at the
+project's threshold shows."""
+
+
+def situation_ratios(runs, method: str) -> str:
+    """A method's fault situations against random sampling's (ratio of the means over
+    seeds), by the project's rule and the stricter one."""
+    def mean(name: str, share: float) -> float:
+        values = [fault_situations(r, share) / r.figures.episodes for r in runs
+                  if r.figures.method == name]
+        return float(np.mean(values)) if values else float('nan')
+    parts = []
+    for share in (SITUATION_CELLS, STRICT_SHARE):
+        mine, theirs = mean(method, share), mean('random', share)
+        ratio = f'{mine / theirs:.2f}x' if theirs > 0 else 'n/a'
+        parts.append(f'< {share:.0%} of cells: {ratio}')
+    return f'{method} vs random, fault situations: ' + ', '.join(parts)
 
 
 def describe_method(runs, method: str) -> str:
@@ -88,6 +109,7 @@ def describe_method(runs, method: str) -> str:
                   key=lambda r: r.figures.search_seed)
     confirmed = [r.figures.confirmed_per_1000 for r in mine]
     situations = [1000.0 * fault_situations(r) / r.figures.episodes for r in mine]
+    strict = [1000.0 * fault_situations(r, STRICT_SHARE) / r.figures.episodes for r in mine]
     first = [r.figures.first_confirmed_episode for r in mine]
     share = [100.0 * r.figures.cheap_wall / r.figures.search_wall for r in mine
              if r.figures.search_wall > 0]
@@ -99,7 +121,8 @@ def describe_method(runs, method: str) -> str:
         std = float(np.std(present, ddof=1)) if len(present) > 1 else 0.0
         return f'{np.mean(present):.1f} ± {std:.1f} ({", ".join(f"{v:.0f}" for v in present)})'
     return (f'{method}: confirmed distinct faults / 1,000 episodes {spread(confirmed)}; fault '
-            f'situations / 1,000 episodes {spread(situations)}; episodes to the first '
+            f'situations / 1,000 episodes {spread(situations)} (maps differing in < '
+            f'{STRICT_SHARE:.0%} of cells one situation: {spread(strict)}); episodes to the first '
             f'confirmed fault {spread(first)}; cheap work % of search wall {spread(share)}')
 
 
@@ -153,6 +176,10 @@ def run_one(args: argparse.Namespace, controller: str, budget: int, command: str
                 print(describe_ratio(result.runs, method, 'random', 'confirmed_per_1000'))
     for method in config.methods:
         print(describe_method(result.runs, method))
+    if 'random' in config.methods:
+        for method in config.methods:
+            if method != 'random':
+                print(situation_ratios(result.runs, method))
     sessgan = [r for r in result.runs if r.figures.method == 'sessgan']
     shipped = next((s for key, s in result.fresh.items() if key == 'pyramid:base'), None)
     if sessgan and shipped is not None:

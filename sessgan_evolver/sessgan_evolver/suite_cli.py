@@ -212,9 +212,9 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
     from rclpy.executors import ExternalShutdownException
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
-    from sessgan_evolver.campaign_cli import RosEvaluator
     from sessgan_evolver.process_supervisor import ProcessSupervisor
     from sessgan_evolver.replay_cli import bag_environment
+    from sessgan_evolver.ros_evaluator import RosEvaluator
 
     environments = []
     for progress in progresses:

@@ -70,8 +70,8 @@ def test_ctrl_c_stops_the_suite_and_reports_what_ran(ros_workspace, tmp_path):
     import time
 
     from sessgan_evolver.in_process import InProcessEvaluator
-    from sessgan_gen.navigation import make_environment
     from sessgan_gen.token_map import load_example_map
+    from sessgan_gen.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'example')
     with InProcessEvaluator('factory', 'nearness_diagram',

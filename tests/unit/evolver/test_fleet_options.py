@@ -16,8 +16,8 @@ from sessgan_evolver.fault_picture import (
 )
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

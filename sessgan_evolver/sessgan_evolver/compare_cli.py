@@ -21,7 +21,7 @@ import torch
 from sessgan_evolver.comparison import CompareConfig, run_comparison
 from sessgan_evolver.errors import CompareError, SessganEvolverError
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
-from sessgan_gen.config_cli import field_docs
+from sessgan_gen.config_cli import add_old_spelling, field_docs
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 
@@ -55,8 +55,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         else:
             parser.add_argument(flag, type=type(default), default=default,
                                 help=docs.get(field.name, ''))
-    parser.add_argument('--output', type=Path, default=None,
+    parser.add_argument('--output-dir', dest='output', type=Path, default=None,
                         help='report folder (default: runs/compare-<scenario>-<controller>)')
+    add_old_spelling(parser, '--output', 'output', type=Path)
     return parser.parse_args(argv)
 
 
@@ -82,7 +83,8 @@ def compare(arguments: list[str]) -> int:
     try:  # usage errors (exit 2, nothing written) before the work, failures of it (exit 1)
         config.validate()
         if (output / 'report.md').exists():
-            raise CompareError(f'{output} holds a comparison already: choose another --output')
+            raise CompareError(
+                f'{output} holds a comparison already: choose another --output-dir')
     except (SessganEvolverError, SessganGenError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2

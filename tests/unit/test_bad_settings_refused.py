@@ -56,10 +56,12 @@ def test_the_time_limit_bound_is_documented_and_inclusive():
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--time-limit', '-5'], '--time-limit'), (['--time-limit', 'nan'], '--time-limit'),
     (['--time-limit', '1e9'], '--time-limit'), (['--controller', 'nope'], 'nope'),
-    (['--repeats', '-1'], '--repeats'), (['--fault-records', '-2'], '--fault-records'),
-    (['--coarse-cells', '0'], 'coarse_cells'), (['--seed', '-1'], '--seed')])
+    (['--repeats', '-1'], '--repeats'), (['--max-fault-records', '-2'], '--max-fault-records'),
+    (['--coarse-cells', '0'], 'coarse_cells'), (['--evaluation-seed', '-1'], '--evaluation-seed'),
+    # The spellings before the rename, accepted for one release: the new name is reported.
+    (['--seed', '-1'], '--evaluation-seed'), (['--fault-records', '-2'], '--max-fault-records')])
 def test_evaluate_refuses_a_bad_setting_before_its_output(tmp_path, capsys, arguments, named):
-    status = evaluate_cli.main(['--episodes', '1', '--output', str(tmp_path / 'out'),
+    status = evaluate_cli.main(['--fresh-episodes', '1', '--output-dir', str(tmp_path / 'out'),
                                 *arguments])
     err = capsys.readouterr().err
     assert status == 2, err
@@ -72,7 +74,7 @@ def test_evaluate_refuses_a_bad_setting_before_its_output(tmp_path, capsys, argu
     (['--checkpoint', '/nonexistent.pt'], 'does not exist'),
     (['--station-dwell-time', 'nan'], 'station_dwell_time')])
 def test_compare_refuses_a_bad_setting_before_its_output(tmp_path, capsys, arguments, named):
-    status = compare_cli.main(['--output', str(tmp_path / 'out'), *arguments])
+    status = compare_cli.main(['--output-dir', str(tmp_path / 'out'), *arguments])
     err = capsys.readouterr().err
     assert status == 2, err
     assert named in err and not (tmp_path / 'out').exists()
@@ -82,14 +84,14 @@ def test_compare_tells_a_usage_error_from_a_failed_comparison(tmp_path, capsys, 
     output = tmp_path / 'out'
     output.mkdir()
     (output / 'report.md').write_text('an earlier comparison')
-    assert compare_cli.main(['--output', str(output)]) == 2
+    assert compare_cli.main(['--output-dir', str(output)]) == 2
     assert 'holds a comparison already' in capsys.readouterr().err
 
     def fails(*args):
         raise CompareError('a method failed')
 
     monkeypatch.setattr(compare_cli, 'run_comparison', fails)
-    assert compare_cli.main(['--output', str(tmp_path / 'other')]) == 1
+    assert compare_cli.main(['--output-dir', str(tmp_path / 'other')]) == 1
     assert 'a method failed' in capsys.readouterr().err
 
 
@@ -137,3 +139,22 @@ def test_report_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments
     err = capsys.readouterr().err
     assert status == 2, err
     assert named in err and not (tmp_path / 'out').exists()
+
+
+def test_renamed_options_keep_their_old_spelling_for_a_release(capsys):
+    from sessgan_evolver.suite_cli import parse_args as suite_args
+
+    new = evaluate_cli.parse_args(['--evaluation-seed', '7', '--fresh-episodes', '3',
+                                   '--max-fault-records', '2', '--output-dir', 'here'])
+    old = evaluate_cli.parse_args(['--seed', '7', '--episodes', '3', '--fault-records', '2',
+                                   '--output', 'here'])
+    assert vars(old) == vars(new)
+    assert compare_cli.parse_args(['--output', 'here']).output == \
+        compare_cli.parse_args(['--output-dir', 'here']).output
+    assert suite_args(['s.yaml', '--output', 'here']).output == \
+        suite_args(['s.yaml', '--output-dir', 'here']).output
+    with pytest.raises(SystemExit):
+        evaluate_cli.parse_args(['--help'])
+    shown = capsys.readouterr().out
+    assert '--output-dir' in shown and '--fault-records' not in shown.replace(
+        '--max-fault-records', '')

@@ -64,8 +64,8 @@ def test_every_command_refuses_a_fleet_it_cannot_run_before_writing(command, tmp
     main, arguments = {
         'campaign': (campaign_cli.main, ['--in-process', '--runs-root', str(output),
                                          '--bags-root', str(output)]),
-        'evaluate': (evaluate_cli.main, ['--episodes', '1', '--output', str(output)]),
-        'compare': (compare_cli.main, ['--output', str(output)]),
+        'evaluate': (evaluate_cli.main, ['--fresh-episodes', '1', '--output-dir', str(output)]),
+        'compare': (compare_cli.main, ['--output-dir', str(output)]),
     }[command]
     for bad in (['--robots', '0'], ['--robots', '2', '--mission-stations', '1']):
         status = main([*arguments, *bad])

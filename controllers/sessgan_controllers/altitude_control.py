@@ -12,11 +12,11 @@ from odometry (``pose.pose.position.z``; :attr:`RobotState.z`).
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import TypeVar
 
 from sessgan_controllers.errors import InvalidConfigError
+from sessgan_gen.validation import require_positive
 
 Decision = TypeVar('Decision')
 
@@ -39,9 +39,7 @@ class AltitudeHold:
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first unusable value."""
         for name in ('cruise_altitude', 'takeoff_altitude', 'climb_gain', 'max_climb_rate'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise InvalidConfigError(f'{name} must be a positive number, got {value}')
+            require_positive(name, getattr(self, name), InvalidConfigError)
         if self.takeoff_altitude > self.cruise_altitude:
             raise InvalidConfigError(
                 f'takeoff_altitude ({self.takeoff_altitude}) must not exceed cruise_altitude '

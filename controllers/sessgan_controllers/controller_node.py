@@ -19,7 +19,7 @@ The goal is read in its own frame; the simulator's map->odom transform is
 the identity (perfect localisation), so map and odom coordinates agree.
 
 Controllers that plan on a map (a ``set_map`` method, see
-:class:`~sessgan_controllers.types.MapAwareController`) also subscribe ``map``
+:class:`~sessgan_controllers.controller_interface.MapAwareController`) also subscribe ``map``
 (nav_msgs/OccupancyGrid, reliable and transient local, depth 1, as the simulator
 publishes it) and get every map that arrives; the others never subscribe it.
 
@@ -66,6 +66,15 @@ from rclpy.qos import (
 )
 from sensor_msgs.msg import LaserScan
 
+from sessgan_controllers.controller_interface import (
+    STOP,
+    Goal,
+    MapData,
+    RobotState,
+    VelocityCommand,
+    accepts_map,
+    config_help,
+)
 from sessgan_controllers.messages import (
     goal_from_pose,
     map_from_msg,
@@ -75,15 +84,6 @@ from sessgan_controllers.messages import (
     twist_stamped_from_command,
 )
 from sessgan_controllers.registry import ControllerSpec, get_controller
-from sessgan_controllers.types import (
-    STOP,
-    Goal,
-    MapData,
-    RobotState,
-    VelocityCommand,
-    accepts_map,
-    config_help,
-)
 from sessgan_gen.node_help import exit_if_help
 
 GOAL_QOS = QoSProfile(

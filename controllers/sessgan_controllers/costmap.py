@@ -1,6 +1,6 @@
 """A Nav2-style costmap of a known map for a circular robot: inflation and a scan overlay.
 
-The map (:class:`~sessgan_controllers.types.MapData`) is refined to the planning
+The map (:class:`~sessgan_controllers.controller_interface.MapData`) is refined to the planning
 resolution (each map cell split into ``factor x factor`` cells, so thin walls stay
 exact) and every cell gets its **clearance**: the distance in metres from the
 cell's centre to the nearest blocked cell *square* (walls, out of bounds, cells
@@ -33,7 +33,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from sessgan_controllers.types import MapData, RobotState, ScanData
+from sessgan_controllers.controller_interface import MapData, RobotState, ScanData
 
 FREE = 0
 LOW_OBSTACLE = 50

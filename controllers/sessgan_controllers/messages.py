@@ -11,7 +11,13 @@ from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
-from sessgan_controllers.types import Goal, MapData, RobotState, ScanData, VelocityCommand
+from sessgan_controllers.controller_interface import (
+    Goal,
+    MapData,
+    RobotState,
+    ScanData,
+    VelocityCommand,
+)
 from sessgan_gen.quaternion import yaw_from_quaternion
 
 

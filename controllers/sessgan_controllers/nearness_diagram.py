@@ -75,13 +75,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sessgan_controllers.errors import InvalidConfigError
-from sessgan_controllers.route_guidance import (
-    RouteGuidanceConfig,
-    RouteGuide,
-    RouteGuidedController,
-)
-from sessgan_controllers.types import (
+from sessgan_controllers.controller_interface import (
     STOP,
     Goal,
     RobotState,
@@ -90,13 +84,21 @@ from sessgan_controllers.types import (
     parameter,
     wrap_angle,
 )
+from sessgan_controllers.errors import InvalidConfigError
+from sessgan_controllers.route_guidance import (
+    RouteGuidanceConfig,
+    RouteGuidanceParameters,
+    RouteGuide,
+    RouteGuidedController,
+)
+from sessgan_gen.validation import require_non_negative, require_positive
 
 FAR_TARGET = 1e6
 """Distance in metres of the intermediate target behind an open (free) discontinuity."""
 
 
 @dataclass
-class NearnessDiagramConfig:
+class NearnessDiagramConfig(RouteGuidanceParameters):
     """Parameters of :class:`NearnessDiagramController` (each becomes a ROS parameter)."""
 
     robot_radius: float = parameter(0.2, 'Radius of the circular robot footprint in m.')
@@ -130,45 +132,26 @@ class NearnessDiagramConfig:
     reverse_speed: float = parameter(
         0.0, 'Robots that cannot turn in place: speed in m/s at which to back up on an arc '
         'turning the wanted way when there is no room ahead for the turn; 0: never reverse.')
-    use_map: bool = parameter(
-        True, 'Steer for a waypoint on a route planned on the map topic (true) or for the goal '
-        'itself (false: purely reactive, trapped by dead ends).')
-    waypoint_distance: float = parameter(
-        1.5, 'Route length in m from the nearest route point to the waypoint steered for.')
-    route_clearance: float = parameter(
-        0.1, 'Clearance in m beyond the radius that the route keeps where the map has room.')
-    replan_deviation: float = parameter(
-        1.0, 'Distance in m from the route beyond which the route is planned again.')
-    planning_resolution: float = parameter(0.1, 'Route planning cell size in m.')
 
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first parameter out of range."""
         for name in ('robot_radius', 'security_distance', 'max_linear_speed',
-                     'max_angular_speed', 'goal_tolerance', 'waypoint_distance',
-                     'replan_deviation', 'planning_resolution'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise InvalidConfigError(f'{name} must be a positive number, got {value}')
+                     'max_angular_speed', 'goal_tolerance'):
+            require_positive(name, getattr(self, name), InvalidConfigError)
         if not 0.0 <= self.min_speed_factor <= 1.0:
             raise InvalidConfigError(
                 f'min_speed_factor must be in [0, 1], got {self.min_speed_factor}')
         if not isinstance(self.sector_count, int) or self.sector_count < 8:
             raise InvalidConfigError(
                 f'sector_count must be an integer >= 8, got {self.sector_count!r}')
-        if not (math.isfinite(self.gap_threshold) and self.gap_threshold >= 0.0):
-            raise InvalidConfigError(f'gap_threshold must be >= 0, got {self.gap_threshold}')
-        for name in ('route_clearance', 'braking_deceleration', 'stop_distance',
+        for name in ('gap_threshold', 'braking_deceleration', 'stop_distance',
                      'obstacle_speed', 'min_turn_radius', 'reverse_speed'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise InvalidConfigError(f'{name} must be >= 0, got {value}')
+            require_non_negative(name, getattr(self, name), InvalidConfigError)
+        self.validate_route_parameters()
 
     def route_guidance(self) -> RouteGuidanceConfig:
         """The route guidance these parameters ask for."""
-        return RouteGuidanceConfig(
-            robot_radius=self.robot_radius, route_clearance=self.route_clearance,
-            waypoint_distance=self.waypoint_distance, replan_deviation=self.replan_deviation,
-            planning_resolution=self.planning_resolution, enabled=bool(self.use_map))
+        return self.route_guidance_for(self.robot_radius)
 
     @property
     def effective_gap_threshold(self) -> float:
@@ -308,8 +291,7 @@ class NearnessDiagramController(RouteGuidedController):
         if len(angles):
             spacing = max(abs(scan.angle_increment), 1e-9)
             for sector in np.flatnonzero(~hit):
-                offsets = np.abs(
-                    (angles - self._sector_angles[sector] + math.pi) % (2.0 * math.pi) - math.pi)
+                offsets = np.abs(wrap_angle(angles - self._sector_angles[sector]))
                 nearest = int(np.argmin(offsets))
                 if offsets[nearest] <= spacing:
                     fill[sector] = nearest
@@ -452,7 +434,7 @@ class NearnessDiagramController(RouteGuidedController):
         clearance = nearness - config.robot_radius
         with np.errstate(invalid='ignore'):
             in_zone = ~np.isnan(clearance) & (clearance <= config.security_distance)
-        relative = (self._sector_angles - target_direction + math.pi) % (2.0 * math.pi) - math.pi
+        relative = wrap_angle(self._sector_angles - target_direction)
         left = in_zone & (relative >= 0.0)
         right = in_zone & (relative < 0.0)
         closest = float(np.min(clearance[in_zone])) if in_zone.any() else math.inf

@@ -31,8 +31,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sessgan_controllers.controller_interface import (
+    RobotState,
+    ScanData,
+    VelocityCommand,
+    wrap_angle,
+)
 from sessgan_controllers.path_planning import Path
-from sessgan_controllers.types import RobotState, ScanData, VelocityCommand, wrap_angle
 
 
 class PathTracker:

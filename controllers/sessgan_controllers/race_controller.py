@@ -44,24 +44,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sessgan_controllers.errors import InvalidConfigError
-from sessgan_controllers.route_guidance import (
-    RouteGuidanceConfig,
-    RouteGuide,
-    RouteGuidedController,
-)
-from sessgan_controllers.types import (
+from sessgan_controllers.controller_interface import (
     STOP,
     Goal,
     RobotState,
     ScanData,
     VelocityCommand,
     parameter,
+    wrap_angle,
 )
+from sessgan_controllers.errors import InvalidConfigError
+from sessgan_controllers.route_guidance import (
+    RouteGuidanceConfig,
+    RouteGuidanceParameters,
+    RouteGuide,
+    RouteGuidedController,
+    route_parameter,
+)
+from sessgan_gen.validation import require_non_negative, require_positive
 
 
 @dataclass
-class RaceControllerConfig:
+class RaceControllerConfig(RouteGuidanceParameters):
     """Parameters of :class:`RaceController` (each becomes a ROS parameter)."""
 
     half_width: float = parameter(0.6, 'Half the car width (footprint radius) in m.')
@@ -89,41 +93,28 @@ class RaceControllerConfig:
     max_lateral_acceleration: float = parameter(
         6.0, 'Lateral acceleration in m/s^2 the speed policy allows for the current curvature.')
     goal_tolerance: float = parameter(1.0, 'Distance in m to the goal at which the car stops.')
-    use_map: bool = parameter(
-        True, 'Steer for a waypoint on a route planned on the map topic (true) or for the goal '
-        'itself (false: purely reactive, takes the wrong branch at forks).')
-    waypoint_distance: float = parameter(
-        8.0, 'Route length in m from the nearest route point to the waypoint steered for.')
-    route_clearance: float = parameter(
-        0.3, 'Clearance in m beyond the half-width that the route keeps where the map has room.')
-    replan_deviation: float = parameter(
-        3.0, 'Distance in m from the route beyond which the route is planned again.')
-    planning_resolution: float = parameter(0.5, 'Route planning cell size in m.')
+    waypoint_distance: float = route_parameter('waypoint_distance', 8.0)
+    route_clearance: float = route_parameter('route_clearance', 0.3)
+    replan_deviation: float = route_parameter('replan_deviation', 3.0)
+    planning_resolution: float = route_parameter('planning_resolution', 0.5)
 
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first parameter out of range."""
         for name in ('half_width', 'field_of_view', 'look_ahead_distance', 'disparity_threshold',
                      'steering_distance', 'max_speed', 'speed_gain', 'max_lateral_acceleration',
-                     'goal_tolerance', 'waypoint_distance', 'replan_deviation',
-                     'planning_resolution'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise InvalidConfigError(f'{name} must be a positive number, got {value}')
+                     'goal_tolerance'):
+            require_positive(name, getattr(self, name), InvalidConfigError)
         for name in ('safety_margin', 'min_open_distance', 'goal_bias', 'steering_time',
-                     'min_speed', 'route_clearance'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise InvalidConfigError(f'{name} must be >= 0, got {value}')
+                     'min_speed'):
+            require_non_negative(name, getattr(self, name), InvalidConfigError)
+        self.validate_route_parameters()
         if self.min_speed > self.max_speed:
             raise InvalidConfigError(
                 f'min_speed {self.min_speed} must not exceed max_speed {self.max_speed}')
 
     def route_guidance(self) -> RouteGuidanceConfig:
         """The route guidance these parameters ask for."""
-        return RouteGuidanceConfig(
-            robot_radius=self.half_width, route_clearance=self.route_clearance,
-            waypoint_distance=self.waypoint_distance, replan_deviation=self.replan_deviation,
-            planning_resolution=self.planning_resolution, enabled=bool(self.use_map))
+        return self.route_guidance_for(self.half_width)
 
 
 @dataclass(frozen=True)
@@ -171,7 +162,7 @@ class RaceController(RouteGuidedController):
         extended = self._extend_disparities(angles, capped)
         ahead = np.abs(angles) <= 0.5 * config.field_of_view
 
-        goal_beam = int(np.argmin(np.abs(_wrap(angles - goal_bearing))))
+        goal_beam = int(np.argmin(np.abs(wrap_angle(angles - goal_bearing))))
         goal_in_sight = bool(abs(goal_bearing) <= 0.5 * config.field_of_view
                              and extended[goal_beam] >= goal_distance)
         if goal_in_sight:
@@ -180,7 +171,7 @@ class RaceController(RouteGuidedController):
             open_ahead = ahead & (extended >= config.min_open_distance)
             if not open_ahead.any():
                 return RaceDecision(None, False, free_ahead, 0.0, STOP)
-            score = extended - config.goal_bias * np.abs(_wrap(angles - goal_bearing))
+            score = extended - config.goal_bias * np.abs(wrap_angle(angles - goal_bearing))
             score = np.where(open_ahead, score, -np.inf)
             direction = float(angles[int(np.argmax(score))])
 
@@ -232,8 +223,4 @@ class RaceController(RouteGuidedController):
                 span = slice(max(0, edge + 1 - reach), edge + 1)
             extended[span] = np.minimum(extended[span], near)
         return extended
-
-
-def _wrap(angles: np.ndarray) -> np.ndarray:
-    return (angles + math.pi) % (2.0 * math.pi) - math.pi
 

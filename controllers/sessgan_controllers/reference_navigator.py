@@ -66,6 +66,16 @@ from typing import Any
 import numpy as np
 
 from sessgan_controllers.altitude_control import AltitudeHold, with_climb
+from sessgan_controllers.controller_interface import (
+    STOP,
+    Goal,
+    MapData,
+    RobotState,
+    ScanData,
+    VelocityCommand,
+    parameter,
+    wrap_angle,
+)
 from sessgan_controllers.costmap import FREE, LOW_OBSTACLE, Costmap, CostmapConfig
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.path_following import (
@@ -85,16 +95,7 @@ from sessgan_controllers.path_following import (
     to_body,
 )
 from sessgan_controllers.path_planning import Path, PlannerConfig, PlanningError, plan_path
-from sessgan_controllers.types import (
-    STOP,
-    Goal,
-    MapData,
-    RobotState,
-    ScanData,
-    VelocityCommand,
-    parameter,
-    wrap_angle,
-)
+from sessgan_gen.validation import require_non_negative, require_positive
 
 ROBOTS = ('diff_drive', 'car', 'flyer')
 
@@ -260,18 +261,14 @@ class ReferenceNavigatorConfig:
                      'monitor_distance',
                      'blocked_horizon', 'replan_deviation', 'rotate_speed',
                      'angular_deceleration', 'wheelbase', 'max_steering_angle'):
-            value = getattr(config, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise InvalidConfigError(f'{name} must be a positive number, got {value!r}')
+            require_positive(name, getattr(config, name), InvalidConfigError)
         for name in ('safety_margin', 'cost_weight', 'inscribed_penalty', 'clearance_target',
                      'max_angular_speed', 'lookahead_time', 'min_speed_factor', 'stop_margin',
                      'collision_margin', 'dynamic_margin', 'reaction_time', 'obstacle_speed',
                      'rotate_start_angle',
                      'rotate_stop_angle',
                      'yaw_gain'):
-            value = getattr(config, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
-                raise InvalidConfigError(f'{name} must be >= 0, got {value!r}')
+            require_non_negative(name, getattr(config, name), InvalidConfigError)
         for name in ('mark_lifetime', 'replan_interval', 'replan_period'):
             value = getattr(config, name)
             if not (isinstance(value, int) and value >= 1):

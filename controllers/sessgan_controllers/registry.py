@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
+from sessgan_controllers.controller_interface import Controller
 from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.nearness_diagram import (
     NearnessDiagramConfig,
@@ -21,7 +22,6 @@ from sessgan_controllers.reference_navigator import (
     ReferenceNavigator,
     ReferenceNavigatorConfig,
 )
-from sessgan_controllers.types import Controller
 from sessgan_controllers.velocity_projection import (
     VelocityProjectionConfig,
     VelocityProjectionController,

@@ -23,13 +23,20 @@ reactive again. Lengths are metres.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
+from sessgan_controllers.controller_interface import (
+    Goal,
+    MapData,
+    RobotState,
+    StatelessController,
+    parameter,
+)
 from sessgan_controllers.costmap import FREE, Costmap, CostmapConfig
+from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.path_following import PathTracker
 from sessgan_controllers.path_planning import PlannerConfig, PlanningError, plan_path
-from sessgan_controllers.types import Goal, MapData, RobotState, StatelessController
+from sessgan_gen.validation import require_non_negative, require_positive
 
 
 @dataclass(frozen=True)
@@ -55,11 +62,55 @@ class RouteGuidanceConfig:
         """Raise ValueError naming the first unusable value."""
         for name in ('robot_radius', 'waypoint_distance', 'replan_deviation',
                      'planning_resolution'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f'{name} must be a positive number, got {value}')
-        if not (math.isfinite(self.route_clearance) and self.route_clearance >= 0.0):
-            raise ValueError(f'route_clearance must be >= 0, got {self.route_clearance}')
+            require_positive(name, getattr(self, name))
+        require_non_negative('route_clearance', self.route_clearance)
+
+
+ROUTE_PARAMETER_HELP = {
+    'use_map': 'Steer for a waypoint on a route planned on the map topic (true) or for the goal '
+               'itself (false: purely reactive, trapped by dead ends, the wrong branch at forks).',
+    'waypoint_distance': 'Route length in m from the nearest route point to the waypoint '
+                         'steered for.',
+    'route_clearance': "Clearance in m beyond the footprint radius (a car's half-width) that "
+                       'the route keeps where the map has room.',
+    'replan_deviation': 'Distance in m from the route beyond which the route is planned again.',
+    'planning_resolution': 'Route planning cell size in m.',
+}
+
+
+def route_parameter(name: str, default: float) -> float:
+    """A route-guidance field with another default than :class:`RouteGuidanceParameters`'
+    (re-declared in a subclass, it keeps its place and its help)."""
+    return parameter(default, ROUTE_PARAMETER_HELP[name])
+
+
+@dataclass
+class RouteGuidanceParameters:
+    """The route-guidance parameters of a route-guided controller's config, declared once:
+    a config inherits them (each becomes a ROS parameter) and re-declares a default with
+    :func:`route_parameter` where its robot needs another."""
+
+    use_map: bool = parameter(True, ROUTE_PARAMETER_HELP['use_map'])
+    waypoint_distance: float = route_parameter('waypoint_distance', 1.5)
+    route_clearance: float = route_parameter('route_clearance', 0.1)
+    replan_deviation: float = route_parameter('replan_deviation', 1.0)
+    planning_resolution: float = route_parameter('planning_resolution', 0.1)
+
+    def validate_route_parameters(self) -> None:
+        """Raise InvalidConfigError naming the first route parameter out of range."""
+        for name in ('waypoint_distance', 'replan_deviation', 'planning_resolution'):
+            require_positive(name, getattr(self, name), InvalidConfigError)
+        require_non_negative('route_clearance', self.route_clearance, InvalidConfigError)
+
+    def route_guidance_for(self, robot_radius: float,
+                           passable_values: tuple[int, ...] = (FREE,)) -> RouteGuidanceConfig:
+        """The route guidance these parameters ask for, for a footprint of ``robot_radius``
+        metres that may cross ``passable_values``."""
+        return RouteGuidanceConfig(
+            robot_radius=robot_radius, route_clearance=self.route_clearance,
+            waypoint_distance=self.waypoint_distance, replan_deviation=self.replan_deviation,
+            planning_resolution=self.planning_resolution, passable_values=passable_values,
+            enabled=bool(self.use_map))
 
 
 @dataclass(frozen=True)

@@ -47,14 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sessgan_controllers.altitude_control import AltitudeHold, with_climb
-from sessgan_controllers.costmap import FREE, LOW_OBSTACLE
-from sessgan_controllers.errors import InvalidConfigError
-from sessgan_controllers.route_guidance import (
-    RouteGuidanceConfig,
-    RouteGuide,
-    RouteGuidedController,
-)
-from sessgan_controllers.types import (
+from sessgan_controllers.controller_interface import (
     STOP,
     Goal,
     RobotState,
@@ -63,10 +56,19 @@ from sessgan_controllers.types import (
     parameter,
     wrap_angle,
 )
+from sessgan_controllers.costmap import FREE, LOW_OBSTACLE
+from sessgan_controllers.errors import InvalidConfigError
+from sessgan_controllers.route_guidance import (
+    RouteGuidanceConfig,
+    RouteGuidanceParameters,
+    RouteGuide,
+    RouteGuidedController,
+)
+from sessgan_gen.validation import require_non_negative, require_positive
 
 
 @dataclass
-class VelocityProjectionConfig:
+class VelocityProjectionConfig(RouteGuidanceParameters):
     """Parameters of :class:`VelocityProjectionController` (each becomes a ROS parameter)."""
 
     robot_radius: float = parameter(0.2, 'Radius of the flyer footprint in m.')
@@ -93,16 +95,6 @@ class VelocityProjectionConfig:
         '(0 keeps the heading).')
     max_yaw_rate: float = parameter(1.5, 'Maximum yaw rate in rad/s.')
     goal_tolerance: float = parameter(0.15, 'Distance in m to the goal at which the flyer stops.')
-    use_map: bool = parameter(
-        True, 'Steer for a waypoint on a route planned on the map topic (true) or for the goal '
-        'itself (false: purely reactive).')
-    waypoint_distance: float = parameter(
-        1.5, 'Route length in m from the nearest route point to the waypoint steered for.')
-    route_clearance: float = parameter(
-        0.1, 'Clearance in m beyond the radius that the route keeps where the map has room.')
-    replan_deviation: float = parameter(
-        1.0, 'Distance in m from the route beyond which the route is planned again.')
-    planning_resolution: float = parameter(0.1, 'Route planning cell size in m.')
     cruise_altitude: float = parameter(
         0.95, 'Altitude in m (underside above the ground) the flyer climbs to and holds.')
     takeoff_altitude: float = parameter(
@@ -120,15 +112,11 @@ class VelocityProjectionConfig:
         """Raise InvalidConfigError naming the first parameter out of range."""
         for name in ('robot_radius', 'field_of_view', 'look_ahead_distance', 'max_speed',
                      'arrival_gain', 'clearance_gain', 'min_speed', 'max_yaw_rate',
-                     'goal_tolerance', 'waypoint_distance', 'replan_deviation',
-                     'planning_resolution'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise InvalidConfigError(f'{name} must be a positive number, got {value}')
-        for name in ('safety_margin', 'look_ahead_time', 'yaw_gain', 'route_clearance'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise InvalidConfigError(f'{name} must be >= 0, got {value}')
+                     'goal_tolerance'):
+            require_positive(name, getattr(self, name), InvalidConfigError)
+        for name in ('safety_margin', 'look_ahead_time', 'yaw_gain'):
+            require_non_negative(name, getattr(self, name), InvalidConfigError)
+        self.validate_route_parameters()
         if self.field_of_view > 2.0 * math.pi:
             raise InvalidConfigError(
                 f'field_of_view must be at most 2 pi, got {self.field_of_view}')
@@ -139,11 +127,7 @@ class VelocityProjectionConfig:
 
     def route_guidance(self) -> RouteGuidanceConfig:
         """The route guidance these parameters ask for (the flyer crosses low obstacles)."""
-        return RouteGuidanceConfig(
-            robot_radius=self.robot_radius, route_clearance=self.route_clearance,
-            waypoint_distance=self.waypoint_distance, replan_deviation=self.replan_deviation,
-            planning_resolution=self.planning_resolution,
-            passable_values=(FREE, LOW_OBSTACLE), enabled=bool(self.use_map))
+        return self.route_guidance_for(self.robot_radius, (FREE, LOW_OBSTACLE))
 
 
 @dataclass(frozen=True)
@@ -211,7 +195,7 @@ class VelocityProjectionController(RouteGuidedController):
         corridor = config.robot_radius + config.safety_margin
         ring_free = ~self._blocked_ring(angles, ranges, look_ahead, corridor, half_view)
         if moving:
-            ring_free &= np.abs(_wrap(self._ring - reference)) <= half_view
+            ring_free &= np.abs(wrap_angle(self._ring - reference)) <= half_view
         # The goal direction is checked on its own: its sweep ends at the goal, and its
         # margin is capped at half the goal's own clearance, so a goal by a wall stays
         # reachable.
@@ -231,7 +215,7 @@ class VelocityProjectionController(RouteGuidedController):
         if len(free) == 0:
             seen = int((np.cos(angles - reference) >= math.cos(half_view)).sum())
             return ProjectionDecision(None, reference, seen, self._brake(reference))
-        offsets = np.abs(_wrap(candidates[free] - goal_bearing))
+        offsets = np.abs(wrap_angle(candidates[free] - goal_bearing))
         best = int(free[np.argmin(offsets)])
         direction = float(candidates[best])
         view_ranges = ranges[np.cos(angles - direction) >= math.cos(half_view)]
@@ -293,7 +277,3 @@ class VelocityProjectionController(RouteGuidedController):
     def _yaw_rate(self, direction: float) -> float:
         limit = self.config.max_yaw_rate
         return min(limit, max(-limit, self.config.yaw_gain * wrap_angle(direction)))
-
-
-def _wrap(angles: np.ndarray) -> np.ndarray:
-    return (angles + math.pi) % (2.0 * math.pi) - math.pi

@@ -14,7 +14,7 @@ One generation step (``tell``):
   2. the ``elite_count`` best are copied unchanged to the next generation;
   3. every other child: a parent by tournament (``tournament_size`` distinct members, the
      fittest wins); with probability ``crossover_probability`` a second parent by another
-     tournament and a tensor-wise crossover; then Gaussian mutation (``operators``).
+     tournament and a tensor-wise crossover; then Gaussian mutation (``genome_operators``).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 
 from sessgan_evolver.errors import AlgorithmStateError, GenomeError
 from sessgan_evolver.genome import Genome
-from sessgan_evolver.operators import OperatorConfig, crossover, mutate
+from sessgan_evolver.genome_operators import OperatorConfig, crossover, mutate
 
 STATE_FORMAT = 'sessgan_evolver.genetic_algorithm/1'
 """Tag of ``state_dict()`` payloads; other payloads are rejected."""

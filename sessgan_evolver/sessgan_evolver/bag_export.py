@@ -28,13 +28,14 @@ from sessgan_gen.fleet import fleet_to_json
 from sessgan_gen.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
 from sessgan_sim.bag_recording import BagRecord, jazzy_typestore, write_episode_bag
-
-MAP_FRAME = 'map'
-ODOM_FRAME = 'odom'
-BASE_FOOTPRINT = 'base_footprint'
-BASE_LINK = 'base_link'
-SCAN_FRAME = 'base_scan'
-RANGE_DOWN_FRAME = 'base_range_down'
+from sessgan_sim.frames import (
+    BASE_FOOTPRINT,
+    BASE_LINK,
+    MAP_FRAME,
+    ODOM_FRAME,
+    RANGE_DOWN_FRAME,
+    SCAN_FRAME,
+)
 
 
 def _nanoseconds(seconds: float) -> int:

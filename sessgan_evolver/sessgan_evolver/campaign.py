@@ -35,8 +35,8 @@ from sessgan_evolver.fitness import (
     tpkl_reference_from,
 )
 from sessgan_evolver.genome import Genome
+from sessgan_evolver.genome_operators import OperatorConfig
 from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, check_harness_tries
-from sessgan_evolver.operators import OperatorConfig
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
 from sessgan_evolver.search_methods import METHODS

@@ -19,9 +19,9 @@ from pathlib import Path
 import torch
 
 from sessgan_evolver.comparison import CompareConfig, run_comparison
-from sessgan_evolver.errors import SessganEvolverError
+from sessgan_evolver.errors import CompareError, SessganEvolverError
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
-from sessgan_gen.config_cli import field_docs
+from sessgan_gen.config_cli import add_old_spelling, field_docs
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 
@@ -55,12 +55,15 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         else:
             parser.add_argument(flag, type=type(default), default=default,
                                 help=docs.get(field.name, ''))
-    parser.add_argument('--output', type=Path, default=None,
+    parser.add_argument('--output-dir', dest='output', type=Path, default=None,
                         help='report folder (default: runs/compare-<scenario>-<controller>)')
+    add_old_spelling(parser, '--output', 'output', type=Path)
     return parser.parse_args(argv)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Exit status: 0 done, 1 the comparison failed, 2 bad options (nothing written), 130
+    interrupted."""
     arguments = sys.argv[1:] if argv is None else list(argv)
     return run_command(lambda: compare(arguments))
 
@@ -77,11 +80,19 @@ def compare(arguments: list[str]) -> int:
         print(f'[compare] {message}', file=sys.stderr, flush=True)
 
     command = 'ros2 run sessgan_evolver compare ' + shlex.join(arguments)
+    try:  # usage errors (exit 2, nothing written) before the work, failures of it (exit 1)
+        config.validate()
+        if (output / 'report.md').exists():
+            raise CompareError(
+                f'{output} holds a comparison already: choose another --output-dir')
+    except (SessganEvolverError, SessganGenError, ValueError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
     try:
         result = run_comparison(config, output, command, log)
     except (SessganEvolverError, SessganGenError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
-        return 2
+        return 1
     except KeyboardInterrupt:
         log('interrupted')
         return INTERRUPTED_STATUS

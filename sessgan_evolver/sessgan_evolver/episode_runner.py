@@ -37,9 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from sessgan_controllers.errors import UnknownControllerError
-from sessgan_controllers.registry import get_controller
-from sessgan_controllers.types import (
+from sessgan_controllers.controller_interface import (
     STOP,
     Controller,
     Goal,
@@ -48,10 +46,13 @@ from sessgan_controllers.types import (
     RobotState,
     ScanData,
 )
+from sessgan_controllers.errors import UnknownControllerError
+from sessgan_controllers.registry import get_controller
 from sessgan_evolver.errors import EpisodeRunnerError
 from sessgan_gen.environment import Environment
 from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.validation import require_non_negative
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation, TickProfile
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import ContactEvent
@@ -174,9 +175,8 @@ class EpisodeRunner:
             self.controller_spec = get_controller(self.controller_name)
         except UnknownControllerError as err:
             raise EpisodeRunnerError(str(err)) from err
-        if not (math.isfinite(time_limit) and time_limit >= 0):
-            raise EpisodeRunnerError(f'time limit must be >= 0 s (0: the scenario default), got '
-                                     f'{time_limit}')
+        require_non_negative('time limit (0: the scenario default)', time_limit,
+                             EpisodeRunnerError, unit=' s')
         self.settings = settings or SimulatorSettings()
         # The robot the campaign's simulators host for this controller (campaign_cli): its own
         # where it cannot drive the scenario's (the tricycle of tricycle_nearness_diagram).

@@ -1,13 +1,13 @@
 """`ros2 run sessgan_evolver evaluate`: a generator's failure rate on fresh seeds.
 
-Samples --episodes maps from each generator given (the shipped checkpoint, a campaign's best
+Samples --fresh-episodes maps from each generator given (the shipped checkpoint, a campaign's best
 member or final population, your own checkpoints, the cellular-automaton baseline) with seeds
 no campaign used (--run and --exclude-run name the campaigns; their seeds are read from
 their metrics and skipped), runs each map once with the built-in controller in this process
 (lockstep; with --external: on the simulators and stack already running under /w0, /w1, ...,
 as ``campaign --external``) and writes <output>/summary.md, summary.csv (one row per generator) and
 episodes.csv (one row per map): valid maps, failure rate, collisions, risk, TPKL to the
-example map, uniqueness, distinct faults. --fault-records N keeps the first N confirmed
+example map, uniqueness, distinct faults. --max-fault-records N keeps the first N confirmed
 distinct faults of each generator as a bag with a picture.
 """
 
@@ -47,6 +47,7 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.checkpoint import incomplete_warning
+from sessgan_gen.config_cli import add_old_spelling
 from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.fleet import FleetSpec
@@ -83,8 +84,12 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                              "generator learned, a campaign's own size for --run)")
     parser.add_argument('--height', type=int, default=0,
                         help='map height in cells (default 0: as --width)')
-    parser.add_argument('--episodes', type=int, default=30, help='fresh maps per generator')
-    parser.add_argument('--seed', type=int, default=1000, help='seed of the fresh seeds')
+    parser.add_argument('--fresh-episodes', dest='episodes', type=int, default=30,
+                        help='fresh maps per generator')
+    add_old_spelling(parser, '--episodes', 'episodes', type=int)
+    parser.add_argument('--evaluation-seed', dest='seed', type=int, default=1000,
+                        help='seed of the fresh seeds')
+    add_old_spelling(parser, '--seed', 'seed', type=int)
     parser.add_argument('--controller', default='',
                         help="built-in controller (default: the scenario's)")
     parser.add_argument('--time-limit', type=float, default=0.0,
@@ -108,20 +113,22 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                              'be readable on this machine')
     parser.add_argument('--simulate-invalid', action='store_true',
                         help='also simulate maps without a certified route')
-    parser.add_argument('--fault-records', type=int, default=0,
+    parser.add_argument('--max-fault-records', dest='fault_records', type=int, default=0,
                         help='confirmed distinct faults per generator kept as bag + PNG '
                              '(-1: every one)')
+    add_old_spelling(parser, '--fault-records', 'fault_records', type=int)
     parser.add_argument('--repeats', type=int, default=3,
                         help='re-runs that confirm a fault before it is recorded')
     parser.add_argument('--coarse-cells', type=int, default=FaultRule.coarse_cells,
                         help='fault rule: coarse cell side in map cells')
     parser.add_argument('--context-cells', type=int, default=FaultRule.context_cells,
                         help='fault rule: map cells of context around the coarse cell')
-    parser.add_argument('--output', type=Path, default=None,
+    parser.add_argument('--output-dir', dest='output', type=Path, default=None,
                         help='output folder (default: runs/evaluate-<scenario>-seed<seed>)')
+    add_old_spelling(parser, '--output', 'output', type=Path)
     args = parser.parse_args(argv)
     if args.episodes < 1:
-        parser.error('--episodes must be >= 1')
+        parser.error('--fresh-episodes must be >= 1')
     if args.width < 0 or args.height < 0:
         parser.error("--width and --height must be >= 0 (0: the generator's map size)")
     return args
@@ -155,8 +162,9 @@ def check_settings(args: argparse.Namespace, scenario: str) -> None:
     except InvalidConfigError as err:
         raise FreshSeedError(str(err)) from err
     check_controller(scenario, args.controller)
-    for option, value, least in (('--seed', args.seed, 0), ('--repeats', args.repeats, 0),
-                                 ('--fault-records', args.fault_records, -1)):
+    for option, value, least in (('--evaluation-seed', args.seed, 0),
+                                 ('--repeats', args.repeats, 0),
+                                 ('--max-fault-records', args.fault_records, -1)):
         if value < least:
             raise FreshSeedError(f'{option} must be >= {least}, got {value}')
     FaultRule(args.coarse_cells, args.context_cells).validate()

@@ -34,12 +34,12 @@ from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
 from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
 from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
 from sessgan_gen.fleet import fleet_from_json  # noqa: E402
-from sessgan_gen.navigation import (  # noqa: E402
+from sessgan_gen.route_certificate import RouteCertificate  # noqa: E402
+from sessgan_gen.valid_tests import (  # noqa: E402
     certify_environment,
     certify_fleet,
     certify_mission,
 )
-from sessgan_gen.route_certificate import RouteCertificate  # noqa: E402
 from sessgan_sim.bag_recording import jazzy_typestore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -116,7 +116,7 @@ def fleet_members(environment: Environment, trajectories: Sequence[np.ndarray] =
 
 def certified_route(environment: Environment) -> np.ndarray:
     """Corners (n, 2) of the taut certified route of an environment's own start and goal
-    (sessgan_gen.navigation.certify_environment), through every leg of a mission, among the
+    (sessgan_gen.valid_tests.certify_environment), through every leg of a mission, among the
     other robots of a fleet; empty when there is none (or a leg has none)."""
     if environment.fleet:
         return _corners(certify_fleet(environment)[0])

@@ -33,6 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from sessgan_evolver.errors import FitnessError
+from sessgan_gen.validation import require_non_negative
 
 
 class EpisodeMetricsLike(Protocol):
@@ -72,9 +73,7 @@ class FitnessConfig:
     def validate(self) -> None:
         """Raise FitnessError naming the first invalid field."""
         for name, value in asdict(self).items():
-            if not (math.isfinite(value) and value >= 0.0):
-                raise FitnessError(f'fitness config {name} must be a finite number >= 0, '
-                                   f'got {value}')
+            require_non_negative(f'fitness config {name}', value, FitnessError)
         if self.tpkl_reference_floor <= 0.0:
             raise FitnessError('tpkl_reference_floor must be > 0')
 
@@ -155,8 +154,7 @@ def member_fitness(episodes: Sequence[EpisodeMetricsLike | Mapping[str, Any]],
     tpkl_ratio = None
     tpkl_penalty = 0.0
     if tpkl is not None and tpkl_reference is not None:
-        if not (math.isfinite(tpkl) and tpkl >= 0.0):
-            raise FitnessError(f'tpkl must be a finite number >= 0, got {tpkl}')
+        require_non_negative('tpkl', tpkl, FitnessError)
         tpkl_ratio = tpkl / max(tpkl_reference, config.tpkl_reference_floor)
         tpkl_penalty = config.tpkl_weight * max(0.0, tpkl_ratio - 1.0 - config.tpkl_tolerance)
 
@@ -268,9 +266,7 @@ def _episode_values(index: int, episode: EpisodeMetricsLike | Mapping[str, Any]
     for name in ('collisions', 'fault_collisions', 'proximity_time', 'simulation_time',
                  'risk_score', 'fault_risk_score'):
         value = float(get(name))
-        if not (math.isfinite(value) and value >= 0.0):
-            raise FitnessError(f'episode {index}: {name} must be a finite number >= 0, '
-                               f'got {value}')
+        require_non_negative(f'episode {index}: {name}', value, FitnessError)
         values[name] = value
     simulation_time = float(values['simulation_time'])
     values['proximity_fraction'] = (min(1.0, float(values['proximity_time']) / simulation_time)

@@ -47,10 +47,10 @@ from sessgan_gen.checkpoint import (
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.environment_sampler import resolve_sample_size
 from sessgan_gen.errors import SamplingRequestError
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.token_map import load_example_map
 from sessgan_gen.track_cleanup import clean_generated_maps
+from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.metrics import NAVIGATION_COLUMNS, navigation_columns
 
 

@@ -54,10 +54,10 @@ from sessgan_evolver.search_methods import (
 )
 from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.progress import ProgressPrinter, format_duration
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 
 SAMPLE_MAPS_PER_BATCH = 4
 """Maps of each batch kept for the report's figure."""

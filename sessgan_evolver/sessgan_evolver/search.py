@@ -25,7 +25,7 @@ from sessgan_evolver.faults import FaultKey, FaultRule, is_valid_failure, key_of
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search_methods import Evaluated, SearchMethod
 from sessgan_gen.environment import Environment
-from sessgan_gen.navigation import make_environment
+from sessgan_gen.valid_tests import make_environment
 
 
 @dataclass

@@ -47,6 +47,7 @@ from sessgan_evolver.regression_suite import (
     load_suite_source,
     write_outputs,
 )
+from sessgan_gen.config_cli import add_old_spelling
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.progress import ProgressPrinter
 
@@ -58,9 +59,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('source', type=Path,
                         help='a suite file (YAML), a directory of failure bags, or one bag')
-    parser.add_argument('--output', type=Path, default=None,
+    parser.add_argument('--output-dir', dest='output', type=Path, default=None,
                         help='folder for junit.xml, summary.md, scenarios.csv and bags/ '
                              '(default: runs/suite-<suite name>)')
+    add_old_spelling(parser, '--output', 'output', type=Path)
     parser.add_argument('--controller', default='',
                         help="built-in controller to test (default: each bag's recorded one)")
     parser.add_argument('--external', action='store_true',
@@ -212,9 +214,9 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
     from rclpy.executors import ExternalShutdownException
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
-    from sessgan_evolver.campaign_cli import RosEvaluator
     from sessgan_evolver.process_supervisor import ProcessSupervisor
     from sessgan_evolver.replay_cli import bag_environment
+    from sessgan_evolver.ros_evaluator import RosEvaluator
 
     environments = []
     for progress in progresses:

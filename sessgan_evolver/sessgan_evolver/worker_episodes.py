@@ -5,7 +5,7 @@ with --external, against your own stack under /w0, /w1, ... (as ``campaign --ext
 :class:`~sessgan_evolver.in_process.InProcessEvaluator` (``run_environment`` with its
 observer, ``runner.run`` for the re-runs that confirm a fault and draw it, ``sample`` and
 ``evaluate`` for a sessgan campaign), with every episode run by the robot under test in its
-own process through the campaign's :class:`~sessgan_evolver.campaign_cli.RosEvaluator`. In
+own process through the campaign's :class:`~sessgan_evolver.ros_evaluator.RosEvaluator`. In
 process the trace comes from the runner; here it comes from the worker's failure bag
 (sessgan_evolver.fault_tally.trace_from_bag). Only a valid failure has a bag, and only a
 valid failure needs a trace (its fault key, its picture), so the workers must write their
@@ -197,8 +197,8 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
     stack under test are yours."""
     import rclpy
 
-    from sessgan_evolver.campaign_cli import RosEvaluator
     from sessgan_evolver.process_supervisor import ProcessSupervisor
+    from sessgan_evolver.ros_evaluator import RosEvaluator
 
     mission = (mission or MissionSpec()).validate()
     fleet = (fleet or FleetSpec()).validate(mission.stations)

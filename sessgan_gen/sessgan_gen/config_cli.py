@@ -66,6 +66,14 @@ def add_config_arguments(parser: argparse.ArgumentParser, cls: type,
                                 help=help_text, metavar=field.name.upper())
 
 
+def add_old_spelling(parser: argparse.ArgumentParser, old: str, dest: str,
+                     **kwargs: Any) -> None:
+    """Accept ``old``, the spelling of an option before it was renamed, for one release: it
+    fills ``dest`` like the new one and is left out of --help."""
+    parser.add_argument(old, dest=dest, help=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                        **kwargs)
+
+
 def config_from_namespace(cls: type[ConfigT], namespace: argparse.Namespace,
                           prefix: str = '') -> ConfigT:
     """The ``cls`` instance of the options :func:`add_config_arguments` added."""

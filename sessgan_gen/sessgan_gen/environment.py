@@ -15,6 +15,7 @@ import numpy as np
 
 from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_gen.scenarios import OCCUPANCY_VALUES, get_scenario
+from sessgan_gen.validation import require_non_negative, require_positive
 
 MAX_CELLS_PER_SIDE = 4096
 """Grids larger than this per side are rejected as absurd (memory and build time)."""
@@ -172,10 +173,8 @@ class Environment:
             check_grid_size(width, height)
         except InvalidEnvironmentError as err:
             raise InvalidEnvironmentError(f'environment {self.id!r}: {err}') from err
-        if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise InvalidEnvironmentError(
-                f'environment {self.id!r}: resolution must be a positive finite number of '
-                f'metres per cell, got {self.resolution}')
+        require_positive(f'environment {self.id!r}: resolution', self.resolution,
+                         InvalidEnvironmentError, ' m per cell')
         if not all(math.isfinite(v) for v in self.origin):
             raise InvalidEnvironmentError(
                 f'environment {self.id!r}: origin {self.origin} is not finite')
@@ -189,10 +188,8 @@ class Environment:
             raise InvalidEnvironmentError(
                 f'environment {self.id!r}: {len(self.stations)} mission stations; at most '
                 f'{MAX_STATIONS}')
-        if not (math.isfinite(self.dwell_time) and self.dwell_time >= 0):
-            raise InvalidEnvironmentError(
-                f'environment {self.id!r}: dwell time must be a finite number of seconds '
-                f'>= 0, got {self.dwell_time}')
+        require_non_negative(f'environment {self.id!r}: dwell time', self.dwell_time,
+                             InvalidEnvironmentError, ' s')
         if len(self.fleet) + 1 > MAX_ROBOTS:
             raise InvalidEnvironmentError(
                 f'environment {self.id!r}: {len(self.fleet) + 1} robots under test; at most '

@@ -23,10 +23,10 @@ from sessgan_gen.errors import CheckpointError, SamplingRequestError
 from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.missions import MissionSpec
 from sessgan_gen.model import GeneratorPyramid
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.track_cleanup import clean_token_map
+from sessgan_gen.valid_tests import make_environment
 
 MAX_SEEDS_PER_REQUEST = 4096
 

@@ -76,6 +76,10 @@ def check_options(config: ExportConfig) -> Path:
     for option, path in (('--map-file', config.map_file), ('--checkpoint', config.checkpoint)):
         if path and not Path(path).is_file():
             raise SessganGenError(f'{option} {path} does not exist')
+    if config.map_file:  # a file that is no token map is a bad option too
+        from sessgan_gen.token_map import read_token_map
+
+        read_token_map(config.map_file)
     if config.bag and not (Path(config.bag) / 'map.yaml').is_file():
         raise SessganGenError(f'{config.bag} is no failure bag: it has no map.yaml')
     return output

@@ -56,6 +56,7 @@ from sessgan_gen.token_map import (
     resolve_scenario,
     tokens_to_occupancy,
 )
+from sessgan_gen.validation import require_positive
 
 DEFAULT_OCCUPIED_THRESH = 0.65
 DEFAULT_FREE_THRESH = 0.25
@@ -470,8 +471,7 @@ def cells_at_cell_size(pixels: tuple[int, int], resolution: float,
                        cell_size: float) -> tuple[int, int]:
     """(height, width) in cells of ``cell_size`` metres of an image of ``pixels`` (height,
     width) at ``resolution`` metres per pixel: the nearest whole number, at least one."""
-    if not (math.isfinite(cell_size) and cell_size > 0):
-        raise MapFormatError(f'cell size must be a positive number of metres, got {cell_size}')
+    require_positive('cell size', cell_size, MapFormatError, ' m')
     height, width = (max(1, round(count * resolution / cell_size)) for count in pixels)
     return height, width
 

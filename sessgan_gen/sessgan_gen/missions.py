@@ -42,6 +42,7 @@ from sessgan_gen.route_certificate import (
     required_clearances,
 )
 from sessgan_gen.scenarios import Scenario
+from sessgan_gen.validation import require_non_negative
 
 MAX_MISSION_STATIONS = MAX_STATIONS
 """Most stations a mission may have before home (each adds a leg and a dwell)."""
@@ -87,10 +88,9 @@ class MissionSpec:
                 f'mission_stations must be an integer in 0..{MAX_MISSION_STATIONS} (stations '
                 f'before home; 0: a plain start -> goal episode), got {stations!r}')
         dwell = self.dwell_time
-        if (isinstance(dwell, bool) or not isinstance(dwell, (int, float))
-                or not math.isfinite(dwell) or dwell < 0):
-            raise InvalidMissionError(
-                f'station_dwell_time must be a finite number of seconds >= 0, got {dwell!r}')
+        if isinstance(dwell, bool):  # a number to Python, a mistake here
+            raise InvalidMissionError(f'station_dwell_time must be >= 0 s, got {dwell!r}')
+        require_non_negative('station_dwell_time', dwell, InvalidMissionError, ' s')
         return self
 
     @property

@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 
@@ -62,6 +63,9 @@ def check_options(config: ReportConfig) -> list[str]:
         raise SessganGenError('--scenarios names no scenario')
     for name in scenarios:
         get_scenario(name)
+        checkpoint = getattr(config, f'{name}_checkpoint', '')
+        if checkpoint and not Path(checkpoint).is_file():
+            raise SessganGenError(f'--{name}-checkpoint {checkpoint} does not exist')
     return scenarios
 
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from geometry_msgs.msg import Pose
 from nav_msgs.msg import OccupancyGrid
@@ -11,6 +9,7 @@ from nav_msgs.msg import OccupancyGrid
 from sessgan_gen.environment import Environment, FleetRobot, Pose2D, check_grid_size
 from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
+from sessgan_gen.validation import require_positive
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 
 
@@ -59,9 +58,7 @@ def occupancy_from_grid_msg(grid: OccupancyGrid) -> tuple[np.ndarray, float, tup
         raise InvalidEnvironmentError(
             f'occupancy grid data has {len(grid.data)} cells but info says '
             f'{width}x{height} = {width * height}')
-    if not (math.isfinite(resolution) and resolution > 0):
-        raise InvalidEnvironmentError(
-            f'occupancy grid resolution must be a positive finite number, got {resolution}')
+    require_positive('occupancy grid resolution', resolution, InvalidEnvironmentError, ' m')
     q = grid.info.origin.orientation
     if abs(q.z) > 1e-6 or abs(q.x) > 1e-6 or abs(q.y) > 1e-6:
         raise InvalidEnvironmentError('rotated occupancy grid origins are not supported')

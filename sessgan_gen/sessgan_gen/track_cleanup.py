@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from sessgan_gen.navigation import reachable_regions
 from sessgan_gen.scenarios import Scenario, TrackCleanup, get_scenario
 from sessgan_gen.track_realism import (
     paint_discs,
@@ -41,6 +40,7 @@ from sessgan_gen.track_realism import (
     skeleton_end_points,
     track_clearance,
 )
+from sessgan_gen.valid_tests import reachable_regions
 
 
 def fill_islands(track: np.ndarray, max_cells: int) -> np.ndarray:

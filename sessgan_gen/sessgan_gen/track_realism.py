@@ -45,12 +45,12 @@ import numpy as np
 
 from sessgan_gen.environment import Environment
 from sessgan_gen.grid_search import flat_grid, label_regions
-from sessgan_gen.navigation import (
+from sessgan_gen.token_map import resolve_scenario
+from sessgan_gen.valid_tests import (
     certify_environment,
     occupancy_passable_mask,
     shortest_path_in_free,
 )
-from sessgan_gen.token_map import resolve_scenario
 
 DEFAULT_CURVATURE_STEP_M = 0.5
 """Spacing in metres of the resampled route whose heading changes give the curvature."""
@@ -380,7 +380,7 @@ def measure_environment(environment: Environment, spur_length: int | None = None
                         curvature_step_m: float = DEFAULT_CURVATURE_STEP_M,
                         smoothing_m: float = DEFAULT_SMOOTHING_M) -> TrackRealism:
     """The track-realism measures of an Environment, on its own certified start-to-goal
-    route (:func:`sessgan_gen.navigation.certify_environment`; no route measures when it is
+    route (:func:`sessgan_gen.valid_tests.certify_environment`; no route measures when it is
     not a valid test). Track = the cells its scenario's robot may occupy."""
     spec = resolve_scenario(environment.scenario)
     track = occupancy_passable_mask(environment.occupancy, spec)

@@ -13,7 +13,7 @@ from typing import NamedTuple, TextIO
 import numpy as np
 import torch
 
-from sessgan_gen.checkpoint import load_training_checkpoint, save_checkpoint
+from sessgan_gen.checkpoint import load_training_checkpoint, read_checkpoint, save_checkpoint
 from sessgan_gen.config_cli import parse_config
 from sessgan_gen.errors import CheckpointError, SessganGenError
 from sessgan_gen.progress import ProgressPrinter, format_duration
@@ -161,11 +161,14 @@ def run_training(argv: Sequence[str] | None) -> int:
         description='Train a SESS-GAN (TOAD-GAN) generator pyramid on one token map.'))
     try:
         validate_config(config)
-    except ValueError as err:
+        # The inputs the options name, read before anything is written: a map or checkpoint
+        # that is not there or cannot be learned is a usage error too.
+        training_map = check_inputs(config)
+    except (SessganGenError, ValueError) as err:
         print(f'train: error: {err}', file=sys.stderr)
         return 2
     try:
-        return train(config)
+        return train(config, training_map)
     except KeyboardInterrupt:
         print('train: interrupted; run again with --resume to continue from the last '
               'finished scale', file=sys.stderr)
@@ -175,29 +178,47 @@ def run_training(argv: Sequence[str] | None) -> int:
         return 1
 
 
-def train(config: TrainConfig) -> int:
-    """Run (or resume) the training that ``config`` describes; writes config.output."""
+def check_inputs(config: TrainConfig) -> TrainingMap:
+    """The map to learn; SessganGenError when it, or the checkpoint --resume continues, cannot
+    be used. Reads only."""
+    training_map = load_training_map(config)
+    if config.resume:
+        if not Path(config.output).exists():
+            raise CheckpointError(f'--resume: checkpoint {str(config.output)!r} does not exist')
+        check_resumable(config, read_checkpoint(config.output)['metadata'], training_map.source)
+    return training_map
+
+
+def check_resumable(config: TrainConfig, metadata: dict, source: str) -> None:
+    """CheckpointError unless the checkpoint ``metadata`` describes was trained with
+    ``config``'s options on the map ``source``."""
+    output = config.output
+    differing = same_training(metadata.get('training_config', {}), config_dict(config))
+    if differing:
+        raise CheckpointError(
+            f'--resume: checkpoint {str(output)!r} was trained with different options: '
+            f'{", ".join(differing)}')
+    if metadata.get('map_source') != source:
+        raise CheckpointError(
+            f'--resume: checkpoint {str(output)!r} learned {metadata.get("map_source")}, '
+            f'not {source}')
+
+
+def train(config: TrainConfig, training_map: TrainingMap | None = None) -> int:
+    """Run (or resume) the training that ``config`` describes on ``training_map`` (default:
+    :func:`check_inputs`'); writes config.output."""
     if config.threads:
         torch.set_num_threads(config.threads)
-    cells, scenario, source, origin = load_training_map(config)
+    cells, scenario, source, origin = (check_inputs(config) if training_map is None
+                                       else training_map)
     output = Path(config.output)
     seed_everything(config.seed, config.deterministic)
 
     pyramid = None
     state = None
     if config.resume:
-        if not output.exists():
-            raise CheckpointError(f'--resume: checkpoint {str(output)!r} does not exist')
         pyramid, metadata, raw_state = load_training_checkpoint(output, config.device)
-        differing = same_training(metadata.get('training_config', {}), config_dict(config))
-        if differing:
-            raise CheckpointError(
-                f'--resume: checkpoint {str(output)!r} was trained with different options: '
-                f'{", ".join(differing)}')
-        if metadata.get('map_source') != source:
-            raise CheckpointError(
-                f'--resume: checkpoint {str(output)!r} learned {metadata.get("map_source")}, '
-                f'not {source}')
+        check_resumable(config, metadata, source)
         state = TrainingState.from_dict(raw_state)
     trainer = Trainer(cells, scenario, config, pyramid, state)
     if pyramid is not None and trainer.pyramid.scale_shapes != pyramid.scale_shapes:

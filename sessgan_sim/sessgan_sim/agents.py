@@ -2,7 +2,7 @@
 
 Each agent patrols back and forth along a seeded path through free space: two
 random cells of the footprint-free space (walls inflated by the agent's radius)
-joined by a 4-connected shortest path (sessgan_gen.navigation), at a constant
+joined by a 4-connected shortest path (sessgan_gen.valid_tests), at a constant
 speed. Agents are kinematic: static pybullet bodies moved every physics step,
 which the robot under test can hit (a contact counts as a collision) but cannot
 push. They move in the robot's plane (ground agents for ground robots, flyers at the
@@ -28,7 +28,8 @@ import numpy as np
 import pybullet as p
 
 from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.navigation import inflate, shortest_path_in_free
+from sessgan_gen.valid_tests import inflate, shortest_path_in_free
+from sessgan_gen.validation import require_non_negative, require_positive
 from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.robots import Robot
 from sessgan_sim.world import CollisionGroup
@@ -58,18 +59,14 @@ class AgentConfig:
 
     def validate(self) -> None:
         for name in ('speed', 'radius', 'height'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise InvalidConfigError(f'agents: {name} must be > 0, got {value}')
-        if not (math.isfinite(self.min_start_distance) and self.min_start_distance >= 0):
-            raise InvalidConfigError(f'agents: min_start_distance must be >= 0 m, got '
-                                     f'{self.min_start_distance}')
+            require_positive(f'agents: {name}', getattr(self, name), InvalidConfigError)
+        require_non_negative('agents: min_start_distance', self.min_start_distance,
+                             InvalidConfigError, ' m')
         if self.behaviour not in AGENT_BEHAVIOURS:
             raise InvalidConfigError(f'agents: behaviour must be one of {AGENT_BEHAVIOURS}, '
                                      f'got {self.behaviour!r}')
-        if not (math.isfinite(self.safety_distance) and self.safety_distance >= 0):
-            raise InvalidConfigError(f'agents: safety_distance must be >= 0 m, got '
-                                     f'{self.safety_distance}')
+        require_non_negative('agents: safety_distance', self.safety_distance,
+                             InvalidConfigError, ' m')
         if self.min_patrol_cells < 1:
             raise InvalidConfigError(f'agents: min_patrol_cells must be >= 1, got '
                                      f'{self.min_patrol_cells}')

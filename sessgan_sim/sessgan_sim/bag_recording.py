@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import shutil
 import socket
@@ -69,6 +68,7 @@ from sessgan_gen.environment import check_environment_id
 from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_gen.json_data import to_json_data
 from sessgan_gen.map_server_io import write_map_server
+from sessgan_gen.validation import require_positive
 from sessgan_sim import __version__
 from sessgan_sim.errors import BagWriteError
 
@@ -263,9 +263,7 @@ def write_episode_bag(directory: str | Path,
         raise BagWriteError(f'unknown bag storage {storage!r}; expected one of '
                             f'{[s.value for s in BagStorage]}') from err
     _check_replaceable(final, overwrite)
-    if not (math.isfinite(resolution) and resolution > 0):
-        raise BagWriteError(f'map resolution must be a positive number of metres, '
-                            f'got {resolution}')
+    require_positive('map resolution', resolution, BagWriteError, ' m')
     store = typestore if typestore is not None else jazzy_typestore()
     final.parent.mkdir(parents=True, exist_ok=True)
     staging = final.parent / f'{final.name}.tmp-{os.getpid()}'

@@ -48,6 +48,7 @@ from sessgan_gen.errors import SessganGenError
 from sessgan_gen.grid_search import descend, distance_field
 from sessgan_gen.route_certificate import CertificateGrid, map_clearance, required_clearances
 from sessgan_gen.scenarios import Scenario, get_scenario
+from sessgan_gen.validation import require_positive
 from sessgan_sim.agents import AgentConfig, DummyAgents
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import (
@@ -60,7 +61,7 @@ from sessgan_sim.metrics import (
     fleet_metrics,
 )
 from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
-from sessgan_sim.robots import STOP, FlyerRobot, Robot, VelocityCommand, create_robot
+from sessgan_sim.robots import STOP, BodyCommand, FlyerRobot, Robot, create_robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
     Lidar,
@@ -151,14 +152,11 @@ class EpisodeConfig:
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first unusable value."""
         for name in ('control_rate_hz', 'physics_rate_hz'):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InvalidConfigError(f'episode config: {name} must be > 0, got {value!r}')
+            require_positive(f'episode config: {name}', getattr(self, name), InvalidConfigError)
         for name in ('time_limit', 'proximity_distance', 'goal_tolerance', 'clearance_range'):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0):
-                raise InvalidConfigError(f'episode config: {name} must be > 0 or None, '
-                                         f'got {value!r}')
+            if getattr(self, name) is not None:
+                require_positive(f'episode config: {name} (or None)', getattr(self, name),
+                                 InvalidConfigError)
         if self.physics_rate_hz < self.control_rate_hz:
             raise InvalidConfigError(
                 f'episode config: physics_rate_hz ({self.physics_rate_hz}) must be at least '
@@ -260,17 +258,17 @@ class TickProfile:
         return self.physics + self.sensors + self.metrics
 
 
-def _as_command(command: VelocityCommand | Sequence[float]) -> VelocityCommand:
-    if isinstance(command, VelocityCommand):
+def _as_command(command: BodyCommand | Sequence[float]) -> BodyCommand:
+    if isinstance(command, BodyCommand):
         return command
     values = tuple(command)
     if len(values) not in (3, 4):
         raise EpisodeError(f'a command is (vx, vy, wz) or (vx, vy, wz, vz), got {values!r}')
-    return VelocityCommand(*(float(value) for value in values))
+    return BodyCommand(*(float(value) for value in values))
 
 
 @dataclass
-class _Record:
+class _RobotUnderTest:
     """What every robot under test of an episode has after reset, valid or not."""
 
     environment: Environment
@@ -293,7 +291,7 @@ class _Record:
     """Whether its lidar took ``scan`` at the last tick."""
     mission: MissionTracker | None = None
     """The legs so far (None until the environment was found valid)."""
-    live: _Live | None = None
+    live: _RobotSimulation | None = None
     """Its simulation (None when the environment could not be built)."""
 
 
@@ -314,7 +312,7 @@ class ProgressField(NamedTuple):
 
 
 @dataclass
-class _Live:
+class _RobotSimulation:
     """The simulation of an episode whose environment could be built."""
 
     robot: Robot
@@ -349,7 +347,7 @@ class Episode:
         self._clock = clock
         self._world = World()
         self._agents = DummyAgents()
-        self._records: list[_Record] = []
+        self._records: list[_RobotUnderTest] = []
         """One per robot under test (r0 first); [] before the first reset."""
         self._latest: list[Observation] = []
         """Every robot's latest observation (r0's alone when the episode could not start)."""
@@ -375,12 +373,12 @@ class Episode:
     # --- read-only state ------------------------------------------------------------------
 
     @property
-    def _record(self) -> _Record | None:
+    def _record(self) -> _RobotUnderTest | None:
         """Robot r0's record (the only robot's outside fleets)."""
         return self._records[0] if self._records else None
 
     @property
-    def _live(self) -> _Live | None:
+    def _live(self) -> _RobotSimulation | None:
         """Robot r0's simulation."""
         return self._records[0].live if self._records else None
 
@@ -460,8 +458,8 @@ class Episode:
         self.profile = TickProfile()
         scan = np.full(config.lidar.beams, np.inf, dtype=np.float32)
         scan.flags.writeable = False
-        record = _Record(environment, config, MetricsRecorder(math.inf), config.lidar.info, scan,
-                         start=environment.start, waypoints=())
+        record = _RobotUnderTest(environment, config, MetricsRecorder(math.inf),
+                                 config.lidar.info, scan, start=environment.start, waypoints=())
         self._records = [record]
 
         try:
@@ -500,7 +498,7 @@ class Episode:
             return self._latest[0]
         clearance_range = float(config.clearance_range or 0.0)
         self._records = records = [record] + [
-            _Record(environment, config, MetricsRecorder(clearance_range, index),
+            _RobotUnderTest(environment, config, MetricsRecorder(clearance_range, index),
                     config.lidar.info, scan, start=member.start, waypoints=(member.goal,),
                     index=index)
             for index, member in enumerate(environment.fleet, start=1)]
@@ -532,7 +530,7 @@ class Episode:
         for each, body in zip(records, robots, strict=True):
             waypoints = each.waypoints
             feasible = environment.feasible
-            each.live = _Live(
+            each.live = _RobotSimulation(
                 robot=body, lidar=Lidar(config.lidar, np.random.default_rng(
                     noise_seed if each.index == 0 else fleet_seeds[2 * each.index - 2])),
                 clearance=ClearanceSensor(client, body, layout, clearance_range),
@@ -576,7 +574,7 @@ class Episode:
         self._require_record()
         return list(self._latest)
 
-    def step(self, command: VelocityCommand | Sequence[float]) -> StepResult:
+    def step(self, command: BodyCommand | Sequence[float]) -> StepResult:
         """Apply ``command`` (body-frame vx, vy, wz, and the flyer's climb rate vz, 0 when
         left out) for one control tick; return the result. A fleet steps with
         :meth:`step_fleet`."""
@@ -585,7 +583,7 @@ class Episode:
                                f'step_fleet(), a command per robot')
         return self.step_fleet((command,))[0]
 
-    def step_fleet(self, commands: Sequence[VelocityCommand | Sequence[float]]
+    def step_fleet(self, commands: Sequence[BodyCommand | Sequence[float]]
                    ) -> list[StepResult]:
         """Apply a command per robot under test (r0 first) for one control tick; return a
         result per robot: its observation, whether the episode is done and the robot's own
@@ -768,7 +766,7 @@ class Episode:
     # --- internals ------------------------------------------------------------------------
 
     @staticmethod
-    def _route_length(record: _Record) -> float:
+    def _route_length(record: _RobotUnderTest) -> float:
         """m, the certified route of this robot (r0: the environment's, else its fleet
         entry's); 0 without one."""
         environment = record.environment
@@ -788,31 +786,31 @@ class Episode:
         first = min(failing, key=lambda record: (record.ticks, record.index))
         return first.outcome, (first.index if len(records) > 1 else -1)
 
-    def _require_record(self) -> _Record:
+    def _require_record(self) -> _RobotUnderTest:
         if not self._records:
             raise EpisodeError('no episode yet: call reset(environment, config) first')
         return self._records[0]
 
-    def _require_live(self) -> _Live:
+    def _require_live(self) -> _RobotSimulation:
         live = self._records[0].live if self._records else None
         if live is None:
             raise EpisodeError('no running simulation: reset() has not built a valid episode')
         return live
 
     @staticmethod
-    def _end(record: _Record, outcome: Outcome, detail: str) -> None:
+    def _end(record: _RobotUnderTest, outcome: Outcome, detail: str) -> None:
         record.outcome = outcome
         record.detail = detail
 
     @staticmethod
-    def _goal(record: _Record) -> Pose2D:
+    def _goal(record: _RobotUnderTest) -> Pose2D:
         """The robot's waypoint in force: its goal in a plain episode."""
         if record.mission is not None:
             return record.mission.goal
         return record.waypoints[-1] if record.waypoints else record.environment.goal
 
-    def _check_end(self, record: _Record, live: _Live, reached: bool, now: float,
-                   distance: float) -> None:
+    def _check_end(self, record: _RobotUnderTest, live: _RobotSimulation, reached: bool,
+                   now: float, distance: float) -> None:
         config = record.config
         recorder = record.recorder
         mission = record.mission
@@ -864,7 +862,7 @@ class Episode:
                           f'stopped {self._distance_to_goal(record):.2f} m from it at '
                           f'{now:.2f} s')
 
-    def _record_contacts(self, record: _Record, partners: set[int], time: float,
+    def _record_contacts(self, record: _RobotUnderTest, partners: set[int], time: float,
                          x: float, y: float,
                          velocities: tuple[tuple[float, float], ...]) -> None:
         """Record one physics step's contacts of ``record``'s robot, attributing each (see
@@ -968,7 +966,7 @@ class Episode:
                 discs.append((x, y, reach))
         return discs
 
-    def _agent_nearby(self, live: _Live) -> bool:
+    def _agent_nearby(self, live: _RobotSimulation) -> bool:
         """Whether an agent's body, or another robot under test, is within
         AGENT_WAIT_DISTANCE of the robot's body."""
         agents = self._agents
@@ -982,7 +980,7 @@ class Episode:
                 - agents.config.radius - robot.footprint_radius)
         return bool((gaps < AGENT_WAIT_DISTANCE).any())
 
-    def _robots_nearby(self, live: _Live) -> list[int]:
+    def _robots_nearby(self, live: _RobotSimulation) -> list[int]:
         """The other robots under test within AGENT_WAIT_DISTANCE of the robot's body."""
         robot = live.robot
         x, y = robot.position
@@ -997,7 +995,7 @@ class Episode:
         return nearby
 
     @staticmethod
-    def _progress_distance(live: _Live) -> float:
+    def _progress_distance(live: _RobotSimulation) -> float:
         """Distance (m) from the robot to the goal along its ProgressField; inf (never
         progress) where the field does not reach."""
         progress = live.progress
@@ -1008,7 +1006,7 @@ class Episode:
             return float(steps[row, col]) * progress.grid.cell_size
         return math.inf
 
-    def _distance_to_goal(self, record: _Record) -> float:
+    def _distance_to_goal(self, record: _RobotUnderTest) -> float:
         goal = self._goal(record)
         if record.live is not None:
             x, y = record.live.robot.position
@@ -1020,7 +1018,7 @@ class Episode:
             return math.inf
         return distance if math.isfinite(distance) else math.inf
 
-    def _start_overlap(self, environment: Environment, record: _Record, robot: Robot,
+    def _start_overlap(self, environment: Environment, record: _RobotUnderTest, robot: Robot,
                        layout: WorldLayout) -> str | None:
         """Why the robot's footprint at its start overlaps an obstacle, or None."""
         x, y = robot.position
@@ -1041,7 +1039,7 @@ class Episode:
                             f'{-point[8]:.3f} m{inside}')
         return None
 
-    def _observation(self, record: _Record, scan_updated: bool) -> Observation:
+    def _observation(self, record: _RobotUnderTest, scan_updated: bool) -> Observation:
         live = record.live
         assert live is not None
         robot = live.robot
@@ -1076,7 +1074,7 @@ class Episode:
         return support
 
     @staticmethod
-    def _blank_observation(record: _Record) -> Observation:
+    def _blank_observation(record: _RobotUnderTest) -> Observation:
         """The observation of an episode that could not start: no returns, at the start."""
         environment = record.environment
         try:

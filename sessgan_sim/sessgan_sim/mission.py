@@ -14,11 +14,11 @@ robot left (the dwell's end); :func:`failed_leg` says which leg an episode faile
 from __future__ import annotations
 
 import enum
-import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from sessgan_gen.environment import Pose2D
+from sessgan_gen.validation import require_non_negative
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import FAILURE_OUTCOMES, STANDING_SPEED, Outcome
 
@@ -58,8 +58,7 @@ class MissionTracker:
                  start_time: float = 0.0) -> None:
         if not waypoints:
             raise EpisodeError('a mission needs at least one waypoint (the goal)')
-        if not (math.isfinite(dwell_time) and dwell_time >= 0):
-            raise EpisodeError(f'dwell time must be a finite number >= 0, got {dwell_time}')
+        require_non_negative('dwell time', dwell_time, EpisodeError, ' s')
         self.waypoints = tuple(waypoints)
         self.dwell_time = float(dwell_time)
         self.tolerance = float(tolerance)

@@ -1,7 +1,7 @@
 """Robot models under test: a registry of planar robots with real dynamics.
 
 Every robot takes a body-frame velocity command like geometry_msgs/Twist
-(:class:`VelocityCommand`: linear.x, linear.y, angular.z) and turns it into
+(:class:`BodyCommand`: linear.x, linear.y, angular.z) and turns it into
 motion through its own dynamics:
 
 * ``diff_drive``: a differential-drive cylinder. linear.x is the forward speed,
@@ -52,6 +52,7 @@ import pybullet as p
 from sessgan_gen.environment import Pose2D
 from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_gen.scenarios import FREE, LOW_OBSTACLE
+from sessgan_gen.validation import require_positive
 from sessgan_sim.errors import InvalidConfigError, UnknownRobotError
 from sessgan_sim.world import ROBOT_MASK, CollisionGroup
 
@@ -62,8 +63,9 @@ TILT_INERTIA_FACTOR = 1000.0
 """Roll and pitch inertia multiplier: contacts must not tip a planar robot over."""
 
 
-class VelocityCommand(NamedTuple):
-    """A body-frame velocity command, as geometry_msgs/Twist carries it."""
+class BodyCommand(NamedTuple):
+    """A body-frame velocity command, as geometry_msgs/Twist carries it, that the simulated
+    body executes (a controller's answer is sessgan_controllers' VelocityCommand)."""
 
     vx: float = 0.0
     """linear.x in m/s (forward)."""
@@ -75,11 +77,12 @@ class VelocityCommand(NamedTuple):
     """linear.z in m/s (up); only the flyer uses it."""
 
 
-STOP = VelocityCommand()
+STOP = BodyCommand()
 
 
-class RobotState(NamedTuple):
-    """Pose in the map frame and twist in the body frame."""
+class BodyState(NamedTuple):
+    """Pose in the map frame and twist in the body frame of the simulated body (what a
+    controller sees of it is sessgan_controllers' RobotState)."""
 
     x: float
     y: float
@@ -99,10 +102,7 @@ def _clip(value: float, low: float, high: float) -> float:
 
 def _check_positive(owner: str, params: Any, names: tuple[str, ...]) -> None:
     for name in names:
-        value = getattr(params, name)
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise InvalidConfigError(f'{owner}: {name} must be a positive finite number, '
-                                     f'got {value!r}')
+        require_positive(f'{owner}: {name}', getattr(params, name), InvalidConfigError)
 
 
 class Robot(abc.ABC):
@@ -213,7 +213,7 @@ class Robot(abc.ABC):
         """Zero the model's internal state (speeds, steering)."""
 
     @abc.abstractmethod
-    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+    def _advance(self, command: BodyCommand, dt: float) -> tuple[float, float, float]:
         """Advance the model by ``dt`` seconds toward ``command``; return the body-frame
         velocity (vx, vy, wz) of the body's centre to impose for this step."""
 
@@ -221,7 +221,7 @@ class Robot(abc.ABC):
     def _observe(self, vx: float, vy: float, wz: float) -> None:
         """Take the body's real body-frame velocity after a step back into the model."""
 
-    def _advance_altitude(self, command: VelocityCommand, dt: float) -> float:
+    def _advance_altitude(self, command: BodyCommand, dt: float) -> float:
         """Advance the altitude model by ``dt`` seconds toward ``command``; return the
         vertical velocity (m/s) to impose for this step. Ground robots do not climb."""
         return 0.0
@@ -255,7 +255,7 @@ class Robot(abc.ABC):
         self._reset_model()
         return body
 
-    def apply(self, command: VelocityCommand, dt: float) -> None:
+    def apply(self, command: BodyCommand, dt: float) -> None:
         """Advance the model by one physics step of ``dt`` s and set the body's velocity."""
         vx, vy, wz = self._advance(command, dt)
         vz = self._advance_altitude(command, dt) if self.flies else 0.0
@@ -292,9 +292,9 @@ class Robot(abc.ABC):
         """Take the body's altitude and vertical velocity after a step (fliers only)."""
 
     @property
-    def state(self) -> RobotState:
+    def state(self) -> BodyState:
         """Pose (map frame), body-frame twist, altitude and climb rate after the last step."""
-        return RobotState(self._x, self._y, self._yaw, self._vx, self._vy, self._wz,
+        return BodyState(self._x, self._y, self._yaw, self._vx, self._vy, self._wz,
                           self._altitude, self._climb_rate)
 
     @property
@@ -397,7 +397,7 @@ class DiffDriveRobot(Robot):
         self._speed = 0.0
         self._turn_rate = 0.0
 
-    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+    def _advance(self, command: BodyCommand, dt: float) -> tuple[float, float, float]:
         params = self.params
         target_speed = _clip(command.vx, -params.max_reverse_speed, params.max_linear_speed)
         target_rate = _clip(command.wz, -params.max_angular_speed, params.max_angular_speed)
@@ -434,7 +434,7 @@ class TricycleRobot(DiffDriveRobot):
         super().validate()
         _check_positive('tricycle', self.params, ('min_turn_radius',))
 
-    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+    def _advance(self, command: BodyCommand, dt: float) -> tuple[float, float, float]:
         speed, _, turn_rate = super()._advance(command, dt)
         limit = abs(speed) / self.params.min_turn_radius
         self._turn_rate = _clip(turn_rate, -limit, limit)
@@ -524,7 +524,7 @@ class CarRobot(Robot):
         self._speed = 0.0
         self._steering = 0.0
 
-    def target_steering(self, command: VelocityCommand) -> float:
+    def target_steering(self, command: BodyCommand) -> float:
         """Steering angle (rad) that turns at ``command.wz`` when driving at ``command.vx``."""
         params = self.params
         speed = command.vx
@@ -533,7 +533,7 @@ class CarRobot(Robot):
             angle = -angle
         return _clip(angle, -params.max_steering_angle, params.max_steering_angle)
 
-    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+    def _advance(self, command: BodyCommand, dt: float) -> tuple[float, float, float]:
         params = self.params
         step = params.max_steering_rate * dt
         self._steering += _clip(self.target_steering(command) - self._steering, -step, step)
@@ -657,7 +657,7 @@ class FlyerRobot(Robot):
         self._world_vy = 0.0
         self._turn_rate = 0.0
 
-    def _advance(self, command: VelocityCommand, dt: float) -> tuple[float, float, float]:
+    def _advance(self, command: BodyCommand, dt: float) -> tuple[float, float, float]:
         params = self.params
         cos_yaw, sin_yaw = self._cos_yaw, self._sin_yaw
         target_x = cos_yaw * command.vx - sin_yaw * command.vy
@@ -682,7 +682,7 @@ class FlyerRobot(Robot):
         return (cos_yaw * self._world_vx + sin_yaw * self._world_vy,
                 -sin_yaw * self._world_vx + cos_yaw * self._world_vy, self._turn_rate)
 
-    def _advance_altitude(self, command: VelocityCommand, dt: float) -> float:
+    def _advance_altitude(self, command: BodyCommand, dt: float) -> float:
         params = self.params
         target = _clip(command.vz, -params.max_climb_rate, params.max_climb_rate)
         gain = min(1.0, dt / params.response_time)

@@ -11,14 +11,14 @@ from tf2_msgs.msg import TFMessage
 
 from sessgan_gen.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
-
-MAP_FRAME = 'map'
-ODOM_FRAME = 'odom'
-BASE_FOOTPRINT = 'base_footprint'
-BASE_LINK = 'base_link'
-SCAN_FRAME = 'base_scan'
-RANGE_DOWN_FRAME = 'base_range_down'
-"""The flyer's downward range sensor: its x axis (the beam) points down."""
+from sessgan_sim.frames import (
+    BASE_FOOTPRINT,
+    BASE_LINK,
+    MAP_FRAME,
+    ODOM_FRAME,
+    RANGE_DOWN_FRAME,
+    SCAN_FRAME,
+)
 
 
 def time_msg(seconds: float) -> Time:

@@ -47,6 +47,7 @@ import numpy as np
 import pybullet as p
 
 from sessgan_gen.environment import Pose2D
+from sessgan_gen.validation import require_non_negative, require_positive
 from sessgan_sim.agents import DummyAgents
 from sessgan_sim.errors import InvalidConfigError, SessganSimError
 from sessgan_sim.robots import Robot
@@ -98,15 +99,12 @@ class LidarConfig:
         if not (math.isfinite(self.field_of_view) and 0 < self.field_of_view <= 2 * math.pi):
             raise InvalidConfigError(f'lidar: field_of_view must be in (0, 2*pi] rad, got '
                                      f'{self.field_of_view}')
-        if not (math.isfinite(self.range_min) and self.range_min >= 0):
-            raise InvalidConfigError(f'lidar: range_min must be >= 0 m, got {self.range_min}')
+        require_non_negative('lidar: range_min', self.range_min, InvalidConfigError, ' m')
         if not (math.isfinite(self.range_max) and self.range_max > self.range_min):
             raise InvalidConfigError(f'lidar: range_max must exceed range_min, got '
                                      f'{self.range_max} <= {self.range_min}')
-        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise InvalidConfigError(f'lidar: rate_hz must be > 0, got {self.rate_hz}')
-        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
-            raise InvalidConfigError(f'lidar: noise_std must be >= 0 m, got {self.noise_std}')
+        require_positive('lidar: rate_hz', self.rate_hz, InvalidConfigError)
+        require_non_negative('lidar: noise_std', self.noise_std, InvalidConfigError, ' m')
         if self.caster not in tuple(RayCaster):
             raise InvalidConfigError(f'lidar: caster must be one of '
                                      f'{[caster.value for caster in RayCaster]}, '
@@ -542,18 +540,16 @@ class RangeFinderConfig:
 
     def validate(self) -> None:
         """Raise InvalidConfigError naming the first unusable parameter."""
-        if not (math.isfinite(self.min_range) and self.min_range >= 0):
-            raise InvalidConfigError(f'range finder: min_range must be >= 0 m, got '
-                                     f'{self.min_range}')
+        require_non_negative('range finder: min_range', self.min_range, InvalidConfigError,
+                             ' m')
         if not (math.isfinite(self.max_range) and self.max_range > self.min_range):
             raise InvalidConfigError(f'range finder: max_range must exceed min_range, got '
                                      f'{self.max_range} <= {self.min_range}')
         if not (math.isfinite(self.field_of_view) and 0 < self.field_of_view < math.pi):
             raise InvalidConfigError(f'range finder: field_of_view must be in (0, pi) rad, '
                                      f'got {self.field_of_view}')
-        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
-            raise InvalidConfigError(f'range finder: noise_std must be >= 0 m, got '
-                                     f'{self.noise_std}')
+        require_non_negative('range finder: noise_std', self.noise_std, InvalidConfigError,
+                             ' m')
 
 
 class RangeFinder:
@@ -701,8 +697,7 @@ class ClearanceSensor:
 
     def __init__(self, client: int, robot: Robot, layout: WorldLayout, range_: float,
                  analytic: bool = True) -> None:
-        if not (math.isfinite(range_) and range_ > 0):
-            raise InvalidConfigError(f'clearance range must be > 0 m, got {range_}')
+        require_positive('clearance range', range_, InvalidConfigError, ' m')
         self.range = range_
         self._client = client
         self._robot = robot

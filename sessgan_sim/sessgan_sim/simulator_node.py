@@ -45,12 +45,12 @@ from rclpy.node import Node
 from sessgan_gen.config_cli import field_docs
 from sessgan_gen.environment import Environment
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.node_help import exit_if_help
 from sessgan_gen.ros_conversion import environment_from_msg, occupancy_from_grid_msg
 from sessgan_gen.ros_spin import exit_process, run_node
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import occupancy_to_tokens
+from sessgan_gen.valid_tests import make_environment
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from sessgan_sim.bag_recording import record_directory_under

@@ -24,6 +24,7 @@ from sessgan_gen.fleet import FleetSpec
 from sessgan_gen.json_data import to_json_data
 from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.validation import require_non_negative, require_positive
 from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
 from sessgan_sim.bag_recording import BagStorage, check_record_subdirectory
 from sessgan_sim.episode import EpisodeConfig, check_time_limit
@@ -418,10 +419,8 @@ def _one_of(name: str, value: str, choices: type[StrEnum]) -> None:
 
 
 def _positive(name: str, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise InvalidConfigError(f'parameter {name!r} must be > 0, got {value}')
+    require_positive(f'parameter {name!r}', value, InvalidConfigError)
 
 
 def _not_negative(name: str, value: float) -> None:
-    if not (math.isfinite(value) and value >= 0):
-        raise InvalidConfigError(f'parameter {name!r} must be >= 0, got {value}')
+    require_non_negative(f'parameter {name!r}', value, InvalidConfigError)

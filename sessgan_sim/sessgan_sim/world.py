@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import contextlib
 import enum
-import math
 import os
 import shutil
 import tempfile
@@ -46,6 +45,7 @@ import pybullet as p
 
 from sessgan_gen.environment import Environment
 from sessgan_gen.scenarios import BLOCKED, LOW_OBSTACLE
+from sessgan_gen.validation import require_non_negative, require_positive
 from sessgan_sim.errors import InvalidConfigError, WorldError
 
 
@@ -142,11 +142,9 @@ class WorldStyle:
     def validate(self) -> None:
         """Raise InvalidConfigError unless every dimension is positive and finite."""
         for name in ('wall_height', 'barrier_height', 'low_obstacle_height'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise InvalidConfigError(f'world style: {name} must be > 0 m, got {value}')
-        if not (math.isfinite(self.friction) and self.friction >= 0):
-            raise InvalidConfigError(f'world style: friction must be >= 0, got {self.friction}')
+            require_positive(f'world style: {name}', getattr(self, name), InvalidConfigError,
+                             ' m')
+        require_non_negative('world style: friction', self.friction, InvalidConfigError)
 
 
 @dataclass(frozen=True)
@@ -407,8 +405,7 @@ class World:
         """
         style = style or WorldStyle()
         style.validate()
-        if not (math.isfinite(physics_timestep) and physics_timestep > 0):
-            raise InvalidConfigError(f'physics timestep must be > 0 s, got {physics_timestep}')
+        require_positive('physics timestep', physics_timestep, InvalidConfigError, ' s')
         client = self.client
         p.resetSimulation(physicsClientId=client)
         p.setGravity(0.0, 0.0, 0.0, physicsClientId=client)

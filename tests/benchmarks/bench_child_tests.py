@@ -49,11 +49,11 @@ from sessgan_evolver.screening import certify_route, environment_of  # noqa: E40
 from sessgan_evolver.search import EpisodeLog  # noqa: E402
 from sessgan_evolver.search_methods import load_pyramid  # noqa: E402
 from sessgan_gen.environment import Environment  # noqa: E402
-from sessgan_gen.navigation import make_environment  # noqa: E402
 from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps  # noqa: E402
 from sessgan_gen.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.token_map import tokens_to_occupancy  # noqa: E402
 from sessgan_gen.track_cleanup import clean_generated_maps  # noqa: E402
+from sessgan_gen.valid_tests import make_environment  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -45,8 +45,14 @@ ROOT = Path(__file__).resolve().parents[2]
 for package in ('sessgan_gen', 'sessgan_sim', 'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
+from sessgan_controllers.controller_interface import (  # noqa: E402
+    STOP,
+    Goal,
+    MapData,
+    accepts_map,
+    observed,
+)
 from sessgan_controllers.registry import CONTROLLERS, ControllerSpec  # noqa: E402
-from sessgan_controllers.types import STOP, Goal, MapData, accepts_map, observed  # noqa: E402
 from sessgan_gen.environment import Environment  # noqa: E402
 from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
 from sessgan_gen.progress import ProgressPrinter, format_duration  # noqa: E402

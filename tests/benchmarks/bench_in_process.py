@@ -36,9 +36,9 @@ for package in ('sessgan_gen', 'sessgan_sim', 'sessgan_evolver', 'controllers'):
 
 from sessgan_controllers.registry import CONTROLLERS  # noqa: E402
 from sessgan_evolver.episode_runner import EpisodeRunner  # noqa: E402
-from sessgan_gen.navigation import make_environment  # noqa: E402
 from sessgan_gen.scenarios import SCENARIOS  # noqa: E402
 from sessgan_gen.token_map import load_example_map  # noqa: E402
+from sessgan_gen.valid_tests import make_environment  # noqa: E402
 
 
 def controllers_of(scenario: str) -> list[str]:

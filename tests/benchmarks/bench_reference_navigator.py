@@ -43,8 +43,8 @@ ROOT = Path(__file__).resolve().parents[2]
 for package in ('sessgan_gen', 'sessgan_sim', 'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
+from sessgan_controllers.controller_interface import Goal, MapData, observed  # noqa: E402
 from sessgan_controllers.registry import get_controller  # noqa: E402
-from sessgan_controllers.types import Goal, MapData, observed  # noqa: E402
 from sessgan_gen.environment import Environment  # noqa: E402
 from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
 from sessgan_gen.scenarios import get_scenario  # noqa: E402

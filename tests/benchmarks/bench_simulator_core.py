@@ -47,17 +47,17 @@ for package in ('sessgan_gen', 'sessgan_sim'):
     sys.path.insert(0, str(ROOT / package))
 
 from sessgan_gen.environment import Environment  # noqa: E402
-from sessgan_gen.navigation import make_environment  # noqa: E402
 from sessgan_gen.token_map import load_example_map  # noqa: E402
+from sessgan_gen.valid_tests import make_environment  # noqa: E402
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation  # noqa: E402
-from sessgan_sim.robots import VelocityCommand  # noqa: E402
+from sessgan_sim.robots import BodyCommand  # noqa: E402
 from sessgan_sim.sensors import ClearanceSensor, Lidar, LidarConfig, RayCaster  # noqa: E402
 from sessgan_sim.world import SCAN_RAY_MASK, WorldStyle  # noqa: E402
 
 CLOCKS: dict[str, Callable[[], float]] = {'cpu': time.thread_time, 'wall': time.perf_counter}
 
 
-def wander(observation: Observation) -> VelocityCommand:
+def wander(observation: Observation) -> BodyCommand:
     """A scripted policy that keeps driving: ahead when clear, turning away from walls."""
     info = observation.lidar
     ranges = np.where(np.isfinite(observation.scan), observation.scan, info.range_max)
@@ -66,9 +66,9 @@ def wander(observation: Observation) -> VelocityCommand:
     left = ranges[(angles > 0.5) & (angles < 1.6)].mean()
     right = ranges[(angles < -0.5) & (angles > -1.6)].mean()
     if front < 0.6:
-        return VelocityCommand(0.0, 0.0, 1.5 if left >= right else -1.5)
+        return BodyCommand(0.0, 0.0, 1.5 if left >= right else -1.5)
     turn = float(np.clip(1.5 * (left - right) / (left + right), -1.0, 1.0))
-    return VelocityCommand(min(0.8, float(front) - 0.4), 0.0, turn)
+    return BodyCommand(min(0.8, float(front) - 0.4), 0.0, turn)
 
 
 @dataclass

@@ -338,9 +338,9 @@ def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_cor
 
 def reference_episode():
     """The factory reference environment and its Environment message."""
-    from sessgan_gen.navigation import make_environment
     from sessgan_gen.ros_conversion import environment_to_msg
     from sessgan_gen.token_map import load_example_map
+    from sessgan_gen.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'reference')
     return environment, environment_to_msg(environment)

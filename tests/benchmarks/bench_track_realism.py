@@ -32,10 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'sessgan_gen'))
 
 from sessgan_gen.environment import Environment  # noqa: E402
 from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
-from sessgan_gen.navigation import certify_environment, make_environment  # noqa: E402
 from sessgan_gen.progress import ProgressPrinter  # noqa: E402
 from sessgan_gen.token_map import load_example_map  # noqa: E402
 from sessgan_gen.track_realism import TrackRealism, measure_environment  # noqa: E402
+from sessgan_gen.valid_tests import certify_environment, make_environment  # noqa: E402
 
 FIRST_SEED = 800_000
 BATCH = 20

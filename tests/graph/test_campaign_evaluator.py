@@ -74,7 +74,7 @@ def finished(outcome: str):
 
 @pytest.fixture
 def evaluator(ros_node, tmp_path):
-    from sessgan_evolver.campaign_cli import RosEvaluator
+    from sessgan_evolver.ros_evaluator import RosEvaluator
 
     with ProcessSupervisor(tmp_path / 'logs') as supervisor:
         pool = WorkerPool(supervisor)
@@ -151,10 +151,10 @@ def test_a_dead_simulator_is_seen_at_once_and_its_episode_rerun(evaluator):
 
 
 def test_a_restarted_pair_that_never_gets_ready_is_quarantined(evaluator, monkeypatch):
-    from sessgan_evolver import campaign_cli
+    from sessgan_evolver import ros_evaluator
     from sessgan_evolver.campaign import CampaignError
 
-    monkeypatch.setattr(campaign_cli, 'RESTART_READY_TIMEOUT', 1.0)
+    monkeypatch.setattr(ros_evaluator, 'RESTART_READY_TIMEOUT', 1.0)
     pool = evaluator.pool
     pool.max_restarts = 1
     pair = pool.pairs['/w0']

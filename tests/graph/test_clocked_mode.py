@@ -92,12 +92,18 @@ def test_goal_reaches_subscribers_that_join_during_the_episode(node_processes, r
     environment = environment_msg(room(), 'factory', 'late')
     client = ActionClient(ros_node, EvaluateEnvironment, f'{namespace}/evaluate')
     assert client.wait_for_server(timeout_sec=30)
+    reliable = ReliabilityPolicy.RELIABLE
+    # A reader there from the start: once it has the goal, the episode runs and the goal is
+    # out, so the two readers below join late.
+    early: list = []
+    probe = ros_node.create_subscription(PoseStamped, f'{namespace}/goal_pose', early.append,
+                                         QoSProfile(depth=1, reliability=reliable))
+    assert spin_until(ros_node, lambda: probe.get_publisher_count() > 0, timeout=20)
     sent = client.send_goal_async(EvaluateEnvironment.Goal(environment=environment, seed=1))
     assert spin_until(ros_node, sent.done, timeout=30) and sent.result().accepted
-    assert spin_until(ros_node, lambda: False, timeout=2.0) is False  # the episode is running
+    assert spin_until(ros_node, lambda: early, timeout=30), 'the episode never sent its goal'
 
     latched, volatile = [], []
-    reliable = ReliabilityPolicy.RELIABLE
     ros_node.create_subscription(PoseStamped, f'{namespace}/goal_pose', latched.append,
                                  QoSProfile(depth=1, reliability=reliable,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))

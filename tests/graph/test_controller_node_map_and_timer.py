@@ -19,9 +19,9 @@ import numpy as np  # noqa: E402
 from nav_msgs.msg import OccupancyGrid  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
+from sessgan_controllers.controller_interface import VelocityCommand, parameter  # noqa: E402
 from sessgan_controllers.controller_node import MAP_QOS, ControllerNode  # noqa: E402
 from sessgan_controllers.registry import CONTROLLERS, ControllerSpec  # noqa: E402
-from sessgan_controllers.types import VelocityCommand, parameter  # noqa: E402
 from tests.graph.test_controller_node import goal_msg, harness, odom_msg, scan_msg  # noqa: E402,F401
 
 pytestmark = pytest.mark.graph

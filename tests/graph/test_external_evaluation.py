@@ -46,8 +46,8 @@ def read_csv(path: Path) -> list[dict]:
 
 
 def test_evaluate_and_compare_run_on_the_external_stack(external_stack, tmp_path):
-    evaluated = command(external_stack, 'evaluate', '--external', *SHORT, '--episodes', '3',
-                        '--fault-records', '1', '--repeats', '1', '--output',
+    evaluated = command(external_stack, 'evaluate', '--external', *SHORT, '--fresh-episodes',
+                        '3', '--max-fault-records', '1', '--repeats', '1', '--output-dir',
                         str(tmp_path / 'evaluate'))
     assert evaluated.returncode == 0, evaluated.stderr[-4000:]
     assert 'external workers: /w0/evaluate' in evaluated.stderr
@@ -77,7 +77,7 @@ def test_evaluate_and_compare_run_on_the_external_stack(external_stack, tmp_path
     compared = command(external_stack, 'compare', '--external', *SHORT, '--methods',
                        'random,sessgan', '--search-seeds', '0', '--budget', '2',
                        '--population', '2', '--maps-per-member', '1', '--fresh-episodes', '2',
-                       '--repeats', '1', '--max-fault-records', '1', '--output',
+                       '--repeats', '1', '--max-fault-records', '1', '--output-dir',
                        str(tmp_path / 'compare'))
     assert compared.returncode == 0, compared.stderr[-4000:]
     runs = read_csv(tmp_path / 'compare' / 'runs.csv')

@@ -28,7 +28,7 @@ def crossing_environment(environment_id: str = 'fleet-crossing'):
     import dataclasses
 
     from sessgan_gen.environment import FleetRobot, Pose2D
-    from sessgan_gen.navigation import certify_fleet, make_environment
+    from sessgan_gen.valid_tests import certify_fleet, make_environment
 
     base = make_environment(room(16), 'factory', environment_id, seed=0)
     environment = dataclasses.replace(

@@ -26,8 +26,8 @@ DWELL_TIME = 2.0
 def mission_environment(stations: int = 1):
     """The factory example with ``stations`` stations before home (core Environment)."""
     from sessgan_gen.missions import MissionSpec
-    from sessgan_gen.navigation import make_environment
     from sessgan_gen.token_map import load_example_map
+    from sessgan_gen.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory',
                                    'factory-mission', seed=0,
@@ -117,8 +117,8 @@ def test_mission_failure_bag_replays_and_resimulates(node_processes, ros_node, t
 
 def test_a_nav2_stack_gets_each_waypoint_as_a_navigate_to_pose_goal(node_processes, ros_node):
     from sessgan_gen.missions import MissionSpec
-    from sessgan_gen.navigation import make_environment
     from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_gen.valid_tests import make_environment
     from tests.graph.test_clocked_mode import start_stand_in
     from tests.graph.test_simulator_graph import room
 

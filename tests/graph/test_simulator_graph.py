@@ -64,8 +64,8 @@ def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0,
 
 
 def environment_msg(cells, scenario: str, env_id: str):
-    from sessgan_gen.navigation import make_environment
     from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_gen.valid_tests import make_environment
 
     return environment_to_msg(make_environment(cells, scenario, env_id))
 

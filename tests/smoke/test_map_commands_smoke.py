@@ -63,13 +63,15 @@ def test_train_on_a_map_server_map_and_export_its_maps(tmp_path, capsys):
 
 def test_map_commands_report_bad_input_clearly(tmp_path, capsys):
     yaml_path, _ = write_negated_facility(tmp_path)
+    # Bad options, and inputs they name that cannot be used, are usage errors: exit 2,
+    # nothing written.
     assert train_main(['--map-yaml', str(yaml_path), '--map-file', 'x.txt', '--output',
-                       str(tmp_path / 'x.pt')]) == 1
+                       str(tmp_path / 'x.pt')]) == 2
     assert 'not both' in capsys.readouterr().err
     assert train_main(['--map-yaml', str(tmp_path / 'missing.yaml'), '--output',
-                       str(tmp_path / 'x.pt')]) == 1
+                       str(tmp_path / 'x.pt')]) == 2
     assert 'missing.yaml' in capsys.readouterr().err
-    # Bad options are usage errors: exit 2, nothing written.
+    assert not (tmp_path / 'x.pt').exists()
     assert export_main(['--output', str(tmp_path / 'a.yaml')]) == 2
     assert 'exactly one of' in capsys.readouterr().err
     assert export_main(['--generate', '--bag', str(tmp_path), '--output',

@@ -32,15 +32,16 @@ def test_confirmed_faults_fail_the_suite_and_a_controller_that_avoids_them_passe
         ros_workspace, tmp_path):
     # Eight fresh maps of the shipped factory generator: the Nearness-Diagram robot collides
     # on some (measured: 2, confirmed); the reference navigator crosses the same maps.
-    evaluate = run(['evaluate', '--controller', 'nearness_diagram', '--episodes', '8',
-                    '--fault-records', '-1', '--repeats', '1', '--output', 'found'], tmp_path)
+    evaluate = run(['evaluate', '--controller', 'nearness_diagram', '--fresh-episodes', '8',
+                    '--max-fault-records', '-1', '--repeats', '1', '--output-dir', 'found'],
+                   tmp_path)
     assert evaluate.returncode == 0, evaluate.stderr[-3000:]
     suite_file = tmp_path / 'found' / 'suite.yaml'
     scenarios = yaml.safe_load(suite_file.read_text())['scenarios']
     assert scenarios, 'no confirmed fault to keep'
     assert all(entry['controller'] == 'nearness_diagram' for entry in scenarios)
 
-    failing = run(['suite', str(suite_file), '--output', 'ci-nd'], tmp_path)
+    failing = run(['suite', str(suite_file), '--output-dir', 'ci-nd'], tmp_path)
     assert failing.returncode == 1, failing.stdout + failing.stderr[-3000:]
     counts, verdicts = junit_counts(tmp_path / 'ci-nd' / 'junit.xml')
     assert (counts['tests'], counts['failures'], counts['errors']) == (
@@ -49,7 +50,7 @@ def test_confirmed_faults_fail_the_suite_and_a_controller_that_avoids_them_passe
     assert (tmp_path / 'ci-nd' / 'summary.md').is_file()
     assert (tmp_path / 'ci-nd' / 'scenarios.csv').is_file()
 
-    passing = run(['suite', str(suite_file), '--output', 'ci-ref', '--controller',
+    passing = run(['suite', str(suite_file), '--output-dir', 'ci-ref', '--controller',
                    'reference_navigator'], tmp_path)
     assert passing.returncode == 0, passing.stdout + passing.stderr[-3000:]
     counts, verdicts = junit_counts(tmp_path / 'ci-ref' / 'junit.xml')
@@ -58,7 +59,7 @@ def test_confirmed_faults_fail_the_suite_and_a_controller_that_avoids_them_passe
 
     broken = tmp_path / 'broken.yaml'
     broken.write_text(suite_file.read_text().replace(scenarios[0]['bag'], 'faults/missing'))
-    refused = run(['suite', str(broken), '--output', 'ci-broken'], tmp_path)
+    refused = run(['suite', str(broken), '--output-dir', 'ci-broken'], tmp_path)
     assert refused.returncode == 2 and scenarios[0]['name'] in refused.stderr, refused.stderr
     assert not (tmp_path / 'ci-broken').exists()
 
@@ -70,8 +71,8 @@ def test_ctrl_c_stops_the_suite_and_reports_what_ran(ros_workspace, tmp_path):
     import time
 
     from sessgan_evolver.in_process import InProcessEvaluator
-    from sessgan_gen.navigation import make_environment
     from sessgan_gen.token_map import load_example_map
+    from sessgan_gen.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'example')
     with InProcessEvaluator('factory', 'nearness_diagram',

@@ -54,19 +54,21 @@ def test_train_writes_a_checkpoint_that_loads_and_samples(tmp_path, capsys):
     # Resuming a finished run does nothing; a changed option is refused.
     assert main(argv + ['--resume']) == 0
     assert 'already complete' in capsys.readouterr().err
-    assert main(argv + ['--resume', '--seed', '6']) == 1
+    assert main(argv + ['--resume', '--seed', '6']) == 2  # a usage error: nothing written
     assert 'seed' in capsys.readouterr().err
 
 
 def test_train_reports_bad_input_clearly(tmp_path, capsys):
+    # Inputs the options name that cannot be used are usage errors: exit 2, nothing written.
     assert main(['--map-file', str(tmp_path / 'missing.txt'), '--output',
-                 str(tmp_path / 'x.pt')]) == 1
+                 str(tmp_path / 'x.pt')]) == 2
     assert 'missing.txt' in capsys.readouterr().err
     map_file = tmp_path / 'tiny.txt'
     map_file.write_text(TINY_FACTORY)
     assert main(['--scenario', 'drone', '--map-file', str(map_file), '--output',
-                 str(tmp_path / 'x.pt')]) == 1
+                 str(tmp_path / 'x.pt')]) == 2
     assert 'factory' in capsys.readouterr().err
     assert main(['--map-file', str(map_file), '--output', str(tmp_path / 'y.pt'),
-                 '--resume']) == 1
+                 '--resume']) == 2
     assert 'does not exist' in capsys.readouterr().err
+    assert sorted(path.name for path in tmp_path.iterdir()) == ['tiny.txt']

@@ -7,6 +7,7 @@ import pytest
 
 from sessgan_evolver import campaign_cli, compare_cli, evaluate_cli
 from sessgan_evolver.campaign import CampaignConfig, CampaignError
+from sessgan_evolver.errors import CompareError
 from sessgan_gen import export_cli, report_cli, train_cli
 from sessgan_sim.episode import MAX_TIME_LIMIT
 
@@ -55,10 +56,12 @@ def test_the_time_limit_bound_is_documented_and_inclusive():
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--time-limit', '-5'], '--time-limit'), (['--time-limit', 'nan'], '--time-limit'),
     (['--time-limit', '1e9'], '--time-limit'), (['--controller', 'nope'], 'nope'),
-    (['--repeats', '-1'], '--repeats'), (['--fault-records', '-2'], '--fault-records'),
-    (['--coarse-cells', '0'], 'coarse_cells'), (['--seed', '-1'], '--seed')])
+    (['--repeats', '-1'], '--repeats'), (['--max-fault-records', '-2'], '--max-fault-records'),
+    (['--coarse-cells', '0'], 'coarse_cells'), (['--evaluation-seed', '-1'], '--evaluation-seed'),
+    # The spellings before the rename, accepted for one release: the new name is reported.
+    (['--seed', '-1'], '--evaluation-seed'), (['--fault-records', '-2'], '--max-fault-records')])
 def test_evaluate_refuses_a_bad_setting_before_its_output(tmp_path, capsys, arguments, named):
-    status = evaluate_cli.main(['--episodes', '1', '--output', str(tmp_path / 'out'),
+    status = evaluate_cli.main(['--fresh-episodes', '1', '--output-dir', str(tmp_path / 'out'),
                                 *arguments])
     err = capsys.readouterr().err
     assert status == 2, err
@@ -71,15 +74,33 @@ def test_evaluate_refuses_a_bad_setting_before_its_output(tmp_path, capsys, argu
     (['--checkpoint', '/nonexistent.pt'], 'does not exist'),
     (['--station-dwell-time', 'nan'], 'station_dwell_time')])
 def test_compare_refuses_a_bad_setting_before_its_output(tmp_path, capsys, arguments, named):
-    status = compare_cli.main(['--output', str(tmp_path / 'out'), *arguments])
+    status = compare_cli.main(['--output-dir', str(tmp_path / 'out'), *arguments])
     err = capsys.readouterr().err
     assert status == 2, err
     assert named in err and not (tmp_path / 'out').exists()
 
 
+def test_compare_tells_a_usage_error_from_a_failed_comparison(tmp_path, capsys, monkeypatch):
+    output = tmp_path / 'out'
+    output.mkdir()
+    (output / 'report.md').write_text('an earlier comparison')
+    assert compare_cli.main(['--output-dir', str(output)]) == 2
+    assert 'holds a comparison already' in capsys.readouterr().err
+
+    def fails(*args):
+        raise CompareError('a method failed')
+
+    monkeypatch.setattr(compare_cli, 'run_comparison', fails)
+    assert compare_cli.main(['--output-dir', str(tmp_path / 'other')]) == 1
+    assert 'a method failed' in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--beta1', 'nan'], 'beta1'), (['--lr-decay', '0'], 'lr_decay'),
-    (['--coarsest-coverage', 'inf'], 'coarsest_coverage'), (['--seed', '-1'], 'seed')])
+    (['--coarsest-coverage', 'inf'], 'coarsest_coverage'), (['--seed', '-1'], 'seed'),
+    # The inputs an option names count as options: read before anything is written.
+    (['--map-file', '/nonexistent.txt'], '/nonexistent.txt'),
+    (['--map-yaml', '/nonexistent.yaml'], '/nonexistent.yaml'), (['--resume'], '--resume')])
 def test_train_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments, named):
     output = tmp_path / 'out' / 'generator.pt'
     status = train_cli.main(['--output', str(output), '--iterations', '1', *arguments])
@@ -99,11 +120,41 @@ def test_export_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments
     assert named in err and not (tmp_path / 'out').exists()
 
 
+def test_export_refuses_a_map_file_that_is_no_token_map(tmp_path, capsys):
+    bad = tmp_path / 'notes.txt'
+    bad.write_text('{}\n')
+    status = export_cli.main(['--map-file', str(bad), '--output',
+                              str(tmp_path / 'out' / 'map.yaml')])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert 'notes.txt' in err and not (tmp_path / 'out').exists()
+
+
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--samples', '0'], '--samples'), (['--scenarios', 'moon'], 'moon'),
-    (['--threads', '-1'], '--threads')])
+    (['--threads', '-1'], '--threads'),
+    (['--factory-checkpoint', '/nonexistent.pt'], '--factory-checkpoint')])
 def test_report_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments, named):
     status = report_cli.main(['--output-dir', str(tmp_path / 'out'), *arguments])
     err = capsys.readouterr().err
     assert status == 2, err
     assert named in err and not (tmp_path / 'out').exists()
+
+
+def test_renamed_options_keep_their_old_spelling_for_a_release(capsys):
+    from sessgan_evolver.suite_cli import parse_args as suite_args
+
+    new = evaluate_cli.parse_args(['--evaluation-seed', '7', '--fresh-episodes', '3',
+                                   '--max-fault-records', '2', '--output-dir', 'here'])
+    old = evaluate_cli.parse_args(['--seed', '7', '--episodes', '3', '--fault-records', '2',
+                                   '--output', 'here'])
+    assert vars(old) == vars(new)
+    assert compare_cli.parse_args(['--output', 'here']).output == \
+        compare_cli.parse_args(['--output-dir', 'here']).output
+    assert suite_args(['s.yaml', '--output', 'here']).output == \
+        suite_args(['s.yaml', '--output-dir', 'here']).output
+    with pytest.raises(SystemExit):
+        evaluate_cli.parse_args(['--help'])
+    shown = capsys.readouterr().out
+    assert '--output-dir' in shown and '--fault-records' not in shown.replace(
+        '--max-fault-records', '')

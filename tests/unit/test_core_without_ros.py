@@ -14,17 +14,37 @@ ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = {'sessgan_gen': ROOT / 'sessgan_gen', 'sessgan_sim': ROOT / 'sessgan_sim',
             'sessgan_evolver': ROOT / 'sessgan_evolver',
             'sessgan_controllers': ROOT / 'controllers'}
-# Modules that are ROS adapters by design: nodes, CLIs that start nodes, message conversion.
-ROS_MODULES = {'generator_node', 'ros_conversion', 'simulator_node', 'ros_messages',
-               'controller_node', 'messages', 'campaign_cli', 'replay_cli'}
+# Modules that are ROS adapters by design: nodes, CLIs that start nodes, message conversion;
+# and subpackages that are (sessgan_sim.worker: the simulator node's side, in parts).
+ROS_MODULES = {'sessgan_gen.generator_node', 'sessgan_gen.ros_conversion',
+               'sessgan_sim.simulator_node', 'sessgan_sim.ros_messages',
+               'sessgan_controllers.controller_node', 'sessgan_controllers.messages',
+               'sessgan_evolver.campaign_cli', 'sessgan_evolver.replay_cli'}
+ROS_SUBPACKAGES = {'sessgan_sim.worker'}
 BLOCKED = ['rclpy', 'std_msgs', 'geometry_msgs', 'nav_msgs', 'sensor_msgs', 'rosgraph_msgs',
            'tf2_msgs', 'builtin_interfaces', 'sessgan_interfaces']
 
 
+def all_modules() -> list[str]:
+    """Every module of every package, subpackages included (a subpackage by its name)."""
+    modules = []
+    for package, root in PACKAGES.items():
+        for path in (root / package).rglob('*.py'):
+            parts = path.relative_to(root).with_suffix('').parts
+            modules.append('.'.join(parts[:-1] if parts[-1] == '__init__' else parts))
+    return sorted(modules)
+
+
 def core_modules() -> list[str]:
-    return sorted(f'{package}.{path.stem}' for package, root in PACKAGES.items()
-                  for path in (root / package).glob('*.py')
-                  if path.stem not in ROS_MODULES and path.stem != '__init__')
+    return [name for name in all_modules()
+            if name not in PACKAGES and name not in ROS_MODULES
+            and not any(name.startswith(f'{package}.') for package in ROS_SUBPACKAGES)]
+
+
+def test_every_ros_exemption_names_a_module_that_exists():
+    # A renamed adapter must not leave its old name exempt and its new one unchecked.
+    assert ROS_MODULES | ROS_SUBPACKAGES <= set(all_modules())
+    assert 'sessgan_sim.worker.stepping' in all_modules()  # subpackages are found
 
 
 def test_core_modules_import_without_ros():

@@ -122,11 +122,14 @@ class RobotTopics:
         would be answered with the previous goal. A reader that does not acknowledge within a
         second (a stalled one) does not hold the episode up.
         """
+        # Counted before it is sent: a reader that matches while the goal goes out or is
+        # acknowledged may miss it (a volatile one), so it counts as new and gets it again.
+        readers = self.readers('goal_pose')
         self.publish('goal_pose', rm.goal_msg(time_of(stamp_ns), goal.x, goal.y, goal.yaw),
                      stamp_ns, recording)
         self.publishers['goal_pose'].wait_for_all_acked(GOAL_ACK_TIMEOUT)
         self._goal = (goal, stamp_ns)
-        self._goal_readers_told = self.readers('goal_pose')
+        self._goal_readers_told = readers
 
     def forget_goal(self) -> None:
         """A new episode: nothing to resend until its goal is sent on goal_pose."""

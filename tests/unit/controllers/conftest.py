@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import pytest
 
-from sessgan_controllers.types import RobotState, ScanData
+from sessgan_controllers.controller_interface import RobotState, ScanData
 
 ScanFactory = Callable[..., ScanData]
 

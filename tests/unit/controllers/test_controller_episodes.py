@@ -15,10 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip('pybullet')
-
-from sessgan_controllers.registry import get_controller  # noqa: E402
-from sessgan_controllers.types import (  # noqa: E402
+from sessgan_controllers.controller_interface import (
     STOP,
     Controller,
     Goal,
@@ -26,14 +23,15 @@ from sessgan_controllers.types import (  # noqa: E402
     accepts_map,
     observed,
 )
-from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
-from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
-from sessgan_gen.navigation import make_environment  # noqa: E402
-from sessgan_gen.route_certificate import certify, map_clearance, required_clearances  # noqa: E402,E501
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
-from sessgan_gen.token_map import load_example_map, read_token_map  # noqa: E402
-from sessgan_sim.episode import Episode, EpisodeConfig  # noqa: E402
-from sessgan_sim.metrics import EpisodeMetrics, Outcome, is_controller_failure  # noqa: E402,E501
+from sessgan_controllers.registry import get_controller
+from sessgan_gen.environment import Environment, Pose2D
+from sessgan_gen.environment_sampler import EnvironmentSampler
+from sessgan_gen.route_certificate import certify, map_clearance, required_clearances
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map, read_token_map
+from sessgan_gen.valid_tests import make_environment
+from sessgan_sim.episode import Episode, EpisodeConfig
+from sessgan_sim.metrics import EpisodeMetrics, Outcome, is_controller_failure
 
 pytestmark = pytest.mark.unit
 

@@ -12,6 +12,7 @@ from nav_msgs.msg import Odometry  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
+from sessgan_controllers.controller_interface import VelocityCommand  # noqa: E402
 from sessgan_controllers.messages import (  # noqa: E402
     odom_from_cdr,
     scan_from_msg,
@@ -20,7 +21,6 @@ from sessgan_controllers.messages import (  # noqa: E402
     twist_stamped_from_command,
     yaw_from_quaternion,
 )
-from sessgan_controllers.types import VelocityCommand  # noqa: E402
 
 pytestmark = pytest.mark.unit
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from sessgan_controllers.controller_interface import config_help
 from sessgan_controllers.errors import InvalidConfigError, UnknownControllerError
 from sessgan_controllers.registry import CONTROLLERS, get_controller
-from sessgan_controllers.types import config_help
 
 pytestmark = pytest.mark.unit
 

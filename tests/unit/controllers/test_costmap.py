@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import MapData, RobotState
 from sessgan_controllers.costmap import Costmap, CostmapConfig, clearance_field
-from sessgan_controllers.types import MapData, RobotState
 
 pytestmark = pytest.mark.unit
 

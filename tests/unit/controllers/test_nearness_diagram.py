@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import STOP, Goal, RobotState, ScanData
 from sessgan_controllers.nearness_diagram import (
     NearnessDiagramConfig,
     NearnessDiagramController,
     Situation,
 )
-from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
 
 pytestmark = pytest.mark.unit
 

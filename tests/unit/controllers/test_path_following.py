@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import RobotState
 from sessgan_controllers.path_following import (
     CarLimits,
     DiffDriveLimits,
@@ -21,7 +22,6 @@ from sessgan_controllers.path_following import (
     speed_profile,
 )
 from sessgan_controllers.path_planning import Path
-from sessgan_controllers.types import RobotState
 
 pytestmark = pytest.mark.unit
 

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import MapData
 from sessgan_controllers.costmap import Costmap, CostmapConfig
 from sessgan_controllers.path_planning import (
     Path,
@@ -16,7 +17,6 @@ from sessgan_controllers.path_planning import (
     astar,
     plan_path,
 )
-from sessgan_controllers.types import MapData
 
 pytestmark = pytest.mark.unit
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import STOP, Goal, RobotState, ScanData
 from sessgan_controllers.race_controller import RaceController, RaceControllerConfig
-from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
 
 pytestmark = pytest.mark.unit
 

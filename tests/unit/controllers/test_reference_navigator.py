@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import STOP, Goal, MapData, RobotState, accepts_map
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.reference_navigator import (
     ROBOT_PRESETS,
@@ -15,7 +16,6 @@ from sessgan_controllers.reference_navigator import (
     ReferenceNavigatorConfig,
 )
 from sessgan_controllers.registry import get_controller
-from sessgan_controllers.types import STOP, Goal, MapData, RobotState, accepts_map
 
 pytestmark = pytest.mark.unit
 

@@ -14,17 +14,15 @@ from __future__ import annotations
 
 import pytest
 
-pytest.importorskip('pybullet')
-
-from sessgan_controllers.reference_navigator import ReferenceNavigator  # noqa: E402
-from sessgan_controllers.registry import get_controller  # noqa: E402
-from sessgan_controllers.types import Goal, MapData, observed  # noqa: E402
-from sessgan_gen.environment import Environment  # noqa: E402
-from sessgan_gen.navigation import make_environment  # noqa: E402
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
-from sessgan_gen.token_map import load_example_map  # noqa: E402
-from sessgan_sim.episode import Episode, EpisodeConfig  # noqa: E402
-from sessgan_sim.metrics import EpisodeMetrics, Outcome  # noqa: E402
+from sessgan_controllers.controller_interface import Goal, MapData, observed
+from sessgan_controllers.reference_navigator import ReferenceNavigator
+from sessgan_controllers.registry import get_controller
+from sessgan_gen.environment import Environment
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
+from sessgan_sim.episode import Episode, EpisodeConfig
+from sessgan_sim.metrics import EpisodeMetrics, Outcome
 
 pytestmark = pytest.mark.unit
 

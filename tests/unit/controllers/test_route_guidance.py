@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import Goal, MapData, RobotState, accepts_map
 from sessgan_controllers.registry import get_controller
 from sessgan_controllers.route_guidance import RouteGuidanceConfig, RouteGuide
-from sessgan_controllers.types import Goal, MapData, RobotState, accepts_map
 
 pytestmark = pytest.mark.unit
 

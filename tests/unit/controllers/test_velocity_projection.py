@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from sessgan_controllers.controller_interface import STOP, Goal, RobotState, ScanData
 from sessgan_controllers.errors import InvalidConfigError
-from sessgan_controllers.types import STOP, Goal, RobotState, ScanData
 from sessgan_controllers.velocity_projection import (
     VelocityProjectionConfig,
     VelocityProjectionController,

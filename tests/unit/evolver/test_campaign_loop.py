@@ -9,8 +9,8 @@ import json
 import pytest
 import torch
 
+from sessgan_controllers.controller_interface import Goal, observed
 from sessgan_controllers.registry import get_controller
-from sessgan_controllers.types import Goal, observed
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError
 from sessgan_evolver.campaign_cli import (
     campaign_parser,

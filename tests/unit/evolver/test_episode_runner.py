@@ -7,8 +7,8 @@ import pytest
 
 from sessgan_evolver.episode_runner import EpisodeRunner, EpisodeRunnerError
 from sessgan_evolver.in_process import NOT_SIMULATED, InProcessEvaluator
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

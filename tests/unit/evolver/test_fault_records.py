@@ -20,8 +20,8 @@ from sessgan_evolver.fault_records import PICTURE_FILE, confirm_faults
 from sessgan_evolver.faults import FaultRule, group_faults
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.bag_recording import jazzy_typestore
 
 pytestmark = pytest.mark.unit

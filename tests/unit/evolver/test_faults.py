@@ -17,8 +17,8 @@ from sessgan_evolver.faults import (
     is_valid_failure,
     key_of_failure,
 )
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

@@ -8,8 +8,8 @@ from sessgan_evolver.bag_reading import read_bag_topics
 from sessgan_evolver.episode_runner import EpisodeRunner
 from sessgan_evolver.fault_picture import scene_from_bag
 from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

@@ -12,7 +12,7 @@ import torch
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import AlgorithmStateError
 from sessgan_evolver.genome import Genome
-from sessgan_evolver.operators import OperatorConfig
+from sessgan_evolver.genome_operators import OperatorConfig
 from sessgan_evolver.seeding import SeedStream, shared_seeds
 
 pytestmark = pytest.mark.unit

@@ -8,7 +8,7 @@ import torch
 
 from sessgan_evolver.errors import GenomeError
 from sessgan_evolver.genome import Genome
-from sessgan_evolver.operators import OperatorConfig, crossover, mutate, tensor_spread
+from sessgan_evolver.genome_operators import OperatorConfig, crossover, mutate, tensor_spread
 
 pytestmark = pytest.mark.unit
 

@@ -7,6 +7,7 @@ import torch
 
 from sessgan_evolver.errors import GenomeError
 from sessgan_evolver.genome import Genome, clamp_positive, is_evolvable_entry
+from sessgan_gen.model import GeneratorPyramid
 
 pytestmark = pytest.mark.unit
 
@@ -25,8 +26,7 @@ def test_default_rule_keeps_weights_and_batchnorm_statistics_only(state_dict):
 
 
 def test_default_rule_matches_the_real_pyramid_genome_names():
-    model = pytest.importorskip('sessgan_gen.model')
-    pyramid = model.GeneratorPyramid(2, [(8, 8), (16, 16)], channels=4)
+    pyramid = GeneratorPyramid(2, [(8, 8), (16, 16)], channels=4)
     assert Genome.from_state_dict(pyramid.state_dict()).names() == pyramid.genome_names()
 
 
@@ -52,12 +52,11 @@ def test_to_state_dict_substitutes_genes_and_keeps_fixed_buffers(state_dict):
 
 
 def test_to_state_dict_loads_into_the_real_pyramid():
-    model = pytest.importorskip('sessgan_gen.model')
-    pyramid = model.GeneratorPyramid(2, [(8, 8), (16, 16)], channels=4)
+    pyramid = GeneratorPyramid(2, [(8, 8), (16, 16)], channels=4)
     template = pyramid.state_dict()
     genome = Genome.from_state_dict(template)
     doubled = Genome({name: t * 2.0 for name, t in genome.items()})
-    fresh = model.GeneratorPyramid(2, [(8, 8), (16, 16)], channels=4)
+    fresh = GeneratorPyramid(2, [(8, 8), (16, 16)], channels=4)
     fresh.load_state_dict(doubled.to_state_dict(template))
     assert torch.equal(fresh.generators[0].tail.weight, pyramid.generators[0].tail.weight * 2)
 

@@ -28,8 +28,8 @@ from sessgan_evolver.regression_suite import (
     suite_from_bag_directory,
     write_suite_file,
 )
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

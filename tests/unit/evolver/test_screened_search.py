@@ -35,8 +35,8 @@ from sessgan_evolver.search_methods import (
     SearchMethodError,
     make_baseline,
 )
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 torch.set_num_threads(1)

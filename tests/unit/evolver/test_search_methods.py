@@ -18,8 +18,8 @@ from sessgan_evolver.search_methods import (
     make_baseline,
 )
 from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.sampling import sample_token_maps
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 torch.set_num_threads(1)

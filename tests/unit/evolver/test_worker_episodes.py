@@ -12,7 +12,7 @@ from sessgan_evolver.faults import FaultRule, key_of_failure
 from sessgan_evolver.in_process import NOT_SIMULATED, InProcessEvaluator
 from sessgan_evolver.worker_episodes import WorkerEvaluator
 from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.navigation import make_environment
+from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

@@ -124,8 +124,7 @@ def test_default_checkpoint_paths():
 @pytest.mark.parametrize('scenario', ['factory', 'racetrack', 'drone'])
 def test_shipped_checkpoints_load_and_sample(scenario):
     path = default_checkpoint_path(scenario)
-    if not path.exists():
-        pytest.skip(f'{path.name} not shipped yet')
+    assert path.is_file(), f'{path} is shipped with the package and must be there'
     assert path.stat().st_size < 4 * 2**20  # a few MB at most
     pyramid, metadata = load_checkpoint(path, scenario=scenario)
     assert metadata['complete'] is True

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from sessgan_gen.navigation import (
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import (
     certify_environment,
     footprint_free_mask,
     inflate,
@@ -11,8 +13,6 @@ from sessgan_gen.navigation import (
     reachable_regions,
     shortest_path_in_free,
 )
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
 
 pytestmark = pytest.mark.unit
 

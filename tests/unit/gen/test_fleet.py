@@ -21,10 +21,10 @@ from sessgan_gen.fleet import (
     separation,
 )
 from sessgan_gen.missions import MissionSpec
-from sessgan_gen.navigation import certify_fleet, environment_is_feasible, make_environment
 from sessgan_gen.route_certificate import map_clearance, required_clearances
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import certify_fleet, environment_is_feasible, make_environment
 from tests.unit.gen.served_maps import served_token_maps
 
 pytestmark = pytest.mark.unit

@@ -10,14 +10,14 @@ import pytest
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.errors import InvalidEnvironmentError, InvalidMissionError
 from sessgan_gen.missions import MAX_MISSION_STATIONS, MissionSpec
-from sessgan_gen.navigation import (
+from sessgan_gen.route_certificate import map_clearance, required_clearances
+from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import (
     certify_mission,
     environment_is_feasible,
     make_environment,
 )
-from sessgan_gen.route_certificate import map_clearance, required_clearances
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
 from tests.unit.gen.served_maps import served_token_maps
 
 pytestmark = pytest.mark.unit

@@ -105,5 +105,7 @@ def test_report_command_writes_into_the_output_directory(checkpoints, tmp_path, 
     assert main(argv) == 0
     assert (tmp_path / 'out' / 'report.md').exists()
     assert 'Uniqueness' in capsys.readouterr().out
+    # A checkpoint that is not there is a usage error: exit 2, nothing written.
     assert main(['--output-dir', str(tmp_path / 'bad'), '--samples', '2',
-                 '--factory-checkpoint', str(tmp_path / 'missing.pt')]) == 1
+                 '--factory-checkpoint', str(tmp_path / 'missing.pt')]) == 2
+    assert not (tmp_path / 'bad').exists()

@@ -7,7 +7,6 @@ import pytest
 
 from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.grid_search import bfs, flat_grid
-from sessgan_gen.navigation import certify_environment, make_environment
 from sessgan_gen.route_certificate import (
     bottleneck_clearance,
     certificate_subdivision,
@@ -19,6 +18,7 @@ from sessgan_gen.route_certificate import (
 )
 from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.token_map import tokens_to_occupancy
+from sessgan_gen.valid_tests import certify_environment, make_environment
 
 pytestmark = pytest.mark.unit
 

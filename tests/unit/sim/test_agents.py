@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.agents import AgentConfig, DummyAgents, PatrolPath
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError
-from sessgan_sim.robots import VelocityCommand, create_robot
+from sessgan_sim.robots import BodyCommand, create_robot
 from sessgan_sim.sensors import LidarConfig
 from sessgan_sim.world import World
 
@@ -107,7 +107,7 @@ def test_agents_move_at_their_speed():
         before = episode.agents.positions.copy()
         paths = episode.agents.paths
         for _ in range(10):
-            episode.step(VelocityCommand())
+            episode.step(BodyCommand())
         after = episode.agents.positions
         expected = [path.position(0.5 * 0.5) for path in paths]  # 0.5 m/s for 0.5 s
         np.testing.assert_allclose(after, expected)
@@ -126,7 +126,7 @@ def test_an_agent_running_into_the_robot_is_a_collision():
         episode.reset(environment, config)
         hit = False
         for _ in range(1000):
-            observation = episode.step(VelocityCommand(0.3, 0.0, 0.0)).observation
+            observation = episode.step(BodyCommand(0.3, 0.0, 0.0)).observation
             if observation.in_contact:
                 hit = True
                 break

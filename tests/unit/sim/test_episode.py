@@ -9,13 +9,13 @@ import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.grid_search import distance_field
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.agents import AgentConfig
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError, InvalidConfigError
 from sessgan_sim.metrics import ContactKind, Outcome, is_controller_failure
-from sessgan_sim.robots import VelocityCommand
+from sessgan_sim.robots import BodyCommand
 from sessgan_sim.sensors import LidarConfig
 
 pytestmark = pytest.mark.unit
@@ -51,14 +51,14 @@ def run(episode: Episode, policy, limit: int = 10000):
     return episode.metrics()
 
 
-def wander(observation: Observation | None) -> VelocityCommand:
+def wander(observation: Observation | None) -> BodyCommand:
     """A scan-driven policy whose commands depend on every observation bit."""
     if observation is None:
-        return VelocityCommand(0.3, 0.0, 0.0)
+        return BodyCommand(0.3, 0.0, 0.0)
     ranges = np.nan_to_num(observation.scan, posinf=10.0, neginf=0.0)
     front = float(ranges[150:210].min())
     turn = float(ranges[200:300].mean() - ranges[60:160].mean())
-    return VelocityCommand(min(0.8, front - 0.4), 0.0, float(np.clip(turn, -1.5, 1.5)))
+    return BodyCommand(min(0.8, front - 0.4), 0.0, float(np.clip(turn, -1.5, 1.5)))
 
 
 @pytest.fixture
@@ -80,7 +80,7 @@ def test_reset_returns_the_first_observation(episode):
 
 def test_driving_to_the_goal_reaches_it(episode):
     episode.reset(corridor(), config())
-    metrics = run(episode, VelocityCommand(1.0, 0.0, 0.0))
+    metrics = run(episode, BodyCommand(1.0, 0.0, 0.0))
     assert metrics.outcome is Outcome.GOAL_REACHED
     assert metrics.final_distance_to_goal <= episode.config.goal_tolerance
     assert metrics.distance_travelled == pytest.approx(6.0 - metrics.final_distance_to_goal,
@@ -92,12 +92,12 @@ def test_driving_to_the_goal_reaches_it(episode):
 
 def test_standing_still_ends_stuck_or_at_the_time_limit(episode):
     episode.reset(corridor(), config(stuck_timeout=2.0))
-    metrics = run(episode, VelocityCommand())
+    metrics = run(episode, BodyCommand())
     assert metrics.outcome is Outcome.STUCK
     assert metrics.simulation_time == pytest.approx(2.0)
     assert 'no progress' in metrics.detail
     episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=3.0))
-    metrics = run(episode, VelocityCommand())
+    metrics = run(episode, BodyCommand())
     assert metrics.outcome is Outcome.TIMEOUT
     assert metrics.simulation_time == pytest.approx(3.0)
     assert metrics.ticks == 60
@@ -117,7 +117,7 @@ def test_a_detour_away_from_the_goal_is_not_stuck(episode):
     env = environment(rows, (1.75, 1.75, math.pi), (1.75, 0.75))
     observation = episode.reset(env, config(stuck_timeout=1.0, goal_tolerance=0.2))
     while observation.pose.x > 0.8 and not episode.done:
-        observation = episode.step(VelocityCommand(1.0, 0.0, 0.0)).observation
+        observation = episode.step(BodyCommand(1.0, 0.0, 0.0)).observation
     assert episode.outcome is None
     # Straight-line distance to the goal grew; the distance along free space shrank.
     assert math.hypot(observation.pose.x - 1.75, observation.pose.y - 0.75) > 1.3
@@ -125,7 +125,7 @@ def test_a_detour_away_from_the_goal_is_not_stuck(episode):
 
 def test_pressing_into_a_wall_is_one_collision(episode):
     episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=4.0))
-    metrics = run(episode, VelocityCommand(-0.3, 0.0, 0.0))  # back into the west wall
+    metrics = run(episode, BodyCommand(-0.3, 0.0, 0.0))  # back into the west wall
     assert metrics.collisions == 1
     assert metrics.outcome is Outcome.TIMEOUT
     assert metrics.min_clearance == 0.0
@@ -139,7 +139,7 @@ def test_sliding_along_a_wall_for_two_seconds_is_one_event(episode):
     contact_times = []
     observation = None
     while not episode.done:
-        observation = episode.step(VelocityCommand(0.5, 0.0, 0.0)).observation
+        observation = episode.step(BodyCommand(0.5, 0.0, 0.0)).observation
         if observation.in_contact:
             contact_times.append(observation.time)
     metrics = episode.metrics()
@@ -160,7 +160,7 @@ def test_an_agent_driving_into_a_standing_robot_is_not_its_fault(episode):
     for seed in range(40):
         episode.reset(env, config(dummy_agents=1, seed=seed, stuck_timeout=0.0,
                                   time_limit=15.0))
-        metrics = run(episode, VelocityCommand())
+        metrics = run(episode, BodyCommand())
         if metrics.collisions:
             touched += 1
             assert {event.kind for event in metrics.contacts} == {ContactKind.AGENT_INTO_ROBOT}
@@ -178,11 +178,11 @@ def test_cautious_agents_wait_instead_of_driving_into_a_standing_robot(episode):
     for seed in range(40):
         blind = config(dummy_agents=1, seed=seed, stuck_timeout=0.0, time_limit=15.0)
         episode.reset(env, blind)
-        if not run(episode, VelocityCommand()).collisions:
+        if not run(episode, BodyCommand()).collisions:
             continue
         rammed += 1
         episode.reset(env, dataclasses.replace(blind, agents=cautious))
-        metrics = run(episode, VelocityCommand())
+        metrics = run(episode, BodyCommand())
         assert metrics.collisions == 0 and metrics.min_clearance > 0.0
         if rammed >= 2:
             break
@@ -196,7 +196,7 @@ def test_driving_into_an_agent_is_a_fault(episode):
     for seed in range(40):
         episode.reset(env, config(dummy_agents=1, seed=seed, stuck_timeout=0.0,
                                   time_limit=8.0, collision_limit=1))
-        metrics = run(episode, VelocityCommand(0.8, 0.0, 0.0))
+        metrics = run(episode, BodyCommand(0.8, 0.0, 0.0))
         agent_events = [e for e in metrics.contacts if e.agent >= 0]
         if agent_events and not metrics.static_collisions:
             assert agent_events[0].kind is ContactKind.ROBOT_INTO_AGENT
@@ -207,12 +207,12 @@ def test_driving_into_an_agent_is_a_fault(episode):
 
 def test_only_faults_in_valid_tests_are_controller_failures(episode):
     episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=2.0))
-    metrics = run(episode, VelocityCommand(-0.3, 0.0, 0.0))
+    metrics = run(episode, BodyCommand(-0.3, 0.0, 0.0))
     assert is_controller_failure(metrics)
     episode.reset(corridor(feasible=False), config(stuck_timeout=0.0, time_limit=2.0))
-    assert not is_controller_failure(run(episode, VelocityCommand(-0.3, 0.0, 0.0)))
+    assert not is_controller_failure(run(episode, BodyCommand(-0.3, 0.0, 0.0)))
     episode.reset(corridor(), config(time_limit=20.0, goal_tolerance=0.3))
-    reached = run(episode, VelocityCommand(1.0, 0.0, 0.0))
+    reached = run(episode, BodyCommand(1.0, 0.0, 0.0))
     assert reached.outcome is Outcome.GOAL_REACHED and not is_controller_failure(reached)
 
 
@@ -222,8 +222,8 @@ def test_repeated_crashes_end_at_the_collision_limit(episode):
     def bump(observation):
         # Back into the west wall, pull away, and back again.
         if observation is None or observation.time % 2.0 < 1.0:
-            return VelocityCommand(-0.3, 0.0, 0.0)
-        return VelocityCommand(0.3, 0.0, 0.0)
+            return BodyCommand(-0.3, 0.0, 0.0)
+        return BodyCommand(0.3, 0.0, 0.0)
 
     metrics = run(episode, bump, limit=400)
     assert metrics.outcome is Outcome.COLLISION_LIMIT
@@ -238,8 +238,8 @@ def test_risk_score_follows_its_definition(episode):
     def graze(observation):
         # Wait close to the wall, then back along it into the west wall and stay there.
         if observation is None or observation.time < 1.0 or observation.in_contact:
-            return VelocityCommand()
-        return VelocityCommand(-0.3, 0.0, 0.0)
+            return BodyCommand()
+        return BodyCommand(-0.3, 0.0, 0.0)
 
     metrics = run(episode, graze)
     assert metrics.collisions == 1
@@ -250,7 +250,7 @@ def test_risk_score_follows_its_definition(episode):
 
 def test_feasible_is_copied_from_the_environment(episode):
     episode.reset(corridor(feasible=False), config(time_limit=0.5))
-    metrics = run(episode, VelocityCommand())
+    metrics = run(episode, BodyCommand())
     assert metrics.feasible is False
 
 
@@ -267,7 +267,7 @@ def test_a_start_in_or_against_a_wall_is_an_invalid_environment(episode, start, 
     assert metrics.ticks == 0 and metrics.simulation_time == 0.0 and metrics.risk_score == 0.0
     assert np.isposinf(observation.scan).all()
     with pytest.raises(EpisodeError, match='invalid_environment'):
-        episode.step(VelocityCommand())
+        episode.step(BodyCommand())
 
 
 def test_a_ground_robot_starting_on_a_low_obstacle_is_invalid(episode):
@@ -308,8 +308,8 @@ def test_an_unknown_robot_is_an_invalid_environment(episode):
 def test_non_finite_commands_become_stops_and_are_counted(episode):
     episode.reset(corridor(), config(stuck_timeout=0.0))
     for _ in range(10):
-        episode.step(VelocityCommand(0.5, 0.0, 0.0))
-    moving = episode.step(VelocityCommand(0.5, 0.0, 0.0)).observation
+        episode.step(BodyCommand(0.5, 0.0, 0.0))
+    moving = episode.step(BodyCommand(0.5, 0.0, 0.0)).observation
     for command in [(math.nan, 0.0, 0.0), (0.0, math.inf, 0.0), (0.1, 0.0, -math.inf)]:
         result = episode.step(command)
     assert not result.done
@@ -321,7 +321,7 @@ def test_non_finite_commands_become_stops_and_are_counted(episode):
 
 def test_abort_ends_the_episode_with_the_given_outcome(episode):
     episode.reset(corridor(), config())
-    episode.step(VelocityCommand(0.5, 0.0, 0.0))
+    episode.step(BodyCommand(0.5, 0.0, 0.0))
     episode.abort('controller_unresponsive', 'no cmd_vel for 5.0 s of wall time')
     assert episode.done and episode.outcome is Outcome.CONTROLLER_UNRESPONSIVE
     episode.abort(Outcome.TIMEOUT, 'ignored')  # the first outcome stands
@@ -330,13 +330,13 @@ def test_abort_ends_the_episode_with_the_given_outcome(episode):
     assert metrics.detail == 'no cmd_vel for 5.0 s of wall time'
     assert metrics.ticks == 1
     with pytest.raises(EpisodeError, match='over'):
-        episode.step(VelocityCommand())
+        episode.step(BodyCommand())
 
 
 def test_using_an_episode_out_of_order_says_what_to_do():
     with Episode() as episode:
         with pytest.raises(EpisodeError, match='reset'):
-            episode.step(VelocityCommand())
+            episode.step(BodyCommand())
         with pytest.raises(EpisodeError, match='reset'):
             episode.metrics()
         with pytest.raises(EpisodeError, match='reset'):
@@ -371,7 +371,7 @@ def test_scenario_defaults_fill_the_config():
 
 def test_metrics_serialise_to_json(episode):
     episode.reset(corridor(), config(time_limit=0.5))
-    metrics = run(episode, VelocityCommand(0.2, 0.0, 0.0))
+    metrics = run(episode, BodyCommand(0.2, 0.0, 0.0))
     data = json.loads(json.dumps(metrics.to_dict()))
     assert data['outcome'] == 'timeout' and data['ticks'] == 10
 

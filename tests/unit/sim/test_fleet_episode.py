@@ -9,7 +9,7 @@ from sessgan_gen.environment import Environment, FleetRobot, Pose2D
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import EpisodeError, InvalidConfigError
 from sessgan_sim.metrics import ContactKind, Outcome, is_controller_failure
-from sessgan_sim.robots import VelocityCommand
+from sessgan_sim.robots import BodyCommand
 from sessgan_sim.sensors import LidarConfig
 
 pytestmark = pytest.mark.unit
@@ -21,8 +21,8 @@ HALL = ['####################',
         '#..................#',
         '####################']
 """Interior x in [0.5, 9.5] m, y in [0.5, 2.0] m (0.5 m cells)."""
-FORWARD = VelocityCommand(0.5, 0.0, 0.0)
-STAND = VelocityCommand()
+FORWARD = BodyCommand(0.5, 0.0, 0.0)
+STAND = BodyCommand()
 
 
 def hall(r0=((1.0, 1.25, 0.0), (9.0, 1.25)), r1=((9.0, 1.25, math.pi), (1.0, 1.25)),
@@ -92,7 +92,7 @@ def test_robots_passing_each_other_reach_their_goals_and_the_episode_ends(episod
     observations = episode.reset(lanes, config(time_limit=60.0)) and episode.observations()
     assert [observation.goal for observation in observations] == [Pose2D(9.0, 0.9),
                                                                   Pose2D(1.0, 1.7)]
-    fast = VelocityCommand(0.5, 0.0, 0.0)
+    fast = BodyCommand(0.5, 0.0, 0.0)
     results = episode.step_fleet([fast, STAND])
     assert not results[0].done and results[0].outcome is None
     for _ in range(400):  # r1 waits; r0 arrives and stands while r1 goes on
@@ -144,7 +144,7 @@ def test_the_same_seed_gives_the_same_fleet_episode(episode):
             if episode.done:
                 break
             observations = [result.observation for result in
-                            episode.step_fleet([FORWARD, VelocityCommand(0.3, 0.0, 0.2)])]
+                            episode.step_fleet([FORWARD, BodyCommand(0.3, 0.0, 0.2)])]
             scans.append(np.concatenate([observation.scan for observation in observations]))
         results.append((episode.metrics().to_dict(), np.array(scans)))
     assert results[0][0] == results[1][0]

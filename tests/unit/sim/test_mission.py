@@ -99,9 +99,9 @@ def test_a_mission_needs_a_waypoint_and_a_sane_dwell():
 
 def test_a_mission_gets_the_scenario_time_limit_per_leg_and_its_dwells():
     from sessgan_gen.missions import MissionSpec
-    from sessgan_gen.navigation import make_environment
     from sessgan_gen.scenarios import get_scenario
     from sessgan_gen.token_map import load_example_map
+    from sessgan_gen.valid_tests import make_environment
     from sessgan_sim.episode import ROUTE_TIME_FACTOR, Episode, EpisodeConfig
 
     cells = load_example_map('factory').cells

@@ -36,7 +36,7 @@ def module_constants(path: Path) -> dict:
     return constants
 
 
-CONTRACT = module_constants(PACKAGE / 'sessgan_sim' / 'ros_messages.py')
+CONTRACT = module_constants(PACKAGE / 'sessgan_sim' / 'frames.py')
 MAP, ODOM, BASE = CONTRACT['MAP_FRAME'], CONTRACT['ODOM_FRAME'], CONTRACT['BASE_FOOTPRINT']
 RESET_SERVICES = module_constants(
     PACKAGE / 'sessgan_sim' / 'worker' / 'nav2_stack.py')['RESET_SERVICES']

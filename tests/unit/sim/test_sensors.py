@@ -8,11 +8,11 @@ import pybullet as p
 import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.navigation import make_environment
 from sessgan_gen.token_map import load_example_map
+from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError
-from sessgan_sim.robots import Robot, VelocityCommand
+from sessgan_sim.robots import BodyCommand, Robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
     Lidar,
@@ -144,7 +144,7 @@ def test_ground_robots_and_a_low_flyer_see_low_obstacles_and_a_high_flyer_sees_o
     landed = episode.reset(env, config(robot='flyer'))
     assert landed.altitude == 0.0
     assert landed.scan[ahead] == pytest.approx(3.5 - 1.25, abs=1e-4)
-    climbing = VelocityCommand(0.0, 0.0, 0.0, 1.0)
+    climbing = BodyCommand(0.0, 0.0, 0.0, 1.0)
     for _ in range(10):  # 0.5 s: still below 0.3 m - 0.05 m (the scan plane is mid-body)
         observation = episode.step(climbing).observation
     assert observation.altitude < 0.25
@@ -190,7 +190,7 @@ def test_agents_show_up_in_the_scan(episode):
 def test_odometry_reports_the_body_frame_twist(episode):
     episode.reset(environment(ROOM, (2.0, 1.0, math.pi / 2)), config())
     for _ in range(20):
-        result = episode.step(VelocityCommand(0.5, 0.0, 0.0))
+        result = episode.step(BodyCommand(0.5, 0.0, 0.0))
     observation = result.observation
     assert observation.twist.vx == pytest.approx(0.5, abs=1e-6)
     assert observation.twist.vy == pytest.approx(0.0, abs=1e-6)
@@ -206,7 +206,7 @@ def test_a_slower_lidar_updates_every_other_tick(episode):
     assert first.scan_updated
     updates, scans = [], [first.scan]
     for _ in range(6):
-        observation = episode.step(VelocityCommand()).observation
+        observation = episode.step(BodyCommand()).observation
         updates.append(observation.scan_updated)
         scans.append(observation.scan)
     assert updates == [False, True, False, True, False, True]
@@ -217,7 +217,7 @@ def test_clearance_below_the_proximity_distance_counts_as_proximity_time(episode
     env = environment(ROOM, (2.0, 0.8, 0.0))  # 0.1 m between body and south wall
     episode.reset(env, config())
     for _ in range(20):
-        episode.step(VelocityCommand())
+        episode.step(BodyCommand())
     metrics = episode.metrics()
     assert metrics.proximity_time == pytest.approx(1.0)
     assert metrics.min_clearance == pytest.approx(0.1, abs=2e-3)
@@ -227,10 +227,10 @@ def test_clearance_below_the_proximity_distance_counts_as_proximity_time(episode
 def test_min_clearance_is_capped_at_the_clearance_range(episode):
     env = environment(ROOM, (2.0, 1.1, 0.0))  # 0.4 m between body and south wall
     episode.reset(env, config())
-    episode.step(VelocityCommand())
+    episode.step(BodyCommand())
     assert episode.metrics().min_clearance == pytest.approx(0.25)  # the proximity distance
     episode.reset(env, config(clearance_range=1.0))
-    episode.step(VelocityCommand())
+    episode.step(BodyCommand())
     metrics = episode.metrics()
     assert metrics.min_clearance == pytest.approx(0.4, abs=2e-3)
     assert metrics.proximity_time == 0.0
@@ -580,7 +580,7 @@ def test_range_down_noise_is_seeded_and_stays_within_range(episode):
         observation = episode.reset(env, config(robot='flyer', seed=4))
         series = [observation.range_down]
         for _ in range(20):
-            observation = episode.step(VelocityCommand(0.0, 0.0, 0.0, 0.5)).observation
+            observation = episode.step(BodyCommand(0.0, 0.0, 0.0, 0.5)).observation
             series.append(observation.range_down)
         readings.append(series)
         assert observation.range_down == pytest.approx(observation.altitude, abs=0.03)
@@ -603,12 +603,12 @@ def test_proximity_over_a_low_obstacle_uses_the_3d_distance(episode, altitude, n
     robot = episode.robot
     for _ in range(200):  # climb in place to the altitude, then fly over the band
         error = altitude - robot.altitude
-        episode.step(VelocityCommand(0.0, 0.0, 0.0, max(-1.0, min(1.0, 3.0 * error))))
+        episode.step(BodyCommand(0.0, 0.0, 0.0, max(-1.0, min(1.0, 3.0 * error))))
     assert robot.altitude == pytest.approx(altitude, abs=0.01)
     before = episode.metrics().proximity_time
     assert before == 0.0  # 0.85 m from the band's side: not near it at any altitude
     for _ in range(80):
-        observation = episode.step(VelocityCommand(0.8, 0.0, 0.0,
+        observation = episode.step(BodyCommand(0.8, 0.0, 0.0,
                                                    3.0 * (altitude - robot.altitude))).observation
     assert observation.pose.x > 3.5  # past the band (x 2.5 to 3.5)
     metrics = episode.metrics()

@@ -35,7 +35,7 @@ def test_defaults_are_valid_and_build_the_reference_episode():
     ({'goal_interface': 'nav2'}, "'goal_interface' must be one of goal_pose"),
     ({'mission_stations': -1}, 'mission_stations must be an integer in 0..16'),
     ({'mission_stations': 17}, 'mission_stations must be an integer in 0..16'),
-    ({'station_dwell_time': -1.0}, 'station_dwell_time must be a finite number'),
+    ({'station_dwell_time': -1.0}, 'station_dwell_time must be >= 0 s'),
     ({'robots': 0}, 'robots must be an integer in 1..8'),
     ({'robots': 9}, 'robots must be an integer in 1..8'),
     ({'robots': 2, 'mission_stations': 1}, 'robots=2 cannot be combined with mission_stations'),

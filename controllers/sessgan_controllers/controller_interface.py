@@ -25,13 +25,20 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 from functools import lru_cache
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, overload, runtime_checkable
 
 import numpy as np
 
+from sessgan_gen.validation import require_positive
 
-def wrap_angle(angle: float) -> float:
-    """Return ``angle`` (radians) wrapped to [-pi, pi)."""
+
+@overload
+def wrap_angle(angle: float) -> float: ...
+@overload
+def wrap_angle(angle: np.ndarray) -> np.ndarray: ...
+def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:
+    """Return ``angle`` (radians; a float or an array, elementwise) wrapped to [-pi, pi): the
+    project's one angle wrap."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
@@ -49,8 +56,7 @@ def config_help(config_type: type) -> dict[str, str]:
 def _beam_angles(count: int, angle_min: float, angle_increment: float) -> np.ndarray:
     """ScanData.angles, computed once per scan geometry (a controller asks several times a
     tick, every tick, for the same beams)."""
-    raw = angle_min + angle_increment * np.arange(count)
-    angles = (raw + math.pi) % (2.0 * math.pi) - math.pi
+    angles = wrap_angle(angle_min + angle_increment * np.arange(count))
     angles.flags.writeable = False
     return angles
 
@@ -187,9 +193,7 @@ class MapData:
         if grid.ndim != 2 or grid.shape[0] < 1 or grid.shape[1] < 1:
             raise ValueError(f'map occupancy must be a non-empty 2-D array, got shape '
                              f'{grid.shape}')
-        if not (math.isfinite(self.resolution) and self.resolution > 0.0):
-            raise ValueError(f'map resolution must be a positive number of metres, got '
-                             f'{self.resolution}')
+        require_positive('map resolution', self.resolution, unit=' m')
         if len(self.origin) != 2 or not all(math.isfinite(v) for v in self.origin):
             raise ValueError(f'map origin must be two finite numbers, got {self.origin}')
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.navigation import (
+from sessgan_gen.token_map import parse_token_map
+from sessgan_gen.valid_tests import (
     environment_is_feasible,
     footprint_free_mask,
     inflate,
@@ -17,7 +18,6 @@ from sessgan_gen.navigation import (
     reachable_regions,
     shortest_path_in_free,
 )
-from sessgan_gen.token_map import parse_token_map
 
 pytestmark = pytest.mark.unit
 

@@ -36,6 +36,7 @@ from sessgan_gen.route_certificate import (
 )
 from sessgan_gen.scenarios import Scenario
 from sessgan_gen.token_map import ScenarioLike, check_cells, resolve_scenario, tokens_to_occupancy
+from sessgan_gen.validation import require_non_negative
 
 Cell = tuple[int, int]
 """A grid cell (row, col)."""
@@ -104,8 +105,7 @@ def inflate(passable: np.ndarray, radius_cells: float) -> np.ndarray:
     mask = np.asarray(passable, dtype=bool)
     if mask.ndim != 2:
         raise ValueError(f'passable mask must be 2-D, got shape {mask.shape}')
-    if not math.isfinite(radius_cells) or radius_cells < 0:
-        raise ValueError(f'radius must be a finite number of cells >= 0, got {radius_cells}')
+    require_non_negative('radius', radius_cells, unit=' cells')
     offsets = _footprint_offsets(round(float(radius_cells), 9))
     blocked = ~mask
     if not offsets:

@@ -7,7 +7,6 @@ same children every time. Operators never modify their inputs.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,6 +14,7 @@ import torch
 
 from sessgan_evolver.errors import GenomeError
 from sessgan_evolver.genome import Genome, clamp_positive
+from sessgan_gen.validation import require_non_negative, require_positive
 
 
 @dataclass(frozen=True)
@@ -52,11 +52,8 @@ class OperatorConfig:
             if not 0.0 <= value <= 1.0:
                 raise GenomeError(f'{name} must lie in [0, 1], got {value}')
         for name in ('mutation_scale', 'relative_spread_floor', 'absolute_spread_floor'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise GenomeError(f'{name} must be a finite number >= 0, got {value}')
-        if not (math.isfinite(self.min_running_var) and self.min_running_var > 0.0):
-            raise GenomeError(f'min_running_var must be > 0, got {self.min_running_var}')
+            require_non_negative(name, getattr(self, name), GenomeError)
+        require_positive('min_running_var', self.min_running_var, GenomeError)
 
 
 def tensor_spread(tensor: torch.Tensor, config: OperatorConfig) -> float:

@@ -1,0 +1,401 @@
+"""The campaign's evaluator on the ROS graph: the generator's ``generate_environments``
+service for maps, every discovered ``evaluate`` action server for episodes, in parallel.
+
+Used by ``campaign`` (``campaign_cli``), ``suite`` and the workers' episode runner; it imports
+no ROS at module level, so the commands' ``--help`` works without ROS.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from sessgan_evolver.campaign import CampaignConfig, CampaignError, EpisodeJob
+from sessgan_evolver.harness import HarnessRetries
+from sessgan_evolver.process_supervisor import (
+    ChildProcess,
+    ProcessSupervisor,
+    WorkerPair,
+    WorkerPool,
+)
+from sessgan_gen.environment import Environment
+from sessgan_sim.metrics import Outcome, is_harness_outcome
+
+if TYPE_CHECKING:  # ROS types, imported where they are used so --help works without ROS
+    from rclpy.action import ActionClient
+    from rclpy.node import Node
+
+    from sessgan_interfaces.action import EvaluateEnvironment
+
+EVALUATE_TYPE = 'sessgan_interfaces/action/EvaluateEnvironment'
+GENERATOR_NAMESPACE = '/sessgan'
+SIMULATOR_READY_LOG = 'simulator ready'
+"""What a simulator logs once its action server is up (a restarted pair waits for it)."""
+GENERATOR_TIMEOUT = 120.0
+"""Wall seconds the generator may take to answer one request."""
+GOAL_ANSWER_TIMEOUT = 15.0
+"""Wall seconds a worker may take to accept or refuse a goal before it is sent again."""
+NO_WORKER_TIMEOUT = 60.0
+"""Wall seconds without any usable worker before the campaign gives up."""
+RESTART_READY_TIMEOUT = 120.0
+"""Wall seconds a restarted simulator may take to say it is ready."""
+
+
+@dataclass
+class RunningEpisode:
+    job: EpisodeJob
+    started: float
+    send_future: Any
+    goal_handle: Any = None
+    result_future: Any = None
+
+
+class RosEvaluator:
+    """Generator service + every discovered ``evaluate`` action server, dispatched in parallel.
+
+    A worker that refuses a goal, aborts it or stalls past the episode timeout gets the job
+    taken away and retried on another worker; a worker that stalled is quarantined for a
+    minute. The simulator + controller pairs this campaign started (``pool``) are polled every
+    loop: when a process of a pair dies, the episode it was running is a harness failure, not
+    a result (it never reaches the fitness or the metrics); the pair is restarted and the
+    episode run again. A pair that keeps dying is quarantined for good.
+    """
+
+    def __init__(self, node: Node, config: CampaignConfig, record_directory: Path,
+                 controller: str, supervisor: ProcessSupervisor,
+                 log: Callable[[str], None], pool: WorkerPool | None = None) -> None:
+        from rclpy.action import ActionClient
+
+        from sessgan_interfaces.srv import GenerateEnvironments
+
+        self.node = node
+        self.supervisor = supervisor
+        self.pool = pool if pool is not None else WorkerPool(supervisor)
+        self.generator_process: ChildProcess | None = None
+        self.config = config
+        self.record_directory = record_directory  # relative to the simulators' bags root
+        self.controller = controller
+        self.log = log
+        self.action_client_class = ActionClient
+        self.generator = node.create_client(GenerateEnvironments,
+                                            f'{GENERATOR_NAMESPACE}/generate_environments')
+        self.clients: dict[str, ActionClient] = {}
+        self.allowed: set[str] | None = None  # None: every discovered worker (--external)
+        self.quarantine: dict[str, float] = {}
+        self.starting: dict[str, float] = {}
+        """Action names of restarted pairs whose new simulator is not ready yet, with the
+        monotonic time by which it must be."""
+        self.max_attempts = 3
+        """Requests of one member the generator may die on."""
+        self.retries = HarnessRetries(config.harness_tries, log)
+
+    rerun_harness_outcomes = True
+    """Run a harness outcome again here (never told); False: tell it, for a caller that
+    judges harness outcomes itself (``suite``)."""
+
+    @property
+    def harness_reruns(self) -> int:
+        return self.retries.reruns
+
+    def spin(self, seconds: float = 0.02) -> None:
+        import rclpy
+        rclpy.spin_once(self.node, timeout_sec=seconds)
+
+    def check_children(self) -> None:
+        """Fail fast when a process this campaign started has died (while starting up)."""
+        for child in self.supervisor.dead_children():
+            raise CampaignError(f'{child.name} {child.exit_description()}:'
+                                f'\n{child.log_tail()}')
+
+    def wait_for_generator(self, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while not self.generator.wait_for_service(timeout_sec=0.5):
+            self.check_children()
+            if time.monotonic() > deadline:
+                raise CampaignError(f'no generator answers at {GENERATOR_NAMESPACE}/'
+                                    f'generate_environments after {timeout:.0f} s')
+
+    def evaluate_servers(self) -> list[str]:
+        """Names of every ``evaluate`` action server in the graph."""
+        from rclpy.action import get_action_names_and_types
+
+        return [name for name, types in get_action_names_and_types(self.node)
+                if EVALUATE_TYPE in types]
+
+    def wait_until_absent(self, names: list[str], timeout: float) -> None:
+        """Wait for workers of an earlier (killed) campaign to go away before starting ours."""
+        deadline = time.monotonic() + timeout
+        present: list[str] = []
+        while time.monotonic() < deadline:
+            present = sorted(set(names) & set(self.evaluate_servers()))
+            if not present:
+                return
+            self.spin(0.2)
+        raise CampaignError(
+            f'{", ".join(present)} already exist in ROS_DOMAIN_ID '
+            f'{os.environ.get("ROS_DOMAIN_ID", "0")}: another campaign is running there; stop '
+            'it, use --external to share its workers, or pick another ROS_DOMAIN_ID')
+
+    def discover_workers(self) -> list[str]:
+        for name in self.evaluate_servers():
+            if self.allowed is not None and name not in self.allowed:
+                continue
+            if name not in self.clients and name not in self.starting:
+                from sessgan_interfaces.action import EvaluateEnvironment
+                self.clients[name] = self.action_client_class(
+                    self.node, EvaluateEnvironment, name)
+                self.log(f'worker found: {name}')
+        return sorted(self.clients)
+
+    def wait_for_workers(self, count: int, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        ready: list[str] = []
+        while time.monotonic() < deadline:
+            ready = [n for n in self.discover_workers() if self.clients[n].server_is_ready()]
+            if len(ready) >= count:
+                return
+            self.check_children()
+            self.spin(0.1)
+        raise CampaignError(f'only {len(ready)} of {count} simulator workers answered within '
+                            f'{timeout:.0f} s')
+
+    def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
+               member: int) -> list[Environment]:
+        from sessgan_gen.ros_conversion import environment_from_msg
+        from sessgan_interfaces.srv import GenerateEnvironments
+
+        request = GenerateEnvironments.Request(
+            scenario=self.config.scenario, seeds=[int(s) for s in seeds],
+            generation=generation, member=member, height=self.config.height,
+            width=self.config.width)
+        request.weights = weights
+        for attempt in range(1, self.max_attempts + 1):
+            future = self.generator.call_async(request)
+            deadline = time.monotonic() + GENERATOR_TIMEOUT
+            while not future.done():
+                if self.restart_generator_if_dead(attempt):
+                    break
+                if time.monotonic() > deadline:
+                    raise CampaignError(
+                        f'the generator did not answer within {GENERATOR_TIMEOUT:.0f} s')
+                self.spin(0.05)
+            if future.done():
+                break
+        response = future.result()
+        if not response.success:
+            raise CampaignError(f'the generator refused member {member}: {response.message}')
+        environments = [environment_from_msg(msg) for msg in response.environments]
+        stations = self.config.mission_stations
+        for environment in environments:
+            if environment.feasible and len(environment.stations) != stations:
+                raise CampaignError(
+                    f'the generator drew {len(environment.stations)} mission stations on '
+                    f'{environment.id}, the campaign asks for {stations}: a generator already '
+                    f'running under {GENERATOR_NAMESPACE} has its own mission_stations '
+                    'parameter; stop it or start it with the same one')
+            if environment.feasible and environment.robots != self.config.robots:
+                raise CampaignError(
+                    f'the generator drew {environment.robots} robots on {environment.id}, the '
+                    f'campaign asks for {self.config.robots}: a generator already running '
+                    f'under {GENERATOR_NAMESPACE} has its own robots parameter; stop it or '
+                    'start it with the same one')
+        return environments
+
+    def restart_generator_if_dead(self, attempt: int) -> bool:
+        """True (and the generator restarted) if the generator this campaign started died;
+        CampaignError if it died on each of ``max_attempts`` requests."""
+        child = self.generator_process
+        if child is None or child.alive:
+            return False
+        report = f'{child.name} {child.exit_description()}'
+        if attempt >= self.max_attempts:
+            raise CampaignError(f'{report} on {attempt} requests in a row:\n{child.log_tail()}')
+        self.log(f'{report}: restarting it and asking again')
+        self.generator_process = self.supervisor.restart(child)
+        self.wait_for_generator(timeout=120.0)
+        return True
+
+    def goal_for(self, job: EpisodeJob) -> EvaluateEnvironment.Goal:
+        from sessgan_gen.ros_conversion import environment_to_msg
+        from sessgan_interfaces.action import EvaluateEnvironment
+
+        goal = EvaluateEnvironment.Goal()
+        goal.environment = environment_to_msg(job.environment)
+        goal.seed = int(job.seed)
+        goal.time_limit = float(self.config.time_limit)
+        goal.controller = self.controller
+        goal.record_directory = str(self.record_directory) if self.config.record_failures else ''
+        return goal
+
+    def pair_of(self, name: str) -> WorkerPair | None:
+        """The pair this campaign started behind action ``name`` (None for external ones)."""
+        return self.pool.pairs.get(name.rsplit('/', 1)[0])
+
+    def drop_client(self, name: str) -> None:
+        client = self.clients.pop(name, None)
+        if client is not None:
+            client.destroy()
+
+    def take_back_from_dead_pairs(self, running: dict[str, RunningEpisode]
+                                  ) -> list[EpisodeJob]:
+        """Restart every pair with a dead process; returns the jobs they were running, which
+        have no result (a harness failure, never an episode outcome)."""
+        taken = []
+        for pair in self.pool.dead_pairs():
+            name = f'{pair.namespace}/evaluate'
+            state = running.pop(name, None)
+            report = pair.death_report()
+            if state is not None:
+                taken.append(state.job)
+                self.log(f'worker {pair.namespace}: {report} during episode '
+                         f'{state.job.environment.id}: a harness failure, not a result; the '
+                         'episode will run again')
+            else:
+                self.log(f'worker {pair.namespace}: {report}')
+            self.drop_client(name)
+            self.starting.pop(name, None)
+            if self.pool.restart(pair):
+                self.starting[name] = time.monotonic() + RESTART_READY_TIMEOUT
+                self.log(f'worker {pair.namespace}: restarted its simulator and controller '
+                         f'(restart {pair.restarts} of {self.pool.max_restarts})')
+            else:
+                if self.allowed is not None:
+                    self.allowed.discard(name)
+                self.log(f'worker {pair.namespace}: died {pair.restarts + 1} times; quarantined '
+                         f'for the rest of the campaign (logs: {pair.simulator.log_path.parent})')
+                if not self.pool.pairs:
+                    raise CampaignError(f'every simulator worker died repeatedly; last: '
+                                        f'{report}:\n{pair.simulator.log_tail(1000)}\n'
+                                        + '\n'.join(child.log_tail(1000)
+                                                    for child in pair.controllers))
+        for name, deadline in list(self.starting.items()):
+            restarted = self.pair_of(name)
+            if restarted is None:
+                self.starting.pop(name)
+            elif restarted.logged_since_start(SIMULATOR_READY_LOG):
+                self.starting.pop(name)  # discover_workers makes a new client for it
+            elif time.monotonic() > deadline:
+                # Stopped, its pair counts as dead in the next loop: restarted or quarantined.
+                self.log(f'worker {restarted.namespace}: its restarted simulator did not log '
+                         f'{SIMULATOR_READY_LOG!r} within {RESTART_READY_TIMEOUT:.0f} s')
+                self.supervisor.stop([restarted.simulator], grace_seconds=0.0)
+        return taken
+
+    def evaluate(self, jobs: Sequence[EpisodeJob],
+                 on_result: Callable[[EpisodeJob, dict], None]) -> None:
+        from action_msgs.msg import GoalStatus
+
+        pending = deque(jobs)
+        running: dict[str, RunningEpisode] = {}
+        last_discovery = 0.0
+        last_worker_seen = time.monotonic()
+        while pending or running:
+            now = time.monotonic()
+            if now - last_discovery > 2.0:
+                self.discover_workers()
+                last_discovery = now
+            for name, client in self.clients.items():
+                if not pending or name in running or self.quarantine.get(name, 0) > now:
+                    continue
+                if not client.server_is_ready():
+                    continue
+                job = pending.popleft()
+                running[name] = RunningEpisode(job, now,
+                                               client.send_goal_async(self.goal_for(job)))
+            if running or self.starting or any(
+                    c.server_is_ready() for c in self.clients.values()):
+                last_worker_seen = now
+            elif now - last_worker_seen > NO_WORKER_TIMEOUT:
+                raise CampaignError(f'no simulator worker has been available for '
+                                    f'{NO_WORKER_TIMEOUT:.0f} s')
+            self.spin(0.01)
+            for job in self.take_back_from_dead_pairs(running):
+                self.retries.failed(job.key, job.environment.id, 'a worker process died',
+                                    f'logs in {self.supervisor.log_directory}')
+                pending.appendleft(job)
+            for name, state in list(running.items()):
+                retry_reason = None
+                if state.goal_handle is None and state.send_future.done():
+                    handle = state.send_future.result()
+                    if handle is None or not handle.accepted:
+                        retry_reason = 'refused the goal'
+                    else:
+                        state.goal_handle = handle
+                        state.result_future = handle.get_result_async()
+                elif (state.goal_handle is None
+                      and time.monotonic() - state.started > GOAL_ANSWER_TIMEOUT):
+                    # A goal sent while discovery still showed a just-restarted worker's
+                    # predecessor is lost; send it again.
+                    retry_reason = f'did not answer the goal within {GOAL_ANSWER_TIMEOUT:.0f} s'
+                if state.result_future is not None and state.result_future.done():
+                    response = state.result_future.result()
+                    if response.status == GoalStatus.STATUS_SUCCEEDED:
+                        metrics = metrics_dict(response.result.metrics)
+                        pair = self.pair_of(name)
+                        if (metrics['outcome'] == Outcome.CONTROLLER_UNRESPONSIVE
+                                and pair is not None
+                                and not all(child.alive for child in pair.controllers)):
+                            continue  # its controller died: the next loop re-runs it
+                        del running[name]
+                        if self.rerun_harness_outcomes and is_harness_outcome(metrics['outcome']):
+                            # No result: never recorded (sessgan_evolver.harness).
+                            self.retries.failed(state.job.key, state.job.environment.id,
+                                                metrics['outcome'],
+                                                f'worker {name}: {metrics["detail"]}')
+                            pending.appendleft(state.job)
+                            continue
+                        self.retries.succeeded(state.job.key)
+                        on_result(state.job, metrics)
+                        continue
+                    retry_reason = f'ended the goal with status {response.status}'
+                timeout = self.config.episode_timeout_for(state.job.environment.occupancy.size)
+                if retry_reason is None and time.monotonic() - state.started > timeout:
+                    retry_reason = f'gave no result within {timeout:.0f} s'
+                    if state.goal_handle is not None:
+                        state.goal_handle.cancel_goal_async()
+                    self.quarantine[name] = time.monotonic() + 60.0
+                if retry_reason is not None:
+                    del running[name]
+                    self.retries.failed(state.job.key, state.job.environment.id,
+                                        f'worker {name}', retry_reason)
+                    pending.appendleft(state.job)
+
+
+def metrics_dict(msg) -> dict:
+    return {
+        'outcome': msg.outcome, 'detail': msg.detail, 'collisions': int(msg.collisions),
+        'fault_collisions': int(msg.fault_collisions),
+        'static_collisions': int(msg.static_collisions),
+        'robot_into_agent_collisions': int(msg.robot_into_agent_collisions),
+        'agent_into_robot_collisions': int(msg.agent_into_robot_collisions),
+        'robot_into_robot_collisions': int(msg.robot_into_robot_collisions),
+        'robot_hit_by_robot_collisions': int(msg.robot_hit_by_robot_collisions),
+        'proximity_time': float(msg.proximity_time),
+        'simulation_time': float(msg.simulation_time), 'risk_score': float(msg.risk_score),
+        'fault_risk_score': float(msg.fault_risk_score),
+        'invalid_commands': int(msg.invalid_commands),
+        'feasible': bool(msg.feasible), 'min_clearance': float(msg.min_clearance),
+        'distance_travelled': float(msg.distance_travelled),
+        'final_distance_to_goal': float(msg.final_distance_to_goal), 'ticks': int(msg.ticks),
+        'wall_time': float(msg.wall_time), 'bag_path': msg.bag_path,
+        'bag_error': msg.bag_error,
+        'legs': int(msg.legs), 'legs_completed': int(msg.legs_completed),
+        'leg_times': [float(value) for value in msg.leg_times],
+        'failed_leg': int(msg.failed_leg),
+        'success': bool(msg.success),
+        # NaN (not reached, no route) becomes None, as EpisodeMetrics.to_dict writes it.
+        **{name: finite_or_none(getattr(msg, name)) for name in (
+            'time_to_goal', 'path_length_ratio', 'mean_clearance', 'linear_jerk',
+            'angular_jerk', 'mean_speed')},
+    }
+
+
+def finite_or_none(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None

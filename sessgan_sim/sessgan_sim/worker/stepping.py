@@ -3,20 +3,23 @@
 Lockstep publishes a tick's clock, odom, tf, scan (and the flyer's range_down), waits for the
 controller's cmd_vel and only then advances the simulation by one control period. Clocked
 advances the simulation at ``real_time_factor`` times the wall clock and applies the latest
-command received. Either way a silent controller ends the episode as controller_unresponsive
-after a wall-clock timeout, an evaluate client's cancel or a shutdown ends it as cancelled,
-and nothing waits forever.
+command received; a stack whose commands come too late in sim time ends it as overloaded
+(sessgan_sim.command_pace). Either way a silent controller ends the episode as
+controller_unresponsive after a wall-clock timeout, an evaluate client's cancel or a shutdown
+ends it as cancelled, and nothing waits forever.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from sessgan_sim import ros_messages as rm
-from sessgan_sim.metrics import Outcome
+from sessgan_sim.command_pace import PaceFigures, PaceMonitor
+from sessgan_sim.metrics import Outcome, is_harness_outcome
 from sessgan_sim.simulator_settings import SimulatorSettings, StepMode
 from sessgan_sim.worker.commands import CommandReceiver
 from sessgan_sim.worker.topics import Recording, RobotTopics
@@ -77,6 +80,8 @@ class EpisodeStepper:
         self.topics = topics
         self.commands = commands
         self.command_msgtype = f'geometry_msgs/msg/{command_type_name}'
+        self.pace: PaceFigures | None = None
+        """The last clocked episode's command pace (None after a lockstep one)."""
 
     # ---- before the first tick -------------------------------------------------------------
 
@@ -142,6 +147,7 @@ class EpisodeStepper:
         next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
         first = True
         commands.take_all()  # stale answers of an earlier episode
+        pace = PaceMonitor(settings.pace_rule(), dt)  # fed in clocked mode only
         while not episode.done:
             if goal_handle is not None and goal_handle.is_cancel_requested:
                 episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
@@ -185,6 +191,7 @@ class EpisodeStepper:
                     if received_all:
                         command = received_all[-1]
                         last_command_wall = time.monotonic()
+                        pace.command(observation.time)
                 overridden = command_override() if command_override is not None else None
                 limit = startup_timeout if command is None else timeout
                 if overridden is None and time.monotonic() - last_command_wall > limit:
@@ -192,6 +199,12 @@ class EpisodeStepper:
                         continue
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
                                   f'no cmd_vel within {limit:.1f} s wall time')
+                    break
+                if overridden is not None:
+                    pace.restart_gap()  # a stack told its navigation ended may fall silent
+                overload = pace.overload()
+                if overload:
+                    episode.abort(Outcome.OVERLOADED, self.overload_detail(overload, settings))
                     break
             first = False
             values = rm.twist_values(command) if command is not None else (0.0, 0.0, 0.0)
@@ -206,13 +219,29 @@ class EpisodeStepper:
                 if failure:
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
                     break
+                pace.restart_gap()  # a stack may pause between a mission's waypoints
             if goal_handle is not None and feedback.due(observation.time):
                 self.publish_feedback(goal_handle, episode, observation)
         if not lockstep:
             # The final state, so subscribers and bags see where the robot ended. Not in
             # lockstep: its answer could arrive during the next episode.
             topics.publish_tick(observation, clock.stamp_ns(observation.time), recording)
-        return episode.metrics()
+        metrics = episode.metrics()
+        self.pace = None if lockstep else pace.figures
+        if not lockstep and not is_harness_outcome(metrics.outcome):
+            # A result reached while starved (a collision, stuck, even the goal) says how busy
+            # the machine was, not how the stack drives.
+            overload = pace.overload(final=True)
+            if overload:
+                metrics = dataclasses.replace(
+                    metrics, outcome=Outcome.OVERLOADED, success=False,
+                    detail=self.overload_detail(overload, settings) + (
+                        f' (it had ended {metrics.outcome.value})' if metrics.outcome else ''))
+        return metrics
+
+    @staticmethod
+    def overload_detail(overload: str, settings: SimulatorSettings) -> str:
+        return f'{overload}; real_time_factor {settings.real_time_factor:g}'
 
     @staticmethod
     def prepare(episode, before_first_step) -> bool:

@@ -64,9 +64,10 @@ class PaceRule:
     """One gap longer than this many periods is an overload on its own."""
     observed_gaps: int = 10
     """Gaps whose median is the period when none is declared."""
-    judged_after: float = 40.0
+    judged_after: float = 200.0
     """Periods of measured sim time before the share is judged during the episode (it is
-    judged at the end whatever the span)."""
+    judged at the end whatever the span): one late start-up gap (a stack planning its first
+    route) must not end an episode two seconds in."""
 
     def validate(self) -> PaceRule:
         """InvalidConfigError naming the field that cannot work; self otherwise."""

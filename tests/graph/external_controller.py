@@ -9,11 +9,14 @@ the first scan it gets unanswered and then drives as usual (a controller that mi
 as a starved process does: its episode ends controller_unresponsive, the next ones do not),
 ``--alternate`` is blind in every other episode (the first, third, ...: a fault that shows now
 and then; an episode begins where the odometry's stamp goes back or its position jumps, to the
-next episode's start).
+next episode's start), ``--stall`` drives as usual but sleeps 0.2 s wall time after every
+20th scan (a process the scheduler leaves out now and then: against a clocked simulator its
+commands come late in sim time, the episode ends overloaded).
 """
 
 import math
 import sys
+import time
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
@@ -75,11 +78,14 @@ class GoToGoal(Node):
             if abs(error) < 0.5:
                 cmd.linear.x = max(0.0, min(0.4, 0.5 * (clearance - 0.3)))
         self.cmd_publisher.publish(cmd)
+        if self.behaviour == 'stall' and self.scans % 20 == 0:
+            time.sleep(0.2)
 
 
 def main() -> None:
     behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind', '--mute-first-scan',
-                                                  '--alternate') if flag in sys.argv), 'go')
+                                                  '--alternate', '--stall')
+                      if flag in sys.argv), 'go')
     rclpy.init(args=sys.argv)
     node = GoToGoal(behaviour)
     try:

@@ -51,20 +51,22 @@ def test_late_gaps_above_the_share_make_an_overload_with_the_figures():
     # 10 Hz declared; every second a 0.4 s gap (4 periods > 3): 0.4 of each 1.0 s late
     monitor = PaceMonitor(PaceRule(expected_period=0.1), TICK)
     times: list[float] = []
-    for second in range(6):
+    for second in range(25):
         times += [second + 0.1 * step for step in range(7)]  # 0.0 .. 0.6, then 1.0
-    feed(monitor, times + [6.0])
+    feed(monitor, times[:7 * 19])
+    assert monitor.overload() is None  # 18.6 s: under 200 periods, not judged yet
+    feed(monitor, times[7 * 19:] + [25.0])
     figures = monitor.figures
     assert figures.declared and figures.period == pytest.approx(0.1)
-    assert figures.late_gaps == 6
-    assert figures.late_time == pytest.approx(2.4)
-    assert figures.measured_time == pytest.approx(6.0)
+    assert figures.late_gaps == 25
+    assert figures.late_time == pytest.approx(10.0)
+    assert figures.measured_time == pytest.approx(25.0)
     assert figures.late_share == pytest.approx(0.4)
     assert figures.longest_gap == pytest.approx(0.4)
-    detail = monitor.overload()  # 6 s >= 40 periods: judged during the episode
+    detail = monitor.overload()  # 25 s >= 200 periods: judged during the episode
     assert detail is not None
     assert '40% of the time in late gaps' in detail and 'declared' in detail
-    assert '6 gap(s)' in detail and 'longest 0.40 s' in detail
+    assert '25 gap(s)' in detail and 'longest 0.40 s' in detail
 
 
 def test_a_gap_of_exactly_the_factor_is_not_late():

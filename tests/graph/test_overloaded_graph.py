@@ -1,0 +1,75 @@
+"""A stack that cannot keep pace with a clocked simulator (issue 21): its episode ends
+overloaded, a harness outcome that is run again (slower with --adaptive-rtf), never a
+failure, a bag or a fitness.
+
+The external controller's ``--stall`` sleeps 0.2 s wall time after every 20th scan, as a
+process the scheduler leaves out does: at 4x real time each stall is 0.8 sim s without a
+command against 1 s of commands every tick (about 44 % of the sim time in late gaps, the
+rule's limit is 10 %); at 0.5x (the fourth try with --adaptive-rtf) it is 0.1 sim s, two
+ticks, not late.
+"""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+
+import pytest
+
+from tests.graph.test_simulator_graph import (
+    EXTERNAL_CONTROLLER,
+    environment_msg,
+    evaluate,
+    room,
+    start_simulator,
+)
+
+pytestmark = pytest.mark.graph
+
+
+def start_stalling_controller(node_processes, namespace: str):
+    return node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--stall',
+                                 '--ros-args', '-r', f'__ns:={namespace}', '-p',
+                                 'use_sim_time:=true'], name=f'stall{namespace.replace("/", "_")}')
+
+
+def test_a_stalling_stack_in_clocked_mode_ends_overloaded_not_as_a_failure(
+        node_processes, ros_node, tmp_path):
+    namespace = '/overload'
+    start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0',
+                    'dummy_agents:=0', f'bags_root:={tmp_path}')
+    start_stalling_controller(node_processes, namespace)
+    metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'room'),
+                          time_limit=60.0, record_directory='stalled')
+    assert metrics.outcome == 'overloaded', (metrics.outcome, metrics.detail)
+    assert 'could not keep pace with sim time' in metrics.detail
+    assert 'observed command period of 0.050 s' in metrics.detail, metrics.detail
+    assert 'real_time_factor 4' in metrics.detail
+    assert not metrics.success
+    assert metrics.bag_path == '' and not (tmp_path / 'stalled').exists()
+
+
+def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(
+        node_processes, tmp_path):
+    node_processes.start(['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args', '-r',
+                          '__ns:=/w0', '-p', 'dummy_agents:=0', '-p', 'mode:=clocked',
+                          '-p', 'real_time_factor:=4.0', '-p', f'bags_root:={tmp_path}'],
+                         name='simulator_w0')
+    start_stalling_controller(node_processes, '/w0')
+    result = subprocess.run(
+        ['ros2', 'run', 'sessgan_evolver', 'campaign', '--external', '--scenario', 'factory',
+         '--generations', '1', '--population', '1', '--maps-per-member', '1',
+         '--time-limit', '10', '--seed', '5', '--run', 'stalled', '--adaptive-rtf',
+         '--harness-tries', '5', '--no-record-failures', '--runs-root', str(tmp_path / 'runs'),
+         '--bags-root', str(tmp_path / 'bags')],
+        capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    log = result.stderr
+    assert 'overloaded (worker /w0/evaluate: the stack could not keep pace' in log, log[-3000:]
+    assert 'running it again at 0.5 x the real-time factor (try 2 of 5)' in log, log[-3000:]
+    with open(tmp_path / 'runs' / 'stalled' / 'metrics_episodes.csv') as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 1 and rows[0]['outcome'] != 'overloaded'
+    with open(tmp_path / 'runs' / 'stalled' / 'metrics_generations.csv') as handle:
+        assert int(next(csv.DictReader(handle))['harness_reruns']) >= 1

@@ -106,6 +106,12 @@ class PaceFigures(NamedTuple):
     def late_share(self) -> float:
         return self.late_time / self.measured_time if self.measured_time > 0 else 0.0
 
+    def summary(self) -> str:
+        """One line for a log: the period, the late gaps and their share, the longest."""
+        period = f'{self.period:.3f} s' if self.period else 'not measured yet'
+        return (f'period {period}, {self.late_gaps} late gaps, {self.late_share:.1%} of '
+                f'{self.measured_time:.1f} sim s late, longest gap {self.longest_gap:.2f} s')
+
 
 class PaceMonitor:
     """Measures the arrivals of one robot's commands in one episode against a PaceRule."""

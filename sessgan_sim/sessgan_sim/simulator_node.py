@@ -392,10 +392,7 @@ class SimulatorNode(Node):
             f'{metrics.simulation_time:.2f} sim s in {loop_seconds:.2f} wall s '
             f'(x{factor:.1f} real time); per tick ms: ' +
             ' '.join(f'{name}={value * 1e3:.3f}' for name, value in per_tick.items())
-            + ('' if pace is None else
-               f'; commands: period {pace.period or 0.0:.3f} s, {pace.late_gaps} late gaps, '
-               f'{pace.late_share:.1%} of {pace.measured_time:.1f} sim s late, longest gap '
-               f'{pace.longest_gap:.2f} s'))
+            + ('' if pace is None else f'; commands: {pace.summary()}'))
 
     def stop(self, grace: float) -> None:
         """Cut a running episode off (outcome cancelled, its goal aborted) and wait up to

@@ -67,6 +67,9 @@ def test_late_gaps_above_the_share_make_an_overload_with_the_figures():
     assert detail is not None
     assert '40% of the time in late gaps' in detail and 'declared' in detail
     assert '25 gap(s)' in detail and 'longest 0.40 s' in detail
+    assert figures.summary() == ('period 0.100 s, 25 late gaps, 40.0% of 25.0 sim s late, '
+                                 'longest gap 0.40 s')
+    assert PaceMonitor(PaceRule(), TICK).figures.summary().startswith('period not measured')
 
 
 def test_a_gap_of_exactly_the_factor_is_not_late():

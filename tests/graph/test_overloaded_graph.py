@@ -73,3 +73,30 @@ def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(
     assert len(rows) == 1 and rows[0]['outcome'] != 'overloaded'
     with open(tmp_path / 'runs' / 'stalled' / 'metrics_generations.csv') as handle:
         assert int(next(csv.DictReader(handle))['harness_reruns']) >= 1
+
+
+def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_processes, tmp_path):
+    from tests.graph.test_regression_suite_graph import junit_case, room_bag, suite
+
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'mode:=clocked',
+                    'real_time_factor:=4.0', f'bags_root:={tmp_path / "sim"}')
+    start_stalling_controller(node_processes, '/w0')
+
+    starved = suite(str(bag), '--external', '--harness-tries', '2', '--output',
+                    str(tmp_path / 'starved'))
+    assert starved.returncode == 3, starved.stdout + starved.stderr[-3000:]  # no result
+    counts, props = junit_case(tmp_path / 'starved' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '1')
+    assert props['verdict'] == 'error' and props['attempt_outcomes'] == (
+        'harness:overloaded harness:overloaded'), props
+    assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))
+
+    slowed = suite(str(bag), '--external', '--harness-tries', '5', '--adaptive-rtf',
+                   '--output', str(tmp_path / 'slowed'))
+    assert slowed.returncode == 0, slowed.stdout + slowed.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'slowed' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '0')
+    outcomes = props['attempt_outcomes'].split()
+    assert props['verdict'] == 'pass' and outcomes[0] == 'harness:overloaded', props
+    assert outcomes[-1] == 'pass:goal_reached', props

@@ -50,6 +50,24 @@ def test_a_stalling_stack_in_clocked_mode_ends_overloaded_not_as_a_failure(
     assert metrics.bag_path == '' and not (tmp_path / 'stalled').exists()
 
 
+def test_a_fleet_robot_whose_stack_stalls_ends_the_clocked_episode_overloaded(
+        node_processes, ros_node):
+    from sessgan_gen.ros_conversion import environment_to_msg
+    from tests.graph.test_fleet_graph import crossing_environment
+
+    namespace = '/overload_fleet'
+    start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0',
+                    'dummy_agents:=0')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
+                          f'__ns:={namespace}/r0', '-p', 'use_sim_time:=true'], name='steady_r0')
+    start_stalling_controller(node_processes, f'{namespace}/r1')
+    metrics, _ = evaluate(ros_node, namespace, environment_to_msg(crossing_environment()),
+                          time_limit=60.0, timeout=300)
+    assert metrics.outcome == 'overloaded', (metrics.outcome, metrics.detail)
+    assert 'r1: overloaded (robot r1: the stack could not keep pace' in metrics.detail, (
+        metrics.detail)
+
+
 def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(
         node_processes, tmp_path):
     node_processes.start(['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args', '-r',

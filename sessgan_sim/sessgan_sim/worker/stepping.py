@@ -283,7 +283,9 @@ class EpisodeStepper:
 
 class FleetStepper:
     """Runs a fleet episode's ticks: one EpisodeStepper (topics and command reader in the
-    robot's namespace) per robot under test, r0 first.
+    robot's namespace) per robot under test, r0 first. In clocked mode each robot's stack
+    is held to the pace rule on its own (the episode ends overloaded when one could not keep
+    pace; a robot that ended at its goal may fall silent).
 
     Each tick publishes every robot's clock, odom, tf and scan; lockstep then waits for a
     command from every robot still driving (one that ended, at its goal say, stands still
@@ -329,6 +331,8 @@ class FleetStepper:
             stepper.topics.publish_goal(observation.goal, stamp_ns, recording)
         commands: list = [None] * len(steppers)
         heard = [time.monotonic()] * len(steppers)
+        # Each robot's stack keeps pace or not on its own (fed in clocked mode only).
+        paces = [PaceMonitor(settings.pace_rule(), dt) for _ in steppers]
         wall_origin = time.monotonic()
         next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
         first = True
@@ -370,12 +374,19 @@ class FleetStepper:
                     received_all = stepper.commands.take_all()
                     if received_all:
                         commands[index], heard[index] = received_all[-1], now
+                        paces[index].command(observations[0].time)
                 for index in driving:
                     limit = (settings.controller_startup_timeout if commands[index] is None
                              else timeout)
                     if now - heard[index] > limit:
                         silent = index
                         break
+                overloaded = next(((index, detail) for index in driving
+                                   if (detail := paces[index].overload())), None)
+                if silent is None and overloaded is not None:
+                    episode.abort(Outcome.OVERLOADED, f'robot r{overloaded[0]}: '
+                                  + EpisodeStepper.overload_detail(overloaded[1], settings))
+                    break
             if silent is not None:
                 if all(stepper.commands.running for stepper in steppers):
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
@@ -398,4 +409,15 @@ class FleetStepper:
             stamp_ns = clock.stamp_ns(observations[0].time)
             for stepper, observation in zip(steppers, observations):
                 stepper.topics.publish_tick(observation, stamp_ns, recording)
-        return episode.metrics()
+        metrics = episode.metrics()
+        if not lockstep and not is_harness_outcome(metrics.outcome):
+            for index, pace in enumerate(paces):
+                overload = pace.overload(final=True)
+                if overload:  # a result reached while one robot's stack was starved
+                    return dataclasses.replace(
+                        metrics, outcome=Outcome.OVERLOADED, success=False,
+                        detail=f'robot r{index}: '
+                        + EpisodeStepper.overload_detail(overload, settings)
+                        + (f' (it had ended {metrics.outcome.value})' if metrics.outcome
+                           else ''))
+        return metrics

@@ -11,7 +11,11 @@ as a starved process does: its episode ends controller_unresponsive, the next on
 and then; an episode begins where the odometry's stamp goes back or its position jumps, to the
 next episode's start), ``--stall`` drives as usual but sleeps 0.2 s wall time after every
 20th scan (a process the scheduler leaves out now and then: against a clocked simulator its
-commands come late in sim time, the episode ends overloaded).
+commands come late in sim time, the episode ends overloaded), ``--late-start-alternate``
+drives as usual but waits 3.5 s wall time before its first command after every other new goal
+(the first, third, ...; a goal is new when its stamp is: an injected start-up delay, a stack
+slow to plan; before a stack's first command no gap is measured, so at 4x real time such an
+episode stands still past the 10 s stuck timeout).
 """
 
 import math
@@ -36,6 +40,9 @@ class GoToGoal(Node):
         self.scans = 0
         self.episodes = 0
         self.last_stamp = None
+        self.goal_stamp = None
+        self.goals = 0
+        self.delayed_goal = 0
         self.cmd_publisher = self.create_publisher(Twist, 'cmd_vel', 10)
         self.create_subscription(PoseStamped, 'goal_pose', self.on_goal, 10)
         self.create_subscription(Odometry, 'odom', self.on_odom, 10)
@@ -43,6 +50,10 @@ class GoToGoal(Node):
 
     def on_goal(self, msg: PoseStamped) -> None:
         self.goal = (msg.pose.position.x, msg.pose.position.y)
+        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if stamp != self.goal_stamp:  # a goal sent again to a late reader keeps its stamp
+            self.goal_stamp = stamp
+            self.goals += 1
 
     def on_odom(self, msg: Odometry) -> None:
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
@@ -57,6 +68,13 @@ class GoToGoal(Node):
 
     def on_scan(self, msg: LaserScan) -> None:
         self.scans += 1
+        if self.behaviour == 'late-start-alternate':
+            if self.goal is None:
+                return  # no command before the first goal: the delay comes first
+            if self.goals % 2 == 1 and self.delayed_goal != self.goals:
+                self.delayed_goal = self.goals
+                time.sleep(3.5)
+                return
         if self.behaviour == 'silent' or (self.behaviour == 'mute-first-scan'
                                           and self.scans == 1):
             return
@@ -84,7 +102,8 @@ class GoToGoal(Node):
 
 def main() -> None:
     behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind', '--mute-first-scan',
-                                                  '--alternate', '--stall')
+                                                  '--alternate', '--stall',
+                                                  '--late-start-alternate')
                       if flag in sys.argv), 'go')
     rclpy.init(args=sys.argv)
     node = GoToGoal(behaviour)

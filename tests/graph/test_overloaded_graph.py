@@ -118,3 +118,26 @@ def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_pr
     outcomes = props['attempt_outcomes'].split()
     assert props['verdict'] == 'pass' and outcomes[0] == 'harness:overloaded', props
     assert outcomes[-1] == 'pass:goal_reached', props
+
+
+def test_a_clocked_suite_with_an_injected_start_up_delay_is_flaky(node_processes, tmp_path):
+    """Clocked re-runs depend on timing: a stack that, in every other episode, sends its first
+    command 3.5 s wall late (14 sim s at 4x; no gap is measured before a first command) stands
+    still past the stuck timeout (10 sim s) there and reaches the goal otherwise: a pass and a
+    fail, a flaky verdict (not a failure), every attempt a result."""
+    from tests.graph.test_regression_suite_graph import junit_case, room_bag, suite
+
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'mode:=clocked',
+                    'real_time_factor:=4.0', f'bags_root:={tmp_path / "sim"}')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--late-start-alternate',
+                          '--ros-args', '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'],
+                         name='late_start')
+    flaky = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'flaky'),
+                  '--record', 'none')
+    assert flaky.returncode == 0, flaky.stdout + flaky.stderr[-3000:]  # flaky is no failure
+    counts, props = junit_case(tmp_path / 'flaky' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '0')
+    assert props['verdict'] == 'flaky', props
+    outcomes = sorted(props['attempt_outcomes'].split())
+    assert outcomes == ['fail:stuck', 'pass:goal_reached'], props

@@ -236,6 +236,9 @@ class CampaignConfig:
                                 f'got {self.bag_storage!r}')
         if self.mode not in ('lockstep', 'clocked'):
             raise CampaignError(f'mode must be lockstep or clocked, got {self.mode!r}')
+        if self.in_process and self.adaptive_rtf:
+            raise CampaignError('adaptive_rtf re-runs clocked episodes slower; in_process '
+                                'episodes run in lockstep')
         if self.in_process and self.external:
             raise CampaignError('in_process runs a built-in controller itself; it cannot use '
                                 'external workers')

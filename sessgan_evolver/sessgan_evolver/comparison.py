@@ -145,6 +145,9 @@ class CompareConfig:
             self.fleet()
         except InvalidFleetError as err:
             raise CompareError(str(err)) from err
+        if self.adaptive_rtf and not self.external:
+            raise CompareError('adaptive_rtf needs external: in process, episodes run in '
+                               'lockstep')
         unknown = [m for m in self.methods if m not in METHODS]
         if unknown or not self.methods:
             raise CompareError(f'unknown or no methods {unknown}; known: {", ".join(METHODS)}')

@@ -129,6 +129,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         parser.error('--episodes must be >= 1')
     if args.width < 0 or args.height < 0:
         parser.error("--width and --height must be >= 0 (0: the generator's map size)")
+    if args.adaptive_rtf and not args.external:
+        parser.error('--adaptive-rtf needs --external: in process, episodes run in lockstep')
     return args
 
 

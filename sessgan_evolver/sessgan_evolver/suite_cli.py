@@ -95,6 +95,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     if args.external and args.record == 'all':
         parser.error('--record all needs the in-process runner: external simulators record '
                      'failures only')
+    if args.adaptive_rtf and not args.external:
+        parser.error('--adaptive-rtf needs --external: in process, episodes run in lockstep')
     if args.controller and args.external:
         parser.error('--controller picks a built-in controller; with --external the '
                      'controller is the one running beside each simulator')

@@ -93,3 +93,22 @@ def test_a_suite_attempt_that_ended_overloaded_is_no_result_and_slows_the_next()
     assert after_a_result.overloaded_in_a_row == 0
     after_a_result.add(Attempt(AttemptKind.HARNESS, metrics))
     assert after_a_result.overloaded_in_a_row == 1
+
+
+def test_adaptive_rtf_without_clocked_workers_is_refused_by_name():
+    from sessgan_evolver.campaign import CampaignConfig
+    from sessgan_evolver.comparison import CompareConfig
+    from sessgan_evolver.errors import CampaignError, CompareError
+    from sessgan_evolver.evaluate_cli import parse_args as evaluate_args
+    from sessgan_evolver.suite_cli import parse_args as suite_args
+
+    with pytest.raises(CampaignError, match='adaptive_rtf'):
+        CampaignConfig(in_process=True, adaptive_rtf=True).validate()
+    CampaignConfig(external=True, adaptive_rtf=True).validate()
+    with pytest.raises(CompareError, match='adaptive_rtf needs external'):
+        CompareConfig(adaptive_rtf=True).validate()
+    for parse in (evaluate_args, lambda argv: suite_args(['suite.yaml', *argv])):
+        with pytest.raises(SystemExit) as error:
+            parse(['--adaptive-rtf'])
+        assert error.value.code == 2
+        assert parse(['--adaptive-rtf', '--external']).adaptive_rtf

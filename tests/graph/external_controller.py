@@ -12,9 +12,9 @@ and then; an episode begins where the odometry's stamp goes back or its position
 next episode's start), ``--stall`` drives as usual but sleeps 0.2 s wall time after every
 20th scan (a process the scheduler leaves out now and then: against a clocked simulator its
 commands come late in sim time, the episode ends overloaded), ``--late-start-alternate``
-drives as usual but waits 3.5 s wall time before its first command after every other new goal
-(the first, third, ...; a goal is new when its stamp is: an injected start-up delay, a stack
-slow to plan; before a stack's first command no gap is measured, so at 4x real time such an
+drives as usual but sends no command until 5 s wall time after every other new goal (the
+first, third, ...; a goal is new when its stamp is: an injected start-up delay, a stack slow to
+plan; before a stack's first command no gap is measured, so at 4x real time such an
 episode stands still past the 10 s stuck timeout).
 """
 
@@ -43,6 +43,7 @@ class GoToGoal(Node):
         self.goal_stamp = None
         self.goals = 0
         self.delayed_goal = 0
+        self.start_after = 0.0
         self.cmd_publisher = self.create_publisher(Twist, 'cmd_vel', 10)
         self.create_subscription(PoseStamped, 'goal_pose', self.on_goal, 10)
         self.create_subscription(Odometry, 'odom', self.on_odom, 10)
@@ -71,10 +72,12 @@ class GoToGoal(Node):
         if self.behaviour == 'late-start-alternate':
             if self.goal is None:
                 return  # no command before the first goal: the delay comes first
-            if self.goals % 2 == 1 and self.delayed_goal != self.goals:
-                self.delayed_goal = self.goals
-                time.sleep(3.5)
-                return
+            if self.goals % 2 == 1:
+                if self.delayed_goal != self.goals:
+                    self.delayed_goal = self.goals
+                    self.start_after = time.monotonic() + 5.0
+                if time.monotonic() < self.start_after:
+                    return
         if self.behaviour == 'silent' or (self.behaviour == 'mute-first-scan'
                                           and self.scans == 1):
             return

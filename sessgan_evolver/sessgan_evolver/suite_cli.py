@@ -220,7 +220,7 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
     from sessgan_evolver.campaign_cli import RosEvaluator
-    from sessgan_evolver.harness import real_time_factor_scale
+    from sessgan_evolver.harness import real_time_factor_scale as slower_pace
     from sessgan_evolver.process_supervisor import ProcessSupervisor
     from sessgan_evolver.replay_cli import bag_environment
 
@@ -253,7 +253,7 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
         def real_time_factor_scale(self, job) -> float:
             if not args.adaptive_rtf:
                 return 0.0
-            return real_time_factor_scale(progresses[job.member].overloaded_in_a_row)
+            return slower_pace(progresses[job.member].overloaded_in_a_row)
 
     def log(message: str) -> None:
         print(f'[suite] {message}', file=sys.stderr, flush=True)

@@ -134,6 +134,10 @@ class CampaignConfig:
     """[3] Tries of an episode the test harness ends (a silent controller, a dead process, a
     cancelled episode): each is run again, never recorded; an episode the harness ends on
     every try stops the run (1..20)."""
+    adaptive_rtf: bool = False
+    """[False] Clocked mode: run an episode that ended overloaded (the stack could not keep
+    pace with sim time) again at half the simulator's real-time factor, halved again for
+    each overloaded try (down to 1/16)."""
     bag_storage: str = 'mcap'
     """[mcap] Failure bag storage: mcap or sqlite3."""
     seed_schedule: str = 'per-generation'
@@ -232,6 +236,9 @@ class CampaignConfig:
                                 f'got {self.bag_storage!r}')
         if self.mode not in ('lockstep', 'clocked'):
             raise CampaignError(f'mode must be lockstep or clocked, got {self.mode!r}')
+        if self.in_process and self.adaptive_rtf:
+            raise CampaignError('adaptive_rtf re-runs clocked episodes slower; in_process '
+                                'episodes run in lockstep')
         if self.in_process and self.external:
             raise CampaignError('in_process runs a built-in controller itself; it cannot use '
                                 'external workers')

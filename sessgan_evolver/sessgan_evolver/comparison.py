@@ -125,6 +125,10 @@ class CompareConfig:
     in process; --controller then only names it. Their failure bags (in <their
     bags_root>/external/<output folder name>/<method-seed>) must be readable on this
     machine."""
+    adaptive_rtf: bool = False
+    """[False] With --external, clocked simulators: run an episode that ended overloaded (the
+    stack could not keep pace with sim time) again at half the real-time factor, halved again
+    on each overloaded try (down to 1/16)."""
     width: int = 0
     """[0: the generator's] Width of every method's maps in cells (by default the size of
     the map the generator learned)."""
@@ -141,6 +145,9 @@ class CompareConfig:
             self.fleet()
         except InvalidFleetError as err:
             raise CompareError(str(err)) from err
+        if self.adaptive_rtf and not self.external:
+            raise CompareError('adaptive_rtf needs external: in process, episodes run in '
+                               'lockstep')
         unknown = [m for m in self.methods if m not in METHODS]
         if unknown or not self.methods:
             raise CompareError(f'unknown or no methods {unknown}; known: {", ".join(METHODS)}')
@@ -225,7 +232,7 @@ def open_evaluator(config: CompareConfig, output: Path, label: str,
                                 output / 'logs' / label, config.controller,
                                 config.time_limit, config.mission(), config.fleet(),
                                 simulate_invalid=False, observer=observer, log=log,
-                                size=config.map_size())
+                                size=config.map_size(), adaptive_rtf=config.adaptive_rtf)
     return InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                               simulate_invalid=False, observer=observer,
                               mission=config.mission(), fleet=config.fleet(), log=log,

@@ -111,6 +111,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                              'of in process; --controller then only names it. Their failure '
                              'bags (in <their bags_root>/external/<output folder name>/) must '
                              'be readable on this machine')
+    parser.add_argument('--adaptive-rtf', action='store_true',
+                        help='--external, clocked simulators: run an episode that ended '
+                             'overloaded (the stack could not keep pace with sim time) again '
+                             'at half the real-time factor, halved again on each '
+                             'overloaded try (down to 1/16)')
     parser.add_argument('--simulate-invalid', action='store_true',
                         help='also simulate maps without a certified route')
     parser.add_argument('--max-fault-records', dest='fault_records', type=int, default=0,
@@ -131,6 +136,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         parser.error('--fresh-episodes must be >= 1')
     if args.width < 0 or args.height < 0:
         parser.error("--width and --height must be >= 0 (0: the generator's map size)")
+    if args.adaptive_rtf and not args.external:
+        parser.error('--adaptive-rtf needs --external: in process, episodes run in lockstep')
     return args
 
 
@@ -180,7 +187,8 @@ def open_evaluator(args: argparse.Namespace, scenario: str, mission: MissionSpec
     if args.external:
         return worker_evaluator(
             scenario, external_record_subdirectory(output), output / 'logs', args.controller,
-            args.time_limit, mission, fleet, simulate_invalid=args.simulate_invalid, log=log)
+            args.time_limit, mission, fleet, simulate_invalid=args.simulate_invalid, log=log,
+            adaptive_rtf=args.adaptive_rtf)
     return InProcessEvaluator(scenario, args.controller, args.time_limit,
                               simulate_invalid=args.simulate_invalid, mission=mission,
                               fleet=fleet, log=log)

@@ -14,6 +14,11 @@ the same controller, so a controller silent on one map on several tries is most 
 on any worker, and a campaign that dropped the episode or went on without it would select on
 fewer results than it reports. Stopping says so at once; --resume continues from the
 generation's checkpoint when the cause is fixed.
+
+An episode that ended ``overloaded`` (clocked mode: the stack could not keep pace with sim
+time, sessgan_sim.command_pace) is run again like the others; with ``adaptive_rtf`` each such
+re-run asks the simulator for half the real-time factor of the try before
+(:func:`real_time_factor_scale`, at least sessgan_sim's MIN_REAL_TIME_FACTOR_SCALE).
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from __future__ import annotations
 from collections.abc import Callable, Hashable
 
 from sessgan_evolver.errors import HarnessFailureError
+from sessgan_sim.command_pace import MIN_REAL_TIME_FACTOR_SCALE
 from sessgan_sim.metrics import Outcome
 
 DEFAULT_HARNESS_TRIES = 3
@@ -38,19 +44,31 @@ def check_harness_tries(tries: object) -> int:
     return tries
 
 
+def real_time_factor_scale(overloaded_tries: int) -> float:
+    """The evaluate goal's ``real_time_factor_scale`` for a re-run after ``overloaded_tries``
+    overloaded tries: halved for each, never below MIN_REAL_TIME_FACTOR_SCALE; 0
+    (the simulator's own pace) when there was none."""
+    if overloaded_tries <= 0:
+        return 0.0
+    return max(0.5 ** overloaded_tries, MIN_REAL_TIME_FACTOR_SCALE)
+
+
 class HarnessRetries:
     """Counts the harness failures of each episode and of the whole run.
 
     ``failed`` is called for every harness failure of an episode; it returns normally when
     the episode is to run again and raises HarnessFailureError on its ``tries``-th failure.
     ``succeeded`` forgets an episode once it has a result. ``reruns``: harness failures
-    so far (each one an episode run again or, for the last, a stopped run).
+    so far (each one an episode run again or, for the last, a stopped run). With
+    ``adaptive_rtf``, :meth:`real_time_factor_scale` slows the re-runs of an overloaded
+    episode down.
     """
 
     def __init__(self, tries: int = DEFAULT_HARNESS_TRIES,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None, adaptive_rtf: bool = False) -> None:
         self.tries = check_harness_tries(tries)
         self.log = log
+        self.adaptive_rtf = adaptive_rtf
         self.reruns = 0
         self._failures: dict[Hashable, list[tuple[str, str]]] = {}
 
@@ -63,10 +81,20 @@ class HarnessRetries:
         self.reruns += 1
         if len(failures) < self.tries:
             if self.log is not None:
+                scale = self.real_time_factor_scale(key)
+                pace = f' at {scale:g} x the real-time factor' if scale else ''
                 self.log(f'episode {episode}: {outcome} ({detail}): a harness failure, not a '
-                         f'result; running it again (try {len(failures) + 1} of {self.tries})')
+                         f'result; running it again{pace} (try {len(failures) + 1} of '
+                         f'{self.tries})')
             return
         del self._failures[key]
+        if all(cause == Outcome.OVERLOADED for cause, _ in failures):
+            raise HarnessFailureError(
+                f'the stack under test could not keep pace with sim time on every one of '
+                f'{len(failures)} tries of episode {episode} ({Outcome.OVERLOADED.value}; '
+                f'last: {failures[-1][1]}); no result is recorded for it. Give the machine '
+                "less other work, lower the simulators' real_time_factor, or pass "
+                '--adaptive-rtf (each re-run at half the pace)')
         if all(cause == Outcome.CONTROLLER_UNRESPONSIVE for cause, _ in failures):
             raise HarnessFailureError(
                 f'the controller under test was silent on every one of {len(failures)} tries '
@@ -77,6 +105,14 @@ class HarnessRetries:
         causes = '; '.join(f'{cause}: {detail}' for cause, detail in failures)
         raise HarnessFailureError(f'the test harness failed on every one of {len(failures)} '
                                   f'tries of episode {episode}, so it has no result: {causes}')
+
+    def real_time_factor_scale(self, key: Hashable) -> float:
+        """The ``real_time_factor_scale`` for the next try of episode ``key``: halved for each
+        overloaded try since its last result with ``adaptive_rtf``; else 0 (unchanged)."""
+        if not self.adaptive_rtf:
+            return 0.0
+        return real_time_factor_scale(sum(
+            1 for cause, _ in self._failures.get(key, ()) if cause == Outcome.OVERLOADED))
 
     def succeeded(self, key: Hashable) -> None:
         """Forget the harness failures of episode ``key`` (it has a result now)."""

@@ -387,6 +387,13 @@ class ScenarioProgress:
         return count
 
     @property
+    def overloaded_in_a_row(self) -> int:
+        """Overloaded attempts (clocked: the stack could not keep pace) among the harness
+        outcomes in a row at the end: how much slower --adaptive-rtf runs the next one."""
+        return sum(1 for attempt in self.attempts[len(self.attempts) - self.harness_in_a_row:]
+                   if attempt.outcome == 'overloaded')
+
+    @property
     def done(self) -> bool:
         return (len(self.results) >= self.results_wanted
                 or self.harness_in_a_row >= self.harness_tries)

@@ -93,7 +93,7 @@ class RosEvaluator:
         monotonic time by which it must be."""
         self.max_attempts = 3
         """Requests of one member the generator may die on."""
-        self.retries = HarnessRetries(config.harness_tries, log)
+        self.retries = HarnessRetries(config.harness_tries, log, config.adaptive_rtf)
 
     rerun_harness_outcomes = True
     """Run a harness outcome again here (never told); False: tell it, for a caller that
@@ -231,7 +231,13 @@ class RosEvaluator:
         goal.time_limit = float(self.config.time_limit)
         goal.controller = self.controller
         goal.record_directory = str(self.record_directory) if self.config.record_failures else ''
+        goal.real_time_factor_scale = self.real_time_factor_scale(job)
         return goal
+
+    def real_time_factor_scale(self, job: EpisodeJob) -> float:
+        """The pace of ``job``'s next try (the goal's real_time_factor_scale; 0: the
+        simulator's own): slower after overloaded tries with --adaptive-rtf."""
+        return self.retries.real_time_factor_scale(job.key)
 
     def pair_of(self, name: str) -> WorkerPair | None:
         """The pair this campaign started behind action ``name`` (None for external ones)."""
@@ -355,6 +361,8 @@ class RosEvaluator:
                         continue
                     retry_reason = f'ended the goal with status {response.status}'
                 timeout = self.config.episode_timeout_for(state.job.environment.occupancy.size)
+                # A slower re-run (--adaptive-rtf) takes longer in wall time.
+                timeout /= self.real_time_factor_scale(state.job) or 1.0
                 if retry_reason is None and time.monotonic() - state.started > timeout:
                     retry_reason = f'gave no result within {timeout:.0f} s'
                     if state.goal_handle is not None:

@@ -76,6 +76,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                              'pass, fail, flaky); in process episodes are exact and run once')
     parser.add_argument('--harness-tries', type=int, default=3,
                         help='harness outcomes in a row before a scenario is a harness error')
+    parser.add_argument('--adaptive-rtf', action='store_true',
+                        help='--external, clocked simulators: run an attempt after one that '
+                             'ended overloaded (the stack could not keep pace with sim time) at '
+                             'half the real-time factor, halved again on each overloaded '
+                             'attempt in a row (down to 1/16)')
     parser.add_argument('--record', choices=RECORD_CHOICES, default='failures',
                         help='bags of the re-runs to keep: all, failures (default) or none '
                              '(--external: the simulators record failures only)')
@@ -92,6 +97,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     if args.external and args.record == 'all':
         parser.error('--record all needs the in-process runner: external simulators record '
                      'failures only')
+    if args.adaptive_rtf and not args.external:
+        parser.error('--adaptive-rtf needs --external: in process, episodes run in lockstep')
     if args.controller and args.external:
         parser.error('--controller picks a built-in controller; with --external the '
                      'controller is the one running beside each simulator')
@@ -214,6 +221,7 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
     from rclpy.executors import ExternalShutdownException
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
+    from sessgan_evolver.harness import real_time_factor_scale as slower_pace
     from sessgan_evolver.process_supervisor import ProcessSupervisor
     from sessgan_evolver.replay_cli import bag_environment
     from sessgan_evolver.ros_evaluator import RosEvaluator
@@ -243,6 +251,11 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
                 f'suite-{safe_name(output.name)}/{safe_name(progresses[job.member].entry.name)}'
                 f'/attempt-{job.index}' if args.record != 'none' else '')
             return goal
+
+        def real_time_factor_scale(self, job) -> float:
+            if not args.adaptive_rtf:
+                return 0.0
+            return slower_pace(progresses[job.member].overloaded_in_a_row)
 
     def log(message: str) -> None:
         print(f'[suite] {message}', file=sys.stderr, flush=True)

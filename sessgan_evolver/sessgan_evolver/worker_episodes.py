@@ -190,11 +190,13 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
                      observer: EpisodeObserver | None = None,
                      log: Callable[[str], None] = print,
                      wait: float = WORKER_WAIT,
-                     size: tuple[int, int] | None = None) -> Iterator[WorkerEvaluator]:
+                     size: tuple[int, int] | None = None,
+                     adaptive_rtf: bool = False) -> Iterator[WorkerEvaluator]:
     """A WorkerEvaluator on every evaluate action server of the domain (after at least one
     answers within ``wait`` seconds), their failure bags in ``record_directory`` under their
     bags_root; its ROS node is shut down on exit. Nothing is started: the simulators and the
-    stack under test are yours."""
+    stack under test are yours. ``adaptive_rtf``: re-run an overloaded episode slower
+    (CampaignConfig.adaptive_rtf)."""
     import rclpy
 
     from sessgan_evolver.process_supervisor import ProcessSupervisor
@@ -205,7 +207,7 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
     config = CampaignConfig(scenario=scenario, time_limit=time_limit, external=True,
                             mission_stations=mission.stations,
                             station_dwell_time=mission.dwell_time, robots=fleet.robots,
-                            record_failures=True)
+                            record_failures=True, adaptive_rtf=adaptive_rtf)
     config.validate()
     record_directory = check_record_subdirectory(record_directory)
     label = controller or 'external'

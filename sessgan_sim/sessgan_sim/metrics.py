@@ -56,16 +56,20 @@ class Outcome(enum.StrEnum):
     HARNESS_ERROR = 'harness_error'
     """The simulator could not run the episode for a reason of its own (its parameters, the
     goal's options), not of the map: no test result."""
+    OVERLOADED = 'overloaded'
+    """Clocked mode: the stack's commands came too late in sim time to drive the robot (a
+    busy machine; sessgan_sim.command_pace): no test result."""
 
 
 FAILURE_OUTCOMES = frozenset({Outcome.TIMEOUT, Outcome.STUCK})
 """Outcomes that fail a valid test even without a collision: the goal was not reached."""
 
 HARNESS_OUTCOMES = frozenset({Outcome.CONTROLLER_UNRESPONSIVE, Outcome.CANCELLED,
-                              Outcome.HARNESS_ERROR})
+                              Outcome.HARNESS_ERROR, Outcome.OVERLOADED})
 """Outcomes that say the test harness failed, not the controller under test: a controller
 that sent nothing in time (under load its process may just not have been scheduled), an
-episode cut off, a simulator that could not run it. Such an episode is no result: campaigns,
+episode cut off, a simulator that could not run it, a stack that could not keep pace with
+sim time in clocked mode. Such an episode is no result: campaigns,
 evaluate and compare run it again (sessgan_evolver.harness) and never record it, and it is
 no controller failure (no failure bag). A dead simulator or controller process is the other
 harness failure; it has no outcome, the campaign sees the process die."""

@@ -54,6 +54,7 @@ from sessgan_gen.valid_tests import make_environment
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from sessgan_sim.bag_recording import record_directory_under
+from sessgan_sim.command_pace import PaceFigures, check_real_time_factor_scale
 from sessgan_sim.episode import Episode, check_time_limit
 from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
 from sessgan_sim.metrics import Outcome, is_controller_failure
@@ -174,7 +175,8 @@ class SimulatorNode(Node):
             result.metrics = self.run_episode(
                 environment, robot=request.robot, time_limit=request.time_limit,
                 seed=request.seed, record_directory=record_directory,
-                controller=request.controller, goal_handle=goal_handle)
+                controller=request.controller, goal_handle=goal_handle,
+                real_time_factor_scale=request.real_time_factor_scale)
         if not self.context.ok():
             return result  # shut down: the goal handle belongs to a closed context
         if goal_handle.is_cancel_requested:
@@ -218,13 +220,17 @@ class SimulatorNode(Node):
 
     def run_episode(self, environment: Environment, robot: str, time_limit: float, seed: int,
                     record_directory: Path | None, controller: str,
-                    goal_handle) -> EpisodeMetricsMsg:
+                    goal_handle, real_time_factor_scale: float = 0.0) -> EpisodeMetricsMsg:
         wall_start = time.monotonic()
         settings = self.settings  # one snapshot for the whole episode
         recording = Recording() if record_directory is not None else None
         # The goal's options or this simulator's parameters, not the map, are at fault here:
         # a harness error the client runs again (sessgan_sim.metrics.HARNESS_OUTCOMES).
         try:
+            scale = check_real_time_factor_scale(real_time_factor_scale)
+            if scale != 1.0:  # a slower re-run of an overloaded episode (clocked mode)
+                settings = dataclasses.replace(
+                    settings, real_time_factor=settings.real_time_factor * scale)
             check_time_limit(time_limit, "the goal's time_limit")
             config = settings.episode_config(robot, time_limit, seed)
             config.validate()
@@ -295,7 +301,7 @@ class SimulatorNode(Node):
                 metrics = dataclasses.replace(
                     metrics, detail=f'{metrics.detail}; {note}' if metrics.detail else note)
             self.log_timing(environment.id, metrics, episode.profile,
-                            time.monotonic() - loop_start)
+                            time.monotonic() - loop_start, self.stepper.pace)
             # The next episode's clock starts one control period after this one's end: a
             # long-running stack never sees sim time go back (its tf buffer stays valid).
             self.clock_origin_ns = clock.stamp_ns(episode.time + config.control_period)
@@ -372,8 +378,10 @@ class SimulatorNode(Node):
         self.clean_record_directory(directory)
         return directory
 
-    def log_timing(self, environment_id: str, metrics, profile, loop_seconds: float) -> None:
-        """One line per episode: where the wall time of a tick goes (benchmarks parse it)."""
+    def log_timing(self, environment_id: str, metrics, profile, loop_seconds: float,
+                   pace: PaceFigures | None = None) -> None:
+        """One line per episode: where the wall time of a tick goes (benchmarks parse it) and,
+        in clocked mode, how late the commands came in sim time."""
         ticks = max(1, profile.ticks)
         per_tick = {'physics': profile.physics / ticks, 'sensors': profile.sensors / ticks,
                     'metrics': profile.metrics / ticks}
@@ -383,7 +391,8 @@ class SimulatorNode(Node):
             f'episode {environment_id}: {metrics.outcome.value} after '
             f'{metrics.simulation_time:.2f} sim s in {loop_seconds:.2f} wall s '
             f'(x{factor:.1f} real time); per tick ms: ' +
-            ' '.join(f'{name}={value * 1e3:.3f}' for name, value in per_tick.items()))
+            ' '.join(f'{name}={value * 1e3:.3f}' for name, value in per_tick.items())
+            + ('' if pace is None else f'; commands: {pace.summary()}'))
 
     def stop(self, grace: float) -> None:
         """Cut a running episode off (outcome cancelled, its goal aborted) and wait up to

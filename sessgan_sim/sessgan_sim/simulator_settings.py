@@ -27,6 +27,7 @@ from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.validation import require_non_negative, require_positive
 from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
 from sessgan_sim.bag_recording import BagStorage, check_record_subdirectory
+from sessgan_sim.command_pace import PaceRule
 from sessgan_sim.episode import EpisodeConfig, check_time_limit
 from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
 from sessgan_sim.robots import create_robot, get_robot_class
@@ -91,6 +92,15 @@ class SimulatorSettings:
     """Wall seconds without a cmd_vel that end an episode as controller_unresponsive."""
     controller_startup_timeout: float = 15.0
     """Wall seconds allowed for the first cmd_vel (and for a controller to appear)."""
+    expected_command_period: float = 0.0
+    """Clocked mode: the stack's command period in sim seconds (0.05 for a 20 Hz controller),
+    against which late commands are measured; 0: the median of its first 10 gaps."""
+    overload_gap_factor: float = 3.0
+    """Clocked mode: a gap between commands longer than this many command periods is late."""
+    overload_late_share: float = 0.1
+    """Clocked mode: an episode whose late gaps cover more than this share of its sim time
+    (or with one gap over 40 periods) ends as overloaded, a harness outcome that is run
+    again; 1: never."""
     use_stamped_cmd_vel: bool = False
     """Read geometry_msgs/TwistStamped on cmd_vel instead of Twist (fixed at start-up)."""
     goal_interface: str = GoalInterface.GOAL_POSE.value
@@ -203,6 +213,7 @@ class SimulatorSettings:
         for name in ('sim_time_origin', 'time_limit', 'lidar_rate', 'lidar_noise_std',
                      'lidar_range_min', 'stuck_timeout'):
             _not_negative(name, getattr(self, name))
+        self.pace_rule()
         check_time_limit(self.time_limit, "parameter 'time_limit'")
         for name in ('collision_limit', 'seed'):
             if getattr(self, name) < 0:
@@ -288,6 +299,13 @@ class SimulatorSettings:
     def fleet(self) -> FleetSpec:
         """The free-mode fleet, validated (InvalidFleetError names the parameter)."""
         return FleetSpec(self.robots).validate(self.mission_stations)
+
+    def pace_rule(self) -> PaceRule:
+        """Clocked mode's rule for a stack that could not keep pace, validated
+        (InvalidConfigError names the parameter)."""
+        return PaceRule(expected_period=self.expected_command_period,
+                        gap_factor=self.overload_gap_factor,
+                        late_share=self.overload_late_share).validate()
 
     @property
     def step_mode(self) -> StepMode:

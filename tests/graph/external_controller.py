@@ -9,11 +9,18 @@ the first scan it gets unanswered and then drives as usual (a controller that mi
 as a starved process does: its episode ends controller_unresponsive, the next ones do not),
 ``--alternate`` is blind in every other episode (the first, third, ...: a fault that shows now
 and then; an episode begins where the odometry's stamp goes back or its position jumps, to the
-next episode's start).
+next episode's start), ``--stall`` drives as usual but sleeps 0.2 s wall time after every
+20th scan (a process the scheduler leaves out now and then: against a clocked simulator its
+commands come late in sim time, the episode ends overloaded), ``--late-start-alternate``
+drives as usual but sends no command until 5 s wall time after every other new goal (the
+first, third, ...; a goal is new when its stamp is: an injected start-up delay, a stack slow to
+plan; before a stack's first command no gap is measured, so at 4x real time such an
+episode stands still past the 10 s stuck timeout).
 """
 
 import math
 import sys
+import time
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
@@ -33,6 +40,10 @@ class GoToGoal(Node):
         self.scans = 0
         self.episodes = 0
         self.last_stamp = None
+        self.goal_stamp = None
+        self.goals = 0
+        self.delayed_goal = 0
+        self.start_after = 0.0
         self.cmd_publisher = self.create_publisher(Twist, 'cmd_vel', 10)
         self.create_subscription(PoseStamped, 'goal_pose', self.on_goal, 10)
         self.create_subscription(Odometry, 'odom', self.on_odom, 10)
@@ -40,6 +51,10 @@ class GoToGoal(Node):
 
     def on_goal(self, msg: PoseStamped) -> None:
         self.goal = (msg.pose.position.x, msg.pose.position.y)
+        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if stamp != self.goal_stamp:  # a goal sent again to a late reader keeps its stamp
+            self.goal_stamp = stamp
+            self.goals += 1
 
     def on_odom(self, msg: Odometry) -> None:
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
@@ -54,6 +69,15 @@ class GoToGoal(Node):
 
     def on_scan(self, msg: LaserScan) -> None:
         self.scans += 1
+        if self.behaviour == 'late-start-alternate':
+            if self.goal is None:
+                return  # no command before the first goal: the delay comes first
+            if self.goals % 2 == 1:
+                if self.delayed_goal != self.goals:
+                    self.delayed_goal = self.goals
+                    self.start_after = time.monotonic() + 5.0
+                if time.monotonic() < self.start_after:
+                    return
         if self.behaviour == 'silent' or (self.behaviour == 'mute-first-scan'
                                           and self.scans == 1):
             return
@@ -75,11 +99,15 @@ class GoToGoal(Node):
             if abs(error) < 0.5:
                 cmd.linear.x = max(0.0, min(0.4, 0.5 * (clearance - 0.3)))
         self.cmd_publisher.publish(cmd)
+        if self.behaviour == 'stall' and self.scans % 20 == 0:
+            time.sleep(0.2)
 
 
 def main() -> None:
     behaviour = next((flag[2:] for flag in ('--nan', '--silent', '--blind', '--mute-first-scan',
-                                                  '--alternate') if flag in sys.argv), 'go')
+                                                  '--alternate', '--stall',
+                                                  '--late-start-alternate')
+                      if flag in sys.argv), 'go')
     rclpy.init(args=sys.argv)
     node = GoToGoal(behaviour)
     try:

@@ -4,7 +4,10 @@ Per scenario, the navigator (with the scenario's robot) drives to the goal of th
 example map (a valid test: start, goal and route certified): in lockstep, answering every
 scan, and against a clocked simulator at 4x real time, on its own sim-time timer like Nav2's
 controller server. Success as the benchmark counts it: the goal without a fault collision (an
-agent may still drive into the robot standing still).
+agent may still drive into the robot standing still). On a busy machine a clocked episode may
+end overloaded (the navigator could not keep pace with sim time): no result, so it is run
+again at half the pace, as campaigns do with --adaptive-rtf
+(tests/benchmarks/bench_clocked_under_load.py runs these with every core saturated).
 """
 
 from __future__ import annotations
@@ -26,6 +29,21 @@ def start_navigator(node_processes, namespace: str, robot: str, *parameters: str
     for parameter in parameters:
         command += ['-p', parameter]
     return node_processes.start(command, name=f'reference_navigator{namespace.replace("/", "_")}')
+
+
+def evaluate_with_reruns(ros_node, namespace: str, environment, tries: int = 3):
+    """``evaluate``, with the harness's re-run rule for an overloaded episode (each try at half
+    the pace of the one before: sessgan_evolver.harness, --adaptive-rtf); HarnessFailureError
+    when every try is overloaded. Other outcomes are the test's to judge."""
+    from sessgan_evolver.harness import HarnessRetries
+
+    retries = HarnessRetries(tries, print, adaptive_rtf=True)
+    while True:
+        metrics, _ = evaluate(ros_node, namespace, environment, timeout=600,
+                              real_time_factor_scale=retries.real_time_factor_scale(namespace))
+        if metrics.outcome != 'overloaded':
+            return metrics
+        retries.failed(namespace, environment.id, metrics.outcome, metrics.detail)
 
 
 def example_environment(scenario: str):
@@ -50,10 +68,11 @@ def test_reference_navigator_reaches_the_goal_in_lockstep(node_processes, ros_no
 def test_reference_navigator_reaches_the_goal_on_its_timer_in_clocked_mode(
         node_processes, ros_node, scenario):
     namespace = f'/nav_clocked_{scenario}'
-    start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0')
+    start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0',
+                    'expected_command_period:=0.05')  # the navigator's 20 Hz
     start_navigator(node_processes, namespace, ROBOTS[scenario], 'control_mode:=timer',
                     'control_rate_hz:=20.0')
-    metrics, _ = evaluate(ros_node, namespace, example_environment(scenario), timeout=300)
+    metrics = evaluate_with_reruns(ros_node, namespace, example_environment(scenario))
     assert metrics.feasible
     assert metrics.outcome == 'goal_reached', (metrics.outcome, metrics.detail)
     assert metrics.fault_collisions == 0, metrics.detail

@@ -43,7 +43,8 @@ def start_controller(node_processes, namespace: str, name: str, *parameters: str
 
 
 def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0, seed: int = 1,
-             timeout: float = 120.0, record_directory: str = ''):
+             timeout: float = 120.0, record_directory: str = '',
+             real_time_factor_scale: float = 0.0):
     from rclpy.action import ActionClient
 
     from sessgan_interfaces.action import EvaluateEnvironment
@@ -51,7 +52,8 @@ def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0,
     client = ActionClient(ros_node, EvaluateEnvironment, f'{namespace}/evaluate')
     assert client.wait_for_server(timeout_sec=30), f'no action server at {namespace}/evaluate'
     goal = EvaluateEnvironment.Goal(environment=environment_msg, time_limit=time_limit, seed=seed,
-                                    record_directory=record_directory, controller='test')
+                                    record_directory=record_directory, controller='test',
+                                    real_time_factor_scale=real_time_factor_scale)
     feedback = []
     send = client.send_goal_async(goal, feedback_callback=feedback.append)
     assert spin_until(ros_node, send.done, timeout=30), 'goal not answered'

@@ -3,20 +3,23 @@
 Lockstep publishes a tick's clock, odom, tf, scan (and the flyer's range_down), waits for the
 controller's cmd_vel and only then advances the simulation by one control period. Clocked
 advances the simulation at ``real_time_factor`` times the wall clock and applies the latest
-command received. Either way a silent controller ends the episode as controller_unresponsive
-after a wall-clock timeout, an evaluate client's cancel or a shutdown ends it as cancelled,
-and nothing waits forever.
+command received; a stack whose commands come too late in sim time ends it as overloaded
+(sessgan_sim.command_pace). Either way a silent controller ends the episode as
+controller_unresponsive after a wall-clock timeout, an evaluate client's cancel or a shutdown
+ends it as cancelled, and nothing waits forever.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from sessgan_sim import ros_messages as rm
-from sessgan_sim.metrics import Outcome
+from sessgan_sim.command_pace import PaceFigures, PaceMonitor
+from sessgan_sim.metrics import Outcome, is_harness_outcome
 from sessgan_sim.simulator_settings import SimulatorSettings, StepMode
 from sessgan_sim.worker.commands import CommandReceiver
 from sessgan_sim.worker.topics import Recording, RobotTopics
@@ -77,6 +80,8 @@ class EpisodeStepper:
         self.topics = topics
         self.commands = commands
         self.command_msgtype = f'geometry_msgs/msg/{command_type_name}'
+        self.pace: PaceFigures | None = None
+        """The last clocked episode's command pace (None after a lockstep one)."""
 
     # ---- before the first tick -------------------------------------------------------------
 
@@ -142,6 +147,7 @@ class EpisodeStepper:
         next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
         first = True
         commands.take_all()  # stale answers of an earlier episode
+        pace = PaceMonitor(settings.pace_rule(), dt)  # fed in clocked mode only
         while not episode.done:
             if goal_handle is not None and goal_handle.is_cancel_requested:
                 episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
@@ -185,6 +191,7 @@ class EpisodeStepper:
                     if received_all:
                         command = received_all[-1]
                         last_command_wall = time.monotonic()
+                        pace.command(observation.time)
                 overridden = command_override() if command_override is not None else None
                 limit = startup_timeout if command is None else timeout
                 if overridden is None and time.monotonic() - last_command_wall > limit:
@@ -192,6 +199,12 @@ class EpisodeStepper:
                         continue
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
                                   f'no cmd_vel within {limit:.1f} s wall time')
+                    break
+                if overridden is not None:
+                    pace.restart_gap()  # a stack told its navigation ended may fall silent
+                overload = pace.overload()
+                if overload:
+                    episode.abort(Outcome.OVERLOADED, self.overload_detail(overload, settings))
                     break
             first = False
             values = rm.twist_values(command) if command is not None else (0.0, 0.0, 0.0)
@@ -206,13 +219,29 @@ class EpisodeStepper:
                 if failure:
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
                     break
+                pace.restart_gap()  # a stack may pause between a mission's waypoints
             if goal_handle is not None and feedback.due(observation.time):
                 self.publish_feedback(goal_handle, episode, observation)
         if not lockstep:
             # The final state, so subscribers and bags see where the robot ended. Not in
             # lockstep: its answer could arrive during the next episode.
             topics.publish_tick(observation, clock.stamp_ns(observation.time), recording)
-        return episode.metrics()
+        metrics = episode.metrics()
+        self.pace = None if lockstep else pace.figures
+        if not lockstep and not is_harness_outcome(metrics.outcome):
+            # A result reached while starved (a collision, stuck, even the goal) says how busy
+            # the machine was, not how the stack drives.
+            overload = pace.overload(final=True)
+            if overload:
+                metrics = dataclasses.replace(
+                    metrics, outcome=Outcome.OVERLOADED, success=False,
+                    detail=self.overload_detail(overload, settings) + (
+                        f' (it had ended {metrics.outcome.value})' if metrics.outcome else ''))
+        return metrics
+
+    @staticmethod
+    def overload_detail(overload: str, settings: SimulatorSettings) -> str:
+        return f'{overload}; real_time_factor {settings.real_time_factor:g}'
 
     @staticmethod
     def prepare(episode, before_first_step) -> bool:
@@ -254,7 +283,9 @@ class EpisodeStepper:
 
 class FleetStepper:
     """Runs a fleet episode's ticks: one EpisodeStepper (topics and command reader in the
-    robot's namespace) per robot under test, r0 first.
+    robot's namespace) per robot under test, r0 first. In clocked mode each robot's stack
+    is held to the pace rule on its own (the episode ends overloaded when one could not keep
+    pace; a robot that ended at its goal may fall silent).
 
     Each tick publishes every robot's clock, odom, tf and scan; lockstep then waits for a
     command from every robot still driving (one that ended, at its goal say, stands still
@@ -300,6 +331,8 @@ class FleetStepper:
             stepper.topics.publish_goal(observation.goal, stamp_ns, recording)
         commands: list = [None] * len(steppers)
         heard = [time.monotonic()] * len(steppers)
+        # Each robot's stack keeps pace or not on its own (fed in clocked mode only).
+        paces = [PaceMonitor(settings.pace_rule(), dt) for _ in steppers]
         wall_origin = time.monotonic()
         next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
         first = True
@@ -341,12 +374,19 @@ class FleetStepper:
                     received_all = stepper.commands.take_all()
                     if received_all:
                         commands[index], heard[index] = received_all[-1], now
+                        paces[index].command(observations[0].time)
                 for index in driving:
                     limit = (settings.controller_startup_timeout if commands[index] is None
                              else timeout)
                     if now - heard[index] > limit:
                         silent = index
                         break
+                overloaded = next(((index, detail) for index in driving
+                                   if (detail := paces[index].overload())), None)
+                if silent is None and overloaded is not None:
+                    episode.abort(Outcome.OVERLOADED, f'robot r{overloaded[0]}: '
+                                  + EpisodeStepper.overload_detail(overloaded[1], settings))
+                    break
             if silent is not None:
                 if all(stepper.commands.running for stepper in steppers):
                     episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
@@ -369,4 +409,15 @@ class FleetStepper:
             stamp_ns = clock.stamp_ns(observations[0].time)
             for stepper, observation in zip(steppers, observations):
                 stepper.topics.publish_tick(observation, stamp_ns, recording)
-        return episode.metrics()
+        metrics = episode.metrics()
+        if not lockstep and not is_harness_outcome(metrics.outcome):
+            for index, pace in enumerate(paces):
+                overload = pace.overload(final=True)
+                if overload:  # a result reached while one robot's stack was starved
+                    return dataclasses.replace(
+                        metrics, outcome=Outcome.OVERLOADED, success=False,
+                        detail=f'robot r{index}: '
+                        + EpisodeStepper.overload_detail(overload, settings)
+                        + (f' (it had ended {metrics.outcome.value})' if metrics.outcome
+                           else ''))
+        return metrics

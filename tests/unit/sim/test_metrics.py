@@ -96,6 +96,6 @@ def test_to_dict_is_json_ready():
 def test_outcome_values_are_the_contract_strings():
     assert {outcome.value for outcome in Outcome} == {
         'goal_reached', 'collision_limit', 'timeout', 'stuck', 'controller_unresponsive',
-        'invalid_environment', 'cancelled', 'harness_error'}
+        'invalid_environment', 'cancelled', 'harness_error', 'overloaded'}
     assert Outcome('stuck') is Outcome.STUCK
     assert Outcome.STUCK == 'stuck'

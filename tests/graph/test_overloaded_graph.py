@@ -1,0 +1,143 @@
+"""A stack that cannot keep pace with a clocked simulator (issue 21): its episode ends
+overloaded, a harness outcome that is run again (slower with --adaptive-rtf), never a
+failure, a bag or a fitness.
+
+The external controller's ``--stall`` sleeps 0.2 s wall time after every 20th scan, as a
+process the scheduler leaves out does: at 4x real time each stall is 0.8 sim s without a
+command against 1 s of commands every tick (about 44 % of the sim time in late gaps, the
+rule's limit is 10 %); at 0.5x (the fourth try with --adaptive-rtf) it is 0.1 sim s, two
+ticks, not late.
+"""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+
+import pytest
+
+from tests.graph.test_simulator_graph import (
+    EXTERNAL_CONTROLLER,
+    environment_msg,
+    evaluate,
+    room,
+    start_simulator,
+)
+
+pytestmark = pytest.mark.graph
+
+
+def start_stalling_controller(node_processes, namespace: str):
+    return node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--stall',
+                                 '--ros-args', '-r', f'__ns:={namespace}', '-p',
+                                 'use_sim_time:=true'], name=f'stall{namespace.replace("/", "_")}')
+
+
+def test_a_stalling_stack_in_clocked_mode_ends_overloaded_not_as_a_failure(
+        node_processes, ros_node, tmp_path):
+    namespace = '/overload'
+    start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0',
+                    'dummy_agents:=0', f'bags_root:={tmp_path}')
+    start_stalling_controller(node_processes, namespace)
+    metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'room'),
+                          time_limit=60.0, record_directory='stalled')
+    assert metrics.outcome == 'overloaded', (metrics.outcome, metrics.detail)
+    assert 'could not keep pace with sim time' in metrics.detail
+    assert 'observed command period of' in metrics.detail, metrics.detail
+    assert 'real_time_factor 4' in metrics.detail
+    assert not metrics.success
+    assert metrics.bag_path == '' and not (tmp_path / 'stalled').exists()
+
+
+def test_a_fleet_robot_whose_stack_stalls_ends_the_clocked_episode_overloaded(
+        node_processes, ros_node):
+    from sessgan_gen.ros_conversion import environment_to_msg
+    from tests.graph.test_fleet_graph import crossing_environment
+
+    namespace = '/overload_fleet'
+    start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0',
+                    'dummy_agents:=0')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
+                          f'__ns:={namespace}/r0', '-p', 'use_sim_time:=true'], name='steady_r0')
+    start_stalling_controller(node_processes, f'{namespace}/r1')
+    metrics, _ = evaluate(ros_node, namespace, environment_to_msg(crossing_environment()),
+                          time_limit=60.0, timeout=300)
+    assert metrics.outcome == 'overloaded', (metrics.outcome, metrics.detail)
+    assert 'r1: overloaded (robot r1: the stack could not keep pace' in metrics.detail, (
+        metrics.detail)
+
+
+def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(
+        node_processes, tmp_path):
+    node_processes.start(['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args', '-r',
+                          '__ns:=/w0', '-p', 'dummy_agents:=0', '-p', 'mode:=clocked',
+                          '-p', 'real_time_factor:=4.0', '-p', f'bags_root:={tmp_path}'],
+                         name='simulator_w0')
+    start_stalling_controller(node_processes, '/w0')
+    result = subprocess.run(
+        ['ros2', 'run', 'sessgan_evolver', 'campaign', '--external', '--scenario', 'factory',
+         '--generations', '1', '--population', '1', '--maps-per-member', '1',
+         '--time-limit', '10', '--seed', '5', '--run', 'stalled', '--adaptive-rtf',
+         '--harness-tries', '5', '--no-record-failures', '--runs-root', str(tmp_path / 'runs'),
+         '--bags-root', str(tmp_path / 'bags')],
+        capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    log = result.stderr
+    assert 'overloaded (worker /w0/evaluate: the stack could not keep pace' in log, log[-3000:]
+    assert 'running it again at 0.5 x the real-time factor (try 2 of 5)' in log, log[-3000:]
+    with open(tmp_path / 'runs' / 'stalled' / 'metrics_episodes.csv') as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 1 and rows[0]['outcome'] != 'overloaded'
+    with open(tmp_path / 'runs' / 'stalled' / 'metrics_generations.csv') as handle:
+        assert int(next(csv.DictReader(handle))['harness_reruns']) >= 1
+
+
+def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_processes, tmp_path):
+    from tests.graph.test_regression_suite_graph import junit_case, room_bag, suite
+
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'mode:=clocked',
+                    'real_time_factor:=4.0', f'bags_root:={tmp_path / "sim"}')
+    start_stalling_controller(node_processes, '/w0')
+
+    starved = suite(str(bag), '--external', '--harness-tries', '2', '--output',
+                    str(tmp_path / 'starved'))
+    assert starved.returncode == 3, starved.stdout + starved.stderr[-3000:]  # no result
+    counts, props = junit_case(tmp_path / 'starved' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '1')
+    assert props['verdict'] == 'error' and props['attempt_outcomes'] == (
+        'harness:overloaded harness:overloaded'), props
+    assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))
+
+    slowed = suite(str(bag), '--external', '--harness-tries', '5', '--adaptive-rtf',
+                   '--output', str(tmp_path / 'slowed'))
+    assert slowed.returncode == 0, slowed.stdout + slowed.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'slowed' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '0')
+    outcomes = props['attempt_outcomes'].split()
+    assert props['verdict'] == 'pass' and outcomes[0] == 'harness:overloaded', props
+    assert outcomes[-1] == 'pass:goal_reached', props
+
+
+def test_a_clocked_suite_with_an_injected_start_up_delay_is_flaky(node_processes, tmp_path):
+    """Clocked re-runs depend on timing: a stack that, in every other episode, sends its first
+    command 5 s wall late (20 sim s at 4x; no gap is measured before a first command) stands
+    still past the stuck timeout (10 sim s) there and reaches the goal otherwise: a pass and a
+    fail, a flaky verdict (not a failure), every attempt a result."""
+    from tests.graph.test_regression_suite_graph import junit_case, room_bag, suite
+
+    bag = room_bag(tmp_path / 'recorded')
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'mode:=clocked',
+                    'real_time_factor:=4.0', f'bags_root:={tmp_path / "sim"}')
+    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--late-start-alternate',
+                          '--ros-args', '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'],
+                         name='late_start')
+    flaky = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'flaky'),
+                  '--record', 'none')
+    assert flaky.returncode == 0, flaky.stdout + flaky.stderr[-3000:]  # flaky is no failure
+    counts, props = junit_case(tmp_path / 'flaky' / 'junit.xml')
+    assert (counts['failures'], counts['errors']) == ('0', '0')
+    assert props['verdict'] == 'flaky', props
+    outcomes = sorted(props['attempt_outcomes'].split())
+    assert outcomes == ['fail:stuck', 'pass:goal_reached'], props

@@ -28,7 +28,7 @@ from sessgan_evolver.campaign import (
     CampaignError,
     EpisodeJob,
 )
-from sessgan_evolver.errors import HarnessFailureError, SessganEvolverError
+from sessgan_evolver.errors import BagCollectionError, HarnessFailureError, SessganEvolverError
 from sessgan_evolver.harness import HarnessRetries
 from sessgan_evolver.method_campaign import MethodCampaign
 from sessgan_evolver.process_supervisor import (
@@ -82,6 +82,9 @@ def campaign_parser() -> argparse.ArgumentParser:
                         help='directory of the failure bag directories')
     parser.add_argument('--resume', action='store_true',
                         help='continue a killed run from its last completed generation')
+    parser.add_argument('--worker-bags', choices=('keep', 'remove'), default='keep',
+                        help='with --external: after a failure bag is copied (verified) into '
+                             "<bags-root>/<run>/, keep the worker's copy or remove it")
     # The command's default method is the best measured; a CampaignConfig in code: sessgan.
     parser.set_defaults(method=DEFAULT_METHOD)
     return parser
@@ -96,6 +99,7 @@ def invocation_of(args: argparse.Namespace, argv: Sequence[str]) -> dict[str, An
     kept in config.json beside the settings."""
     return {'run': args.run, 'runs_root': str(args.runs_root),
             'bags_root': str(args.bags_root), 'resume': bool(args.resume),
+            'worker_bags': args.worker_bags,
             'command_line': ['ros2', 'run', 'sessgan_evolver', 'campaign', *argv]}
 
 
@@ -149,6 +153,11 @@ class RosEvaluator:
         self.max_attempts = 3
         """Requests of one member the generator may die on."""
         self.retries = HarnessRetries(config.harness_tries, log)
+        self.collect_into: Path | None = None
+        """Where failure bags of workers are copied (the campaign's bags/<run>), or None."""
+        self.remove_collected = False
+        """Remove a worker's copy of a bag once it is collected."""
+        self.bag_sources: dict[str, Any] = {}
 
     rerun_harness_outcomes = True
     """Run a harness outcome again here (never told); False: tell it, for a caller that
@@ -403,6 +412,15 @@ class RosEvaluator:
                                                 f'worker {name}: {metrics["detail"]}')
                             pending.appendleft(state.job)
                             continue
+                        try:
+                            self.collect_bag(name, state.job, metrics)
+                        except BagCollectionError as err:
+                            # The result has no bag here: a harness failure, run again.
+                            self.retries.failed(state.job.key, state.job.environment.id,
+                                                'failure bag not collected',
+                                                f'worker {name}: {err}')
+                            pending.appendleft(state.job)
+                            continue
                         self.retries.succeeded(state.job.key)
                         on_result(state.job, metrics)
                         continue
@@ -418,6 +436,27 @@ class RosEvaluator:
                     self.retries.failed(state.job.key, state.job.environment.id,
                                         f'worker {name}', retry_reason)
                     pending.appendleft(state.job)
+
+    def collect_bag(self, name: str, job: EpisodeJob, metrics: dict) -> None:
+        """Copy the failure bag of a result into ``collect_into`` (verified:
+        sessgan_evolver.bag_collection) and point ``metrics['bag_path']`` at the copy."""
+        if self.collect_into is None or not metrics.get('bag_path'):
+            return
+        final = self.collect_into / job.environment.id
+        if Path(metrics['bag_path']).resolve() == final.resolve():
+            return  # the worker writes into this campaign's bags root
+        from sessgan_evolver.bag_collection import collect_bag
+        from sessgan_evolver.remote_bags import RemoteBagSource
+
+        namespace = name.rsplit('/', 1)[0]
+        if namespace not in self.bag_sources:
+            self.bag_sources[namespace] = RemoteBagSource(self.node, namespace, self.spin)
+        started = time.monotonic()
+        metrics['bag_path'] = str(collect_bag(
+            self.bag_sources[namespace], f'{self.record_directory}/{job.environment.id}',
+            self.collect_into, remove=self.remove_collected))
+        self.log(f'failure bag of {job.environment.id} collected from {namespace} '
+                 f'in {time.monotonic() - started:.2f} s')
 
 
 def metrics_dict(msg) -> dict:
@@ -540,7 +579,8 @@ def run_campaign(argv: list[str]) -> int:
     try:
         if config.in_process:
             return run_in_process(campaign, config, controller, run_name, args.resume, log)
-        return run_with_ros(campaign, config, controller, run_name, args.resume, log)
+        return run_with_ros(campaign, config, controller, run_name, args.resume, log,
+                            args.worker_bags)
     except KeyboardInterrupt:
         log('interrupted: stopping every process this campaign started (continue later with '
             f'--resume --run {run_name}{" --in-process" if config.in_process else ""})')
@@ -548,7 +588,8 @@ def run_campaign(argv: list[str]) -> int:
 
 
 def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, controller: str,
-                 run_name: str, resume: bool, log: Callable[[str], None]) -> int:
+                 run_name: str, resume: bool, log: Callable[[str], None],
+                 worker_bags: str = 'keep') -> int:
     """The campaign on the ROS graph: its generator and workers (or yours, --external)."""
     import rclpy
     init_rclpy(['--ros-args'])
@@ -557,6 +598,9 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
     try:
         # Goals name bags/<run>/ relative to the simulators' bags root (they write nowhere else).
         evaluator = RosEvaluator(node, config, Path(run_name), controller, supervisor, log)
+        if config.external:  # workers elsewhere: their failure bags are copied to bags/<run>/
+            evaluator.collect_into = campaign.bags_dir
+            evaluator.remove_collected = worker_bags == 'remove'
         # Ask/tell methods make their maps in this process: no generator node.
         needs_generator = config.method == SESSGAN_METHOD
         generator_running = (not needs_generator

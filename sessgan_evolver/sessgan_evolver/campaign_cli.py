@@ -64,6 +64,9 @@ NO_WORKER_TIMEOUT = 60.0
 """Wall seconds without any usable worker before the campaign gives up."""
 RESTART_READY_TIMEOUT = 120.0
 """Wall seconds a restarted simulator may take to say it is ready."""
+GONE_GRACE = 2.0
+"""Wall seconds a worker running an episode may be missing from the graph before the episode
+is taken back (DDS drops a host that vanished once its lease expires: 20 s in Fast DDS)."""
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -113,6 +116,8 @@ class Running:
     send_future: Any
     goal_handle: Any = None
     result_future: Any = None
+    gone_since: float | None = None
+    """When its worker's action server was first seen missing from the graph."""
 
 
 class RosEvaluator:
@@ -425,6 +430,8 @@ class RosEvaluator:
                         on_result(state.job, metrics)
                         continue
                     retry_reason = f'ended the goal with status {response.status}'
+                if retry_reason is None and state.goal_handle is not None:
+                    retry_reason = self.gone(name, state)
                 timeout = self.config.episode_timeout_for(state.job.environment.occupancy.size)
                 if retry_reason is None and time.monotonic() - state.started > timeout:
                     retry_reason = f'gave no result within {timeout:.0f} s'
@@ -436,6 +443,20 @@ class RosEvaluator:
                     self.retries.failed(state.job.key, state.job.environment.id,
                                         f'worker {name}', retry_reason)
                     pending.appendleft(state.job)
+
+    def gone(self, name: str, state: Running) -> str | None:
+        """Why the episode of ``state`` is to be taken back from worker ``name``: its action
+        server left the graph (its host or processes are gone) for ``GONE_GRACE``; else None.
+        A worker that comes back is given work again (its client is kept)."""
+        if self.clients[name].server_is_ready():
+            state.gone_since = None
+            return None
+        now = time.monotonic()
+        if state.gone_since is None:
+            state.gone_since = now
+        if now - state.gone_since < GONE_GRACE:
+            return None
+        return 'left the ROS graph during the episode (its host or processes are gone)'
 
     def collect_bag(self, name: str, job: EpisodeJob, metrics: dict) -> None:
         """Copy the failure bag of a result into ``collect_into`` (verified:

@@ -87,32 +87,38 @@ class NamespaceNetwork:
         # No IGMP querier on this bridge: flood multicast (DDS discovery) to every port.
         ip('-n', self.switch, 'link', 'set', 'br0', 'type', 'bridge', 'mcast_snooping', '0')
         ip('-n', self.switch, 'link', 'set', 'br0', 'up')
-        for index, host in enumerate(self.hosts.values()):
+        for host in self.hosts.values():
             self._namespace(host.namespace)
-            port = f'p{index}'
-            ip('link', 'add', 'name', host.interface, 'netns', host.namespace, 'type', 'veth',
-               'peer', 'name', port, 'netns', self.switch)
-            ip('-n', self.switch, 'link', 'set', port, 'master', 'br0')
-            ip('-n', self.switch, 'link', 'set', port, 'up')
-            self.bring_up(host)
+            self.plug(host.name)
 
-    def bring_up(self, host: Host) -> None:
-        """Addresses, links and the multicast route of ``host`` (again after ``cut``)."""
+    def plug(self, name: str) -> None:
+        """Join host ``name`` to the bridge: a veth pair (its end ``host.interface``, the
+        switch's end on the bridge), its address, and the route for DDS multicast discovery
+        (the namespace has no default route)."""
+        host = self.hosts[name]
+        port = f'p{list(self.hosts).index(name)}'
+        ip('link', 'add', 'name', host.interface, 'netns', host.namespace, 'type', 'veth',
+           'peer', 'name', port, 'netns', self.switch)
+        ip('-n', self.switch, 'link', 'set', port, 'master', 'br0')
+        ip('-n', self.switch, 'link', 'set', port, 'up')
         ip('-n', host.namespace, 'link', 'set', 'lo', 'up')
         ip('-n', host.namespace, 'addr', 'add', f'{host.address}/24', 'dev', host.interface)
         ip('-n', host.namespace, 'link', 'set', host.interface, 'up')
-        # DDS multicast discovery needs a route for 239.255.0.1; the namespace has no default.
         ip('-n', host.namespace, 'route', 'add', '224.0.0.0/4', 'dev', host.interface)
 
-    def cut(self, name: str) -> None:
-        """Take ``name``'s link down, as a pulled cable: its processes keep running."""
+    def unplug(self, name: str) -> None:
+        """Delete host ``name``'s interface (the veth pair goes with it), as a host that drops
+        off the network: its processes keep running."""
         host = self.hosts[name]
-        ip('-n', host.namespace, 'link', 'set', host.interface, 'down')
+        ip('-n', host.namespace, 'link', 'del', host.interface)
 
-    def reconnect(self, name: str) -> None:
+    def link(self, name: str, up: bool) -> None:
+        """Take host ``name``'s link down (a pulled cable: interface, address and processes
+        stay) or up again."""
         host = self.hosts[name]
-        ip('-n', host.namespace, 'link', 'set', host.interface, 'up')
-        ip('-n', host.namespace, 'route', 'replace', '224.0.0.0/4', 'dev', host.interface)
+        ip('-n', host.namespace, 'link', 'set', host.interface, 'up' if up else 'down')
+        if up:  # the kernel dropped the route with the link
+            ip('-n', host.namespace, 'route', 'replace', '224.0.0.0/4', 'dev', host.interface)
 
     def _namespace(self, name: str) -> None:
         ip('netns', 'add', name)

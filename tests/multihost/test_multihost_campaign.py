@@ -5,7 +5,10 @@ by a bridge (network_namespaces.py), DDS discovery across them by SUBNET multica
 from __future__ import annotations
 
 import csv
+import os
 import re
+import signal
+import time
 from pathlib import Path
 
 import pytest
@@ -87,3 +90,67 @@ def test_a_campaign_runs_on_workers_of_two_other_hosts(multihost, tmp_path):
 
 def files_of(directory: Path) -> dict[str, bytes]:
     return {path.name: path.read_bytes() for path in sorted(directory.iterdir())}
+
+
+@pytest.mark.parametrize('fault', ['processes_killed', 'interface_deleted', 'link_down'])
+def test_a_worker_host_lost_mid_episode_is_replaced_and_used_again_when_back(
+        multihost, tmp_path, fault):
+    """Worker /w1 is lost in the middle of an episode: its processes killed (SIGKILL, no
+    goodbye to DDS), its host's interface deleted, or its link taken down (the processes
+    still run in both). The campaign takes the episode back once /w1 leaves the graph, runs
+    it on /w0, never records it, and gives /w1 work again once it is back: restarted; its
+    interface made again and its processes restarted (measured: Fast DDS processes that
+    outlived the deletion of their interface were not discovered again within 30 s after it
+    was re-made); its link up again, the same processes."""
+    network, processes = multihost
+    # Clocked at real time: an episode lasts up to its 6 sim s in wall time, so 'mid-episode'
+    # is a wide window.
+    clocked = ('-p', 'mode:=clocked', '-p', 'real_time_factor:=1.0')
+    start_worker(network, processes, 'worker_a', '/w0', tmp_path / 'bags_a', *clocked)
+    start_worker(network, processes, 'worker_b', '/w1', tmp_path / 'bags_b', *clocked)
+    for process in processes.processes[::2]:
+        process.wait_for_output('simulator ready', timeout=120.0)
+    w1_simulator, w1_controller = processes.processes[2:4]
+    # 6 episodes a generation for 2 workers: /w1 is given the next one as soon as it ends one.
+    campaign = processes.start(campaign_command(network, [
+        '--scenario', 'factory', '--generations', '2', '--population', '2',
+        '--maps-per-member', '3', '--time-limit', '6', '--seed', '5', '--run', 'faulty',
+        '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')]),
+        name='campaign')
+    w1_simulator.wait_for_output(EPISODE_LOG.pattern, timeout=180.0)
+    time.sleep(2.0)  # 2 s into its next episode
+    if fault == 'processes_killed':
+        kill(w1_simulator, w1_controller)
+    elif fault == 'interface_deleted':
+        network.unplug('worker_b')
+    else:
+        network.link('worker_b', up=False)
+    campaign.wait_for_output(r'/w1/evaluate \(left the ROS graph during the episode.*'
+                             r'a harness failure, not a result', timeout=120.0)
+    if fault == 'link_down':
+        network.link('worker_b', up=True)
+    else:
+        if fault == 'interface_deleted':
+            kill(w1_simulator, w1_controller)
+            network.plug('worker_b')
+        start_worker(network, processes, 'worker_b', '/w1', tmp_path / 'bags_b', *clocked)
+        w1_simulator = processes.processes[-2]
+        w1_simulator.wait_for_output('simulator ready', timeout=120.0)
+    episodes_before = len(EPISODE_LOG.findall(w1_simulator.output()))
+    assert campaign.wait(timeout=CAMPAIGN_TIMEOUT) == 0, campaign.output()[-4000:]
+    rows = read_csv(tmp_path / 'runs' / 'faulty' / 'metrics_episodes.csv')
+    assert len(rows) == 12  # every episode once: the one cut off has no row of its own
+    assert all(row['outcome'] != 'cancelled' for row in rows)
+    with open(tmp_path / 'runs' / 'faulty' / 'metrics_generations.csv') as handle:
+        assert sum(int(row['harness_reruns']) for row in csv.DictReader(handle)) >= 1
+    # Used again once back: it ran episodes and the campaign collected their bags from it.
+    assert len(EPISODE_LOG.findall(w1_simulator.output())) > episodes_before, \
+        'the worker that came back was never used again'
+    back = campaign.output().split('left the ROS graph', 1)[1]
+    assert 'collected from /w1' in back, back[-3000:]
+
+
+def kill(*node_processes) -> None:
+    for process in node_processes:
+        os.killpg(process.process.pid, signal.SIGKILL)
+        process.process.wait(timeout=10)

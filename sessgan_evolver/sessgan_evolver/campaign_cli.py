@@ -64,6 +64,8 @@ NO_WORKER_TIMEOUT = 60.0
 """Wall seconds without any usable worker before the campaign gives up."""
 RESTART_READY_TIMEOUT = 120.0
 """Wall seconds a restarted simulator may take to say it is ready."""
+IDENTITY_TIMEOUT = 10.0
+"""Wall seconds a newly discovered worker may take to say what it is."""
 GONE_GRACE = 2.0
 """Wall seconds a worker running an episode may be missing from the graph before the episode
 is taken back (DDS drops a host that vanished once its lease expires: 20 s in Fast DDS)."""
@@ -163,6 +165,10 @@ class RosEvaluator:
         self.remove_collected = False
         """Remove a worker's copy of a bag once it is collected."""
         self.bag_sources: dict[str, Any] = {}
+        self.expected_robot: str | None = None
+        """The robot a worker's simulator must host (its version must be ours), or None:
+        workers are not checked (sessgan_evolver.worker_identity)."""
+        self.refused: set[str] = set()
 
     rerun_harness_outcomes = True
     """Run a harness outcome again here (never told); False: tell it, for a caller that
@@ -216,11 +222,39 @@ class RosEvaluator:
             if self.allowed is not None and name not in self.allowed:
                 continue
             if name not in self.clients and name not in self.starting:
+                if name in self.refused or not self.identity_checked(name):
+                    continue
                 from sessgan_interfaces.action import EvaluateEnvironment
                 self.clients[name] = self.action_client_class(
                     self.node, EvaluateEnvironment, name)
                 self.log(f'worker found: {name}')
         return sorted(self.clients)
+
+    def identity_checked(self, name: str) -> bool:
+        """True if worker ``name`` may be used (or is not checked); a worker of another
+        version or robot is refused for good, with the difference logged; one whose ``bags``
+        service does not answer yet is asked again at the next discovery."""
+        if self.expected_robot is None:
+            return True
+        from sessgan_evolver import __version__
+        from sessgan_evolver.remote_bags import RemoteBagSource
+        from sessgan_evolver.worker_identity import worker_difference
+
+        namespace = name.rsplit('/', 1)[0]
+        source = self.bag_sources.setdefault(
+            namespace, RemoteBagSource(self.node, namespace, self.spin))
+        try:
+            description = source.call_within(IDENTITY_TIMEOUT)
+        except BagCollectionError as err:
+            self.log(f'worker {name}: not used yet: {err}')
+            return False
+        why = worker_difference(name, description.software_version, description.settings,
+                                __version__, self.expected_robot, self.config.scenario)
+        if why:
+            self.refused.add(name)
+            self.log(f'refusing {why}')
+            return False
+        return True
 
     def wait_for_workers(self, count: int, timeout: float) -> None:
         deadline = time.monotonic() + timeout
@@ -538,7 +572,7 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
 
     spec = CONTROLLERS.get(controller)
     scenario_robot = get_scenario(config.scenario).robot
-    robot = spec.robot_in(scenario_robot) if spec else scenario_robot
+    robot = robot_of(controller, config.scenario)
     robot_args = spec.node_arguments(robot) if spec else []
     # The simulators host the controller's own robot where it stands in for the scenario's
     # (the tricycle of tricycle_nearness_diagram).
@@ -560,6 +594,16 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
                                                                      config.robots)),
             core=core, batch=True)
     return generator
+
+
+def robot_of(controller: str, scenario: str) -> str:
+    """The robot the simulators host: the scenario's, or the one a built-in controller
+    stands in with (the tricycle of tricycle_nearness_diagram)."""
+    from sessgan_controllers.registry import CONTROLLERS
+
+    spec = CONTROLLERS.get(controller)
+    scenario_robot = get_scenario(scenario).robot
+    return spec.robot_in(scenario_robot) if spec else scenario_robot
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -622,6 +666,7 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
         if config.external:  # workers elsewhere: their failure bags are copied to bags/<run>/
             evaluator.collect_into = campaign.bags_dir
             evaluator.remove_collected = worker_bags == 'remove'
+        evaluator.expected_robot = robot_of(controller, config.scenario)
         # Ask/tell methods make their maps in this process: no generator node.
         needs_generator = config.method == SESSGAN_METHOD
         generator_running = (not needs_generator

@@ -29,7 +29,11 @@ class RemoteBagSource:
     def call(self, **fields: Any) -> Any:
         """The response to a request of ``fields``; BagCollectionError if the worker gives no
         answer within ``timeout`` or refuses."""
-        deadline = time.monotonic() + self.timeout
+        return self.call_within(self.timeout, **fields)
+
+    def call_within(self, timeout: float, **fields: Any) -> Any:
+        """``call`` with its own ``timeout``; no fields: the worker's description."""
+        deadline = time.monotonic() + timeout
         while not self.client.service_is_ready():
             if time.monotonic() > deadline:
                 raise BagCollectionError(f'no worker answers at {self.service} (a simulator '
@@ -43,16 +47,12 @@ class RemoteBagSource:
             if time.monotonic() > deadline:
                 self.client.remove_pending_request(future)
                 raise BagCollectionError(f'{self.service} gave no answer within '
-                                         f'{self.timeout:.0f} s')
+                                         f'{timeout:.0f} s')
             self.spin(0.01)
         response = future.result()
         if not response.success:
             raise BagCollectionError(f'{self.service}: {response.message}')
         return response
-
-    def describe(self) -> Any:
-        """The worker's software version and settings (JSON)."""
-        return self.call()
 
     def list_files(self, bag: str) -> dict[str, int]:
         response = self.call(bag=bag)

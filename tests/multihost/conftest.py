@@ -65,18 +65,23 @@ def multihost(network, node_processes):
 
 
 def start_worker(network: NamespaceNetwork, processes, host: str, namespace: str,
-                 bags_root: Path, *simulator_parameters: str, blind: bool = True) -> Worker:
-    """A simulator and the external example controller (``--blind``: it drives straight on,
-    so valid maps end in failures) under ``namespace`` in ``host``'s namespace."""
+                 bags_root: Path, *simulator_parameters: str, controller: bool = True,
+                 env: dict[str, str] | None = None,
+                 simulator: list[str] | None = None) -> Worker:
+    """A simulator (``simulator``: its command, default ``ros2 run sessgan_sim simulator``)
+    and, with ``controller``, the external example controller (``--blind``: it drives
+    straight on, so valid maps end in failures) under ``namespace`` in ``host``'s
+    namespace."""
     where = network.hosts[host]
     processes.start(where.command(
-        ['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args', '-r', f'__ns:={namespace}',
-         '-p', f'bags_root:={bags_root}', *simulator_parameters]),
-        name=f'simulator{namespace.replace("/", "_")}')
-    processes.start(where.command(
-        [sys.executable, str(EXTERNAL_CONTROLLER), *(['--blind'] if blind else []),
-         '--ros-args', '-r', f'__ns:={namespace}', '-p', 'use_sim_time:=true']),
-        name=f'controller{namespace.replace("/", "_")}')
+        [*(simulator or ['ros2', 'run', 'sessgan_sim', 'simulator']), '--ros-args', '-r',
+         f'__ns:={namespace}', '-p', f'bags_root:={bags_root}', *simulator_parameters]),
+        name=f'simulator{namespace.replace("/", "_")}', env=env)
+    if controller:
+        processes.start(where.command(
+            [sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args', '-r',
+             f'__ns:={namespace}', '-p', 'use_sim_time:=true']),
+            name=f'controller{namespace.replace("/", "_")}', env=env)
     return Worker(host, namespace, bags_root)
 
 

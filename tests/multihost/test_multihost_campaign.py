@@ -8,6 +8,7 @@ import csv
 import os
 import re
 import signal
+import sys
 import time
 from pathlib import Path
 
@@ -148,6 +149,46 @@ def test_a_worker_host_lost_mid_episode_is_replaced_and_used_again_when_back(
         'the worker that came back was never used again'
     back = campaign.output().split('left the ROS graph', 1)[1]
     assert 'collected from /w1' in back, back[-3000:]
+
+
+# A simulator that says it is another version, as one installed from another release would.
+OTHER_VERSION_SIMULATOR = [sys.executable, '-c', (
+    'import sys, sessgan_sim; sessgan_sim.__version__ = "0.0.9"; '
+    'from sessgan_sim.simulator_node import main; sys.exit(main(sys.argv))')]
+
+
+def test_workers_of_another_domain_version_or_scenario_are_not_used(multihost, tmp_path):
+    """Beside a good worker /w0: /w1 in another ROS_DOMAIN_ID (never seen), /w2 of another
+    software version and /w3 set up for the race track's car (both refused, the difference
+    named). Every episode runs on /w0."""
+    network, processes = multihost
+    other_domain = {'ROS_DOMAIN_ID': str(int(processes.env['ROS_DOMAIN_ID']) + 1)}
+    start_worker(network, processes, 'worker_a', '/w0', tmp_path / 'bags_a')
+    start_worker(network, processes, 'worker_a', '/w1', tmp_path / 'bags_a', env=other_domain)
+    start_worker(network, processes, 'worker_b', '/w2', tmp_path / 'bags_b', controller=False,
+                 simulator=OTHER_VERSION_SIMULATOR)
+    start_worker(network, processes, 'worker_b', '/w3', tmp_path / 'bags_b', '-p',
+                 'robot:=car', controller=False)
+    for process in processes.processes:
+        if process.name.startswith('simulator'):
+            process.wait_for_output('simulator ready', timeout=120.0)
+    campaign = processes.start(campaign_command(network, [
+        '--scenario', 'factory', '--generations', '1', '--population', '2',
+        '--maps-per-member', '2', '--time-limit', '10', '--seed', '3', '--run', 'picky',
+        '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')]),
+        name='campaign')
+    assert campaign.wait(timeout=CAMPAIGN_TIMEOUT) == 0, campaign.output()[-4000:]
+    log = campaign.output()
+    assert 'worker found: /w0/evaluate' in log
+    assert '/w1/' not in log, 'a worker of another ROS domain was seen'
+    assert ('refusing worker /w2/evaluate runs sessgan 0.0.9, this campaign 0.1.0: install '
+            'the same version on every host') in log
+    assert ("refusing worker /w3/evaluate hosts robot 'car' (its simulator parameter robot), "
+            "the campaign's scenario factory needs 'diff_drive'") in log
+    assert 'worker found: /w2' not in log and 'worker found: /w3' not in log
+    w0_episodes = len(EPISODE_LOG.findall(processes.processes[0].output()))
+    assert w0_episodes == 4 == len(read_csv(tmp_path / 'runs' / 'picky' /
+                                            'metrics_episodes.csv'))
 
 
 def kill(*node_processes) -> None:

@@ -112,6 +112,34 @@ def invocation_of(args: argparse.Namespace, argv: Sequence[str]) -> dict[str, An
 
 
 @dataclass
+class CampaignOverhead:
+    """Wall seconds the campaign itself spent around its episodes (what limits how many
+    workers one campaign keeps busy; tests/benchmarks/bench_multihost.py)."""
+
+    episodes: int = 0
+    """Results told (harness re-runs excluded)."""
+    generator: float = 0.0
+    """Waiting for the generator's maps."""
+    dispatch: float = 0.0
+    """Per episode: goal sent to result received, less the worker's own episode wall time
+    (goal and result messaging, world build, the dispatch loop's polling)."""
+    bags: int = 0
+    bag_transfer: float = 0.0
+    """Copying failure bags from the workers (sessgan_evolver.bag_collection)."""
+    cpu: float = 0.0
+    """CPU seconds of the campaign process over the run (its search, checkpoints and report
+    included; the generator is a process of its own)."""
+
+    def summary(self) -> str:
+        per = 1e3 / max(1, self.episodes)
+        return (f'campaign overhead per episode ({self.episodes} episodes): generator '
+                f'{self.generator * per:.1f} ms, dispatch {self.dispatch * per:.1f} ms, bag '
+                f'transfer {self.bag_transfer * per:.1f} ms ({self.bags} bags, '
+                f'{self.bag_transfer * 1e3 / max(1, self.bags):.1f} ms each); campaign '
+                f'process CPU {self.cpu * per:.1f} ms')
+
+
+@dataclass
 class Running:
     job: EpisodeJob
     started: float
@@ -160,6 +188,7 @@ class RosEvaluator:
         self.max_attempts = 3
         """Requests of one member the generator may die on."""
         self.retries = HarnessRetries(config.harness_tries, log)
+        self.overhead = CampaignOverhead()
         self.collect_into: Path | None = None
         """Where failure bags of workers are copied (the campaign's bags/<run>), or None."""
         self.remove_collected = False
@@ -278,6 +307,7 @@ class RosEvaluator:
             generation=generation, member=member, height=self.config.height,
             width=self.config.width)
         request.weights = weights
+        asked = time.monotonic()
         for attempt in range(1, self.max_attempts + 1):
             future = self.generator.call_async(request)
             deadline = time.monotonic() + GENERATOR_TIMEOUT
@@ -291,6 +321,7 @@ class RosEvaluator:
             if future.done():
                 break
         response = future.result()
+        self.overhead.generator += time.monotonic() - asked
         if not response.success:
             raise CampaignError(f'the generator refused member {member}: {response.message}')
         environments = [environment_from_msg(msg) for msg in response.environments]
@@ -461,6 +492,9 @@ class RosEvaluator:
                             pending.appendleft(state.job)
                             continue
                         self.retries.succeeded(state.job.key)
+                        self.overhead.episodes += 1
+                        self.overhead.dispatch += max(0.0, time.monotonic() - state.started
+                                                      - float(metrics['wall_time']))
                         on_result(state.job, metrics)
                         continue
                     retry_reason = f'ended the goal with status {response.status}'
@@ -510,8 +544,11 @@ class RosEvaluator:
         metrics['bag_path'] = str(collect_bag(
             self.bag_sources[namespace], f'{self.record_directory}/{job.environment.id}',
             self.collect_into, remove=self.remove_collected))
+        seconds = time.monotonic() - started
+        self.overhead.bag_transfer += seconds
+        self.overhead.bags += 1
         self.log(f'failure bag of {job.environment.id} collected from {namespace} '
-                 f'in {time.monotonic() - started:.2f} s')
+                 f'in {seconds:.2f} s')
 
 
 def metrics_dict(msg) -> dict:
@@ -682,7 +719,10 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
         if needs_generator:
             evaluator.wait_for_generator(timeout=120.0)
         evaluator.wait_for_workers(1 if config.external else config.workers, timeout=120.0)
+        cpu = time.process_time()
         result = campaign.run(evaluator, resume=resume)
+        evaluator.overhead.cpu = time.process_time() - cpu
+        log(evaluator.overhead.summary())
     except (HarnessFailureError, OSError) as err:
         # OSError: the run directory cannot be written (a full disk): nothing more can be.
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')

@@ -30,6 +30,8 @@ from sessgan_sim.bag_recording import EPISODE_FILE, is_episode_bag
 
 CHUNK_BYTES = 1 << 20
 """Bytes asked for per read (the worker serves at most sessgan_sim.bag_serving.MAX_CHUNK)."""
+STAGING_MARK = '.collecting-'
+"""A bag being copied is in ``.<episode>.collecting-<random>`` beside where it goes."""
 MAX_EPISODE_FILE_BYTES = 16 << 20
 """An episode.json larger than this is refused before it is read (it is a few kB)."""
 
@@ -71,7 +73,9 @@ def collect_bag(source: BagSource, bag: str, bags_dir: Path, remove: bool = Fals
     final = bags_dir / episode
     if final.exists() and not is_episode_bag(final):
         raise BagCollectionError(f'refusing to replace {final}: it is not a failure bag')
-    staging = Path(tempfile.mkdtemp(dir=bags_dir, prefix=f'.{episode}.collecting-'))
+    for stale in bags_dir.glob(f'.{episode}{STAGING_MARK}*'):  # of a campaign killed here
+        shutil.rmtree(stale, ignore_errors=True)
+    staging = Path(tempfile.mkdtemp(dir=bags_dir, prefix=f'.{episode}{STAGING_MARK}'))
     try:
         episode_bytes = _copy(source, bag, EPISODE_FILE, listing[EPISODE_FILE], None,
                               staging, chunk_bytes)

@@ -64,7 +64,7 @@ NO_WORKER_TIMEOUT = 60.0
 """Wall seconds without any usable worker before the campaign gives up."""
 RESTART_READY_TIMEOUT = 120.0
 """Wall seconds a restarted simulator may take to say it is ready."""
-IDENTITY_TIMEOUT = 10.0
+IDENTITY_TIMEOUT = 30.0
 """Wall seconds a newly discovered worker may take to say what it is."""
 GONE_GRACE = 2.0
 """Wall seconds a worker running an episode may be missing from the graph before the episode
@@ -198,6 +198,8 @@ class RosEvaluator:
         """The robot a worker's simulator must host (its version must be ours), or None:
         workers are not checked (sessgan_evolver.worker_identity)."""
         self.refused: set[str] = set()
+        self.unidentified: dict[str, float] = {}
+        """Workers whose bags service was not up yet, with when that was first seen."""
 
     rerun_harness_outcomes = True
     """Run a harness outcome again here (never told); False: tell it, for a caller that
@@ -260,9 +262,11 @@ class RosEvaluator:
         return sorted(self.clients)
 
     def identity_checked(self, name: str) -> bool:
-        """True if worker ``name`` may be used (or is not checked); a worker of another
-        version or robot is refused for good, with the difference logged; one whose ``bags``
-        service does not answer yet is asked again at the next discovery."""
+        """True if worker ``name`` may be used (or is not checked). One of another version or
+        robot is refused for good, with the difference logged; one whose ``bags`` service is
+        not up yet is looked at again at the next discovery (never waited for here, so it
+        cannot stall the dispatch loop), and refused once it has been missing for
+        ``IDENTITY_TIMEOUT``."""
         if self.expected_robot is None:
             return True
         from sessgan_evolver import __version__
@@ -272,13 +276,24 @@ class RosEvaluator:
         namespace = name.rsplit('/', 1)[0]
         source = self.bag_sources.setdefault(
             namespace, RemoteBagSource(self.node, namespace, self.spin))
-        try:
-            description = source.call_within(IDENTITY_TIMEOUT)
-        except BagCollectionError as err:
-            self.log(f'worker {name}: not used yet: {err}')
-            return False
-        why = worker_difference(name, description.software_version, description.settings,
-                                __version__, self.expected_robot, self.config.scenario)
+        why = None
+        if not source.client.service_is_ready():
+            first_seen = self.unidentified.setdefault(name, time.monotonic())
+            if time.monotonic() - first_seen < IDENTITY_TIMEOUT:
+                return False
+            why = (f'worker {name}: it serves no {source.service} service within '
+                   f'{IDENTITY_TIMEOUT:.0f} s, so it cannot say its version or send its '
+                   'failure bags (a sessgan version without it?)')
+        else:
+            try:
+                description = source.call_within(IDENTITY_TIMEOUT)
+            except BagCollectionError as err:
+                self.log(f'worker {name}: not used yet: {err}')
+                return False
+            why = worker_difference(name, description.software_version,
+                                    description.settings, __version__, self.expected_robot,
+                                    self.config.scenario)
+        self.unidentified.pop(name, None)
         if why:
             self.refused.add(name)
             self.log(f'refusing {why}')

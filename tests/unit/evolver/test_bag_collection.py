@@ -116,3 +116,11 @@ def test_the_server_reads_only_the_bags_files_in_bounded_chunks(server):
     with pytest.raises(BagServeError, match='1 to'):
         server.read(BAG, 'episode.json', 0, MAX_CHUNK + 1)
     assert server.read(BAG, 'episode.json', 0, 1) == b'{'
+
+
+def test_a_staging_directory_left_by_a_killed_collection_is_replaced(server, tmp_path):
+    stale = tmp_path / 'bags' / '.g003-m07-s12.collecting-abc123'
+    stale.mkdir(parents=True)
+    (stale / 'episode.json').write_text('{"half": ')
+    copy = collect_bag(server, BAG, tmp_path / 'bags')
+    assert [path.name for path in (tmp_path / 'bags').iterdir()] == [copy.name]

@@ -219,3 +219,37 @@ def test_a_lost_bag_reported_by_the_worker_reaches_the_metrics(evaluator):
                        lambda job, metrics: results.append(metrics))
     assert [metrics['bag_error'] for metrics in results] == [
         'cannot write the failure bag: [Errno 28] No space left']
+
+
+def test_an_episode_whose_worker_left_the_graph_is_taken_back_and_rerun(evaluator):
+    """A worker whose action server vanishes mid-episode (its host gone: no result will come)
+    has the episode taken back once it has been missing for GONE_GRACE, long before the
+    episode timeout (600 s here); once back, it runs the episode again: one result."""
+    import threading
+
+    from sessgan_evolver.campaign_cli import GONE_GRACE
+
+    present = threading.Event()
+    present.set()
+
+    class VanishingClient(FakeClient):
+        def server_is_ready(self) -> bool:
+            return present.is_set()
+
+    evaluator.action_client_class = lambda node, kind, name: VanishingClient(evaluator.goals)
+    started = time.monotonic()
+
+    def script(number, result):
+        if number == 0:  # the host drops off; it comes back a while after the take-back
+            present.clear()
+            threading.Timer(GONE_GRACE + 1.0, present.set).start()
+        else:
+            result.finish(finished('timeout'))
+
+    assert run_with(evaluator, script) == ['timeout']
+    assert len(evaluator.goals) == 2
+    assert GONE_GRACE <= time.monotonic() - started < 30.0
+    assert any('left the ROS graph during the episode' in line and
+               'a harness failure, not a result' in line for line in evaluator.logs), \
+        evaluator.logs
+    assert evaluator.harness_reruns == 1

@@ -253,3 +253,43 @@ def test_an_episode_whose_worker_left_the_graph_is_taken_back_and_rerun(evaluato
                'a harness failure, not a result' in line for line in evaluator.logs), \
         evaluator.logs
     assert evaluator.harness_reruns == 1
+
+
+class Describing:
+    """A worker's bags service as identity_checked sees it: up or not, and what it says."""
+
+    def __init__(self, up: bool, version: str = '', robot: str = '') -> None:
+        import json
+
+        self.service = '/w0/bags'
+        self.client = SimpleNamespace(service_is_ready=lambda: up)
+        self.description = SimpleNamespace(software_version=version,
+                                           settings=json.dumps({'robot': robot}))
+
+    def call_within(self, timeout: float):
+        return self.description
+
+
+@pytest.mark.parametrize('source, refusal', [
+    (Describing(True, '0.1.0', ''), None),
+    (Describing(True, '0.0.9', ''), 'runs sessgan 0.0.9, this campaign 0.1.0'),
+    (Describing(True, '0.1.0', 'flyer'), "hosts robot 'flyer'"),
+    (Describing(False), 'serves no /w0/bags service within'),
+])
+def test_a_worker_is_used_only_if_it_says_it_matches(evaluator, monkeypatch, source, refusal):
+    import sessgan_evolver.campaign_cli as campaign_cli
+
+    monkeypatch.setattr(campaign_cli, 'IDENTITY_TIMEOUT', 0.2)
+    evaluator.expected_robot = 'diff_drive'
+    evaluator.bag_sources['/w0'] = source
+    found = evaluator.discover_workers()
+    if refusal is None:
+        assert found == ['/w0/evaluate']
+        return
+    if not source.client.service_is_ready():  # not up yet: looked at again, not waited for
+        assert found == [] and not evaluator.refused
+        time.sleep(0.3)
+        found = evaluator.discover_workers()
+    assert found == [] and evaluator.refused == {'/w0/evaluate'}
+    assert any(line.startswith('refusing worker /w0/evaluate') and refusal in line
+               for line in evaluator.logs), evaluator.logs

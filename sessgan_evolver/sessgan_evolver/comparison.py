@@ -225,7 +225,8 @@ def open_evaluator(config: CompareConfig, output: Path, label: str,
                                 output / 'logs' / label, config.controller,
                                 config.time_limit, config.mission(), config.fleet(),
                                 simulate_invalid=False, observer=observer, log=log,
-                                size=config.map_size())
+                                size=config.map_size(),
+                                collect_into=output / 'worker_bags' / label)
     return InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                               simulate_invalid=False, observer=observer,
                               mission=config.mission(), fleet=config.fleet(), log=log,

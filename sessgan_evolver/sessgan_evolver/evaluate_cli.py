@@ -172,7 +172,8 @@ def open_evaluator(args: argparse.Namespace, scenario: str, mission: MissionSpec
     if args.external:
         return worker_evaluator(
             scenario, external_record_subdirectory(output), output / 'logs', args.controller,
-            args.time_limit, mission, fleet, simulate_invalid=args.simulate_invalid, log=log)
+            args.time_limit, mission, fleet, simulate_invalid=args.simulate_invalid, log=log,
+            collect_into=output / 'worker_bags')
     return InProcessEvaluator(scenario, args.controller, args.time_limit,
                               simulate_invalid=args.simulate_invalid, mission=mission,
                               fleet=fleet, log=log)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -54,6 +55,9 @@ def campaign_parser() -> argparse.ArgumentParser:
                         help='directory of the failure bag directories')
     parser.add_argument('--resume', action='store_true',
                         help='continue a killed run from its last completed generation')
+    parser.add_argument('--worker-bags', choices=('keep', 'remove'), default='keep',
+                        help='with --external: after a failure bag is copied (verified) into '
+                             "<bags-root>/<run>/, keep the worker's copy or remove it")
     # The command's default method is the best measured; a CampaignConfig in code: sessgan.
     parser.set_defaults(method=DEFAULT_METHOD)
     return parser
@@ -68,6 +72,7 @@ def invocation_of(args: argparse.Namespace, argv: Sequence[str]) -> dict[str, An
     kept in config.json beside the settings."""
     return {'run': args.run, 'runs_root': str(args.runs_root),
             'bags_root': str(args.bags_root), 'resume': bool(args.resume),
+            'worker_bags': args.worker_bags,
             'command_line': ['ros2', 'run', 'sessgan_evolver', 'campaign', *argv]}
 
 
@@ -95,7 +100,7 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
 
     spec = CONTROLLERS.get(controller)
     scenario_robot = get_scenario(config.scenario).robot
-    robot = spec.robot_in(scenario_robot) if spec else scenario_robot
+    robot = robot_of(controller, config.scenario)
     robot_args = spec.node_arguments(robot) if spec else []
     # The simulators host the controller's own robot where it stands in for the scenario's
     # (the tricycle of tricycle_nearness_diagram).
@@ -117,6 +122,16 @@ def start_graph(supervisor: ProcessSupervisor, pool: WorkerPool, config: Campaig
                                                                      config.robots)),
             core=core, batch=True)
     return generator
+
+
+def robot_of(controller: str, scenario: str) -> str:
+    """The robot the simulators host: the scenario's, or the one a built-in controller
+    stands in with (the tricycle of tricycle_nearness_diagram)."""
+    from sessgan_controllers.registry import CONTROLLERS
+
+    spec = CONTROLLERS.get(controller)
+    scenario_robot = get_scenario(scenario).robot
+    return spec.robot_in(scenario_robot) if spec else scenario_robot
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -157,7 +172,8 @@ def run_campaign(argv: list[str]) -> int:
     try:
         if config.in_process:
             return run_in_process(campaign, config, controller, run_name, args.resume, log)
-        return run_with_ros(campaign, config, controller, run_name, args.resume, log)
+        return run_with_ros(campaign, config, controller, run_name, args.resume, log,
+                            args.worker_bags)
     except KeyboardInterrupt:
         log('interrupted: stopping every process this campaign started (continue later with '
             f'--resume --run {run_name}{" --in-process" if config.in_process else ""})')
@@ -165,7 +181,8 @@ def run_campaign(argv: list[str]) -> int:
 
 
 def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, controller: str,
-                 run_name: str, resume: bool, log: Callable[[str], None]) -> int:
+                 run_name: str, resume: bool, log: Callable[[str], None],
+                 worker_bags: str = 'keep') -> int:
     """The campaign on the ROS graph: its generator and workers (or yours, --external)."""
     import rclpy
     init_rclpy(['--ros-args'])
@@ -174,6 +191,10 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
     try:
         # Goals name bags/<run>/ relative to the simulators' bags root (they write nowhere else).
         evaluator = RosEvaluator(node, config, Path(run_name), controller, supervisor, log)
+        if config.external:  # workers elsewhere: their failure bags are copied to bags/<run>/
+            evaluator.collect_into = campaign.bags_dir
+            evaluator.remove_collected = worker_bags == 'remove'
+        evaluator.expected_robot = robot_of(controller, config.scenario)
         # Ask/tell methods make their maps in this process: no generator node.
         needs_generator = config.method == SESSGAN_METHOD
         generator_running = (not needs_generator
@@ -189,7 +210,10 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
         if needs_generator:
             evaluator.wait_for_generator(timeout=120.0)
         evaluator.wait_for_workers(1 if config.external else config.workers, timeout=120.0)
+        cpu = time.process_time()
         result = campaign.run(evaluator, resume=resume)
+        evaluator.overhead.cpu = time.process_time() - cpu
+        log(evaluator.overhead.summary())
     except (HarnessFailureError, OSError) as err:
         # OSError: the run directory cannot be written (a full disk): nothing more can be.
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')

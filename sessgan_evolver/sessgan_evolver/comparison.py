@@ -232,7 +232,8 @@ def open_evaluator(config: CompareConfig, output: Path, label: str,
                                 output / 'logs' / label, config.controller,
                                 config.time_limit, config.mission(), config.fleet(),
                                 simulate_invalid=False, observer=observer, log=log,
-                                size=config.map_size(), adaptive_rtf=config.adaptive_rtf)
+                                size=config.map_size(), adaptive_rtf=config.adaptive_rtf,
+                                collect_into=output / 'worker_bags' / label)
     return InProcessEvaluator(config.scenario, config.controller, config.time_limit,
                               simulate_invalid=False, observer=observer,
                               mission=config.mission(), fleet=config.fleet(), log=log,

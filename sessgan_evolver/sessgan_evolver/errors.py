@@ -85,3 +85,8 @@ class ExternalWorkerError(SessganEvolverError):
 
 class SuiteError(SessganEvolverError):
     """A regression suite that cannot be read or run as given (names the entry)."""
+
+
+class BagCollectionError(SessganEvolverError):
+    """A failure bag of a remote worker that could not be copied here intact (a transfer that
+    failed, a file of another size or digest than episode.json records, an unsafe name)."""

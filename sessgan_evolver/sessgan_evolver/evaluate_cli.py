@@ -188,7 +188,7 @@ def open_evaluator(args: argparse.Namespace, scenario: str, mission: MissionSpec
         return worker_evaluator(
             scenario, external_record_subdirectory(output), output / 'logs', args.controller,
             args.time_limit, mission, fleet, simulate_invalid=args.simulate_invalid, log=log,
-            adaptive_rtf=args.adaptive_rtf)
+            adaptive_rtf=args.adaptive_rtf, collect_into=output / 'worker_bags')
     return InProcessEvaluator(scenario, args.controller, args.time_limit,
                               simulate_invalid=args.simulate_invalid, mission=mission,
                               fleet=fleet, log=log)

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sessgan_evolver.campaign import CampaignConfig, CampaignError, EpisodeJob
+from sessgan_evolver.errors import BagCollectionError
 from sessgan_evolver.harness import HarnessRetries
 from sessgan_evolver.process_supervisor import (
     ChildProcess,
@@ -45,6 +46,39 @@ NO_WORKER_TIMEOUT = 60.0
 """Wall seconds without any usable worker before the campaign gives up."""
 RESTART_READY_TIMEOUT = 120.0
 """Wall seconds a restarted simulator may take to say it is ready."""
+IDENTITY_TIMEOUT = 30.0
+"""Wall seconds a newly discovered worker may take to say what it is."""
+GONE_GRACE = 2.0
+"""Wall seconds a worker running an episode may be missing from the graph before the episode
+is taken back (DDS drops a host that vanished once its lease expires: 20 s in Fast DDS)."""
+
+
+@dataclass
+class CampaignOverhead:
+    """Wall seconds the campaign itself spent around its episodes (what limits how many
+    workers one campaign keeps busy; tests/benchmarks/bench_multihost.py)."""
+
+    episodes: int = 0
+    """Results told (harness re-runs excluded)."""
+    generator: float = 0.0
+    """Waiting for the generator's maps."""
+    dispatch: float = 0.0
+    """Per episode: goal sent to result received, less the worker's own episode wall time
+    (goal and result messaging, world build, the dispatch loop's polling)."""
+    bags: int = 0
+    bag_transfer: float = 0.0
+    """Copying failure bags from the workers (sessgan_evolver.bag_collection)."""
+    cpu: float = 0.0
+    """CPU seconds of the campaign process over the run (its search, checkpoints and report
+    included; the generator is a process of its own)."""
+
+    def summary(self) -> str:
+        per = 1e3 / max(1, self.episodes)
+        return (f'campaign overhead per episode ({self.episodes} episodes): generator '
+                f'{self.generator * per:.1f} ms, dispatch {self.dispatch * per:.1f} ms, bag '
+                f'transfer {self.bag_transfer * per:.1f} ms ({self.bags} bags, '
+                f'{self.bag_transfer * 1e3 / max(1, self.bags):.1f} ms each); campaign '
+                f'process CPU {self.cpu * per:.1f} ms')
 
 
 @dataclass
@@ -54,6 +88,8 @@ class RunningEpisode:
     send_future: Any
     goal_handle: Any = None
     result_future: Any = None
+    gone_since: float | None = None
+    """When its worker's action server was first seen missing from the graph."""
 
 
 class RosEvaluator:
@@ -94,6 +130,18 @@ class RosEvaluator:
         self.max_attempts = 3
         """Requests of one member the generator may die on."""
         self.retries = HarnessRetries(config.harness_tries, log, config.adaptive_rtf)
+        self.overhead = CampaignOverhead()
+        self.collect_into: Path | None = None
+        """Where failure bags of workers are copied (the campaign's bags/<run>), or None."""
+        self.remove_collected = False
+        """Remove a worker's copy of a bag once it is collected."""
+        self.bag_sources: dict[str, Any] = {}
+        self.expected_robot: str | None = None
+        """The robot a worker's simulator must host (its version must be ours), or None:
+        workers are not checked (sessgan_evolver.worker_identity)."""
+        self.refused: set[str] = set()
+        self.unidentified: dict[str, float] = {}
+        """Workers whose bags service was not up yet, with when that was first seen."""
 
     rerun_harness_outcomes = True
     """Run a harness outcome again here (never told); False: tell it, for a caller that
@@ -147,11 +195,52 @@ class RosEvaluator:
             if self.allowed is not None and name not in self.allowed:
                 continue
             if name not in self.clients and name not in self.starting:
+                if name in self.refused or not self.identity_checked(name):
+                    continue
                 from sessgan_interfaces.action import EvaluateEnvironment
                 self.clients[name] = self.action_client_class(
                     self.node, EvaluateEnvironment, name)
                 self.log(f'worker found: {name}')
         return sorted(self.clients)
+
+    def identity_checked(self, name: str) -> bool:
+        """True if worker ``name`` may be used (or is not checked). One of another version or
+        robot is refused for good, with the difference logged; one whose ``bags`` service is
+        not up yet is looked at again at the next discovery (never waited for here, so it
+        cannot stall the dispatch loop), and refused once it has been missing for
+        ``IDENTITY_TIMEOUT``."""
+        if self.expected_robot is None:
+            return True
+        from sessgan_evolver import __version__
+        from sessgan_evolver.remote_bags import RemoteBagSource
+        from sessgan_evolver.worker_identity import worker_difference
+
+        namespace = name.rsplit('/', 1)[0]
+        source = self.bag_sources.setdefault(
+            namespace, RemoteBagSource(self.node, namespace, self.spin))
+        why = None
+        if not source.client.service_is_ready():
+            first_seen = self.unidentified.setdefault(name, time.monotonic())
+            if time.monotonic() - first_seen < IDENTITY_TIMEOUT:
+                return False
+            why = (f'worker {name}: it serves no {source.service} service within '
+                   f'{IDENTITY_TIMEOUT:.0f} s, so it cannot say its version or send its '
+                   'failure bags (a sessgan version without it?)')
+        else:
+            try:
+                description = source.call_within(IDENTITY_TIMEOUT)
+            except BagCollectionError as err:
+                self.log(f'worker {name}: not used yet: {err}')
+                return False
+            why = worker_difference(name, description.software_version,
+                                    description.settings, __version__, self.expected_robot,
+                                    self.config.scenario)
+        self.unidentified.pop(name, None)
+        if why:
+            self.refused.add(name)
+            self.log(f'refusing {why}')
+            return False
+        return True
 
     def wait_for_workers(self, count: int, timeout: float) -> None:
         deadline = time.monotonic() + timeout
@@ -175,6 +264,7 @@ class RosEvaluator:
             generation=generation, member=member, height=self.config.height,
             width=self.config.width)
         request.weights = weights
+        asked = time.monotonic()
         for attempt in range(1, self.max_attempts + 1):
             future = self.generator.call_async(request)
             deadline = time.monotonic() + GENERATOR_TIMEOUT
@@ -188,6 +278,7 @@ class RosEvaluator:
             if future.done():
                 break
         response = future.result()
+        self.overhead.generator += time.monotonic() - asked
         if not response.success:
             raise CampaignError(f'the generator refused member {member}: {response.message}')
         environments = [environment_from_msg(msg) for msg in response.environments]
@@ -356,10 +447,24 @@ class RosEvaluator:
                                                 f'worker {name}: {metrics["detail"]}')
                             pending.appendleft(state.job)
                             continue
+                        try:
+                            self.collect_bag(name, state.job, metrics)
+                        except BagCollectionError as err:
+                            # The result has no bag here: a harness failure, run again.
+                            self.retries.failed(state.job.key, state.job.environment.id,
+                                                'failure bag not collected',
+                                                f'worker {name}: {err}')
+                            pending.appendleft(state.job)
+                            continue
                         self.retries.succeeded(state.job.key)
+                        self.overhead.episodes += 1
+                        self.overhead.dispatch += max(0.0, time.monotonic() - state.started
+                                                      - float(metrics['wall_time']))
                         on_result(state.job, metrics)
                         continue
                     retry_reason = f'ended the goal with status {response.status}'
+                if retry_reason is None and state.goal_handle is not None:
+                    retry_reason = self.gone(name, state)
                 timeout = self.config.episode_timeout_for(state.job.environment.occupancy.size)
                 # A slower re-run (--adaptive-rtf) takes longer in wall time.
                 timeout /= self.real_time_factor_scale(state.job) or 1.0
@@ -373,6 +478,44 @@ class RosEvaluator:
                     self.retries.failed(state.job.key, state.job.environment.id,
                                         f'worker {name}', retry_reason)
                     pending.appendleft(state.job)
+
+    def gone(self, name: str, state: RunningEpisode) -> str | None:
+        """Why the episode of ``state`` is to be taken back from worker ``name``: its action
+        server left the graph (its host or processes are gone) for ``GONE_GRACE``; else None.
+        A worker that comes back is given work again (its client is kept)."""
+        if self.clients[name].server_is_ready():
+            state.gone_since = None
+            return None
+        now = time.monotonic()
+        if state.gone_since is None:
+            state.gone_since = now
+        if now - state.gone_since < GONE_GRACE:
+            return None
+        return 'left the ROS graph during the episode (its host or processes are gone)'
+
+    def collect_bag(self, name: str, job: EpisodeJob, metrics: dict) -> None:
+        """Copy the failure bag of a result into ``collect_into`` (verified:
+        sessgan_evolver.bag_collection) and point ``metrics['bag_path']`` at the copy."""
+        if self.collect_into is None or not metrics.get('bag_path'):
+            return
+        final = self.collect_into / job.environment.id
+        if Path(metrics['bag_path']).resolve() == final.resolve():
+            return  # the worker writes into this campaign's bags root
+        from sessgan_evolver.bag_collection import collect_bag
+        from sessgan_evolver.remote_bags import RemoteBagSource
+
+        namespace = name.rsplit('/', 1)[0]
+        if namespace not in self.bag_sources:
+            self.bag_sources[namespace] = RemoteBagSource(self.node, namespace, self.spin)
+        started = time.monotonic()
+        metrics['bag_path'] = str(collect_bag(
+            self.bag_sources[namespace], f'{self.record_directory}/{job.environment.id}',
+            self.collect_into, remove=self.remove_collected))
+        seconds = time.monotonic() - started
+        self.overhead.bag_transfer += seconds
+        self.overhead.bags += 1
+        self.log(f'failure bag of {job.environment.id} collected from {namespace} '
+                 f'in {seconds:.2f} s')
 
 
 def metrics_dict(msg) -> dict:

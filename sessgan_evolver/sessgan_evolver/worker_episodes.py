@@ -191,11 +191,14 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
                      log: Callable[[str], None] = print,
                      wait: float = WORKER_WAIT,
                      size: tuple[int, int] | None = None,
-                     adaptive_rtf: bool = False) -> Iterator[WorkerEvaluator]:
+                     adaptive_rtf: bool = False,
+                     collect_into: Path | None = None) -> Iterator[WorkerEvaluator]:
     """A WorkerEvaluator on every evaluate action server of the domain (after at least one
     answers within ``wait`` seconds), their failure bags in ``record_directory`` under their
-    bags_root; its ROS node is shut down on exit. Nothing is started: the simulators and the
-    stack under test are yours. ``adaptive_rtf``: re-run an overloaded episode slower
+    bags_root and, with ``collect_into``, copied there over ROS (verified:
+    sessgan_evolver.bag_collection), so workers on other machines serve too; its ROS node is
+    shut down on exit. Nothing is started: the simulators and the stack under test are
+    yours. ``adaptive_rtf``: re-run an overloaded episode slower
     (CampaignConfig.adaptive_rtf)."""
     import rclpy
 
@@ -217,6 +220,7 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
         # No process is started: the supervisor only gives the evaluator its log folder.
         supervisor = ProcessSupervisor(log_directory)
         ros = RosEvaluator(node, config, Path(record_directory), label, supervisor, log)
+        ros.collect_into = None if collect_into is None else Path(collect_into).resolve()
         ros.wait_for_workers(1, timeout=wait)
         log(f'external workers: {", ".join(ros.discover_workers())} in ROS_DOMAIN_ID '
             f'{os.environ.get("ROS_DOMAIN_ID", "0")}; failure bags in <their bags_root>/'

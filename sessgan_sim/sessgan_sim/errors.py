@@ -27,3 +27,8 @@ class EpisodeError(SessganSimError):
 class BagWriteError(SessganSimError):
     """A failure bag that cannot be written (bad record, unknown type, unsafe name, file
     system)."""
+
+
+class BagServeError(SessganSimError):
+    """A request for a failure bag's files that cannot be served (an unsafe or unknown bag, a
+    file not of the bag, a chunk too large)."""

@@ -5,7 +5,9 @@ Topics (relative, so ``-r __ns:=/w0`` namespaces a worker): publishes ``scan``, 
 once; ``goal_pose`` carries the one in force, the next once the robot dwelt at a station);
 subscribes ``cmd_vel`` (Twist, or
 TwistStamped with ``use_stamped_cmd_vel``) and, in free mode, ``environment``
-(nav_msgs/OccupancyGrid). Serves the ``evaluate`` action (sessgan_interfaces/EvaluateEnvironment).
+(nav_msgs/OccupancyGrid). Serves the ``evaluate`` action (sessgan_interfaces/EvaluateEnvironment)
+and the ``bags`` service (sessgan_interfaces/WorkerBags: its failure bags, for a campaign on
+another host to collect, and what the worker is: sessgan_sim.bag_serving).
 
 Stepping modes: ``lockstep`` publishes a tick's data and waits for the controller's answer before
 advancing; ``clocked`` advances ``/clock`` at ``real_time_factor`` and uses the latest command.
@@ -28,6 +30,7 @@ reason, and no episode runs.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import threading
 import time
@@ -53,10 +56,18 @@ from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_gen.valid_tests import make_environment
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
+from sessgan_interfaces.srv import WorkerBags
+from sessgan_sim import __version__
 from sessgan_sim.bag_recording import record_directory_under
+from sessgan_sim.bag_serving import BagServer
 from sessgan_sim.command_pace import PaceFigures, check_real_time_factor_scale
 from sessgan_sim.episode import Episode, check_time_limit
-from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
+from sessgan_sim.errors import (
+    BagServeError,
+    BagWriteError,
+    InvalidConfigError,
+    SessganSimError,
+)
 from sessgan_sim.metrics import Outcome, is_controller_failure
 from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSettings
 from sessgan_sim.worker.commands import CommandReceiver
@@ -95,6 +106,9 @@ class SimulatorNode(Node):
             self, EvaluateEnvironment, 'evaluate', execute_callback=self.execute,
             goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=self.callback_group)
+        self.bag_server = BagServer(self.bags_root)
+        self.create_service(WorkerBags, 'bags', self.on_bags_request,
+                            callback_group=self.callback_group)
         if self.settings.free_mode:
             self.free_seed = self.settings.seed
             self.create_subscription(OccupancyGrid, 'environment', self.on_free_map, LATCHED_QOS,
@@ -186,6 +200,28 @@ class SimulatorNode(Node):
         else:
             goal_handle.succeed()
         return result
+
+    def on_bags_request(self, request, response):
+        """Describe the worker; list, read or remove one of its failure bags."""
+        response.software_version = __version__
+        response.settings = json.dumps(self.settings.to_dict(), sort_keys=True)
+        try:
+            if request.bag and request.remove:
+                if request.file:
+                    raise BagServeError('a remove request names no file')
+                self.bag_server.remove(request.bag)
+            elif request.bag and request.file:
+                response.data = self.bag_server.read(request.bag, request.file,
+                                                     int(request.offset), int(request.length))
+            elif request.bag:
+                listing = self.bag_server.list_files(request.bag)
+                response.files = list(listing)
+                response.sizes = list(listing.values())
+        except (BagServeError, OSError) as err:
+            response.message = str(err)
+            return response
+        response.success = True
+        return response
 
     def on_free_map(self, grid: OccupancyGrid) -> None:
         scenario = self.settings.scenario

@@ -219,3 +219,77 @@ def test_a_lost_bag_reported_by_the_worker_reaches_the_metrics(evaluator):
                        lambda job, metrics: results.append(metrics))
     assert [metrics['bag_error'] for metrics in results] == [
         'cannot write the failure bag: [Errno 28] No space left']
+
+
+def test_an_episode_whose_worker_left_the_graph_is_taken_back_and_rerun(evaluator):
+    """A worker whose action server vanishes mid-episode (its host gone: no result will come)
+    has the episode taken back once it has been missing for GONE_GRACE, long before the
+    episode timeout (600 s here); once back, it runs the episode again: one result."""
+    import threading
+
+    from sessgan_evolver.ros_evaluator import GONE_GRACE
+
+    present = threading.Event()
+    present.set()
+
+    class VanishingClient(FakeClient):
+        def server_is_ready(self) -> bool:
+            return present.is_set()
+
+    evaluator.action_client_class = lambda node, kind, name: VanishingClient(evaluator.goals)
+    started = time.monotonic()
+
+    def script(number, result):
+        if number == 0:  # the host drops off; it comes back a while after the take-back
+            present.clear()
+            threading.Timer(GONE_GRACE + 1.0, present.set).start()
+        else:
+            result.finish(finished('timeout'))
+
+    assert run_with(evaluator, script) == ['timeout']
+    assert len(evaluator.goals) == 2
+    assert GONE_GRACE <= time.monotonic() - started < 30.0
+    assert any('left the ROS graph during the episode' in line and
+               'a harness failure, not a result' in line for line in evaluator.logs), \
+        evaluator.logs
+    assert evaluator.harness_reruns == 1
+
+
+class Describing:
+    """A worker's bags service as identity_checked sees it: up or not, and what it says."""
+
+    def __init__(self, up: bool, version: str = '', robot: str = '') -> None:
+        import json
+
+        self.service = '/w0/bags'
+        self.client = SimpleNamespace(service_is_ready=lambda: up)
+        self.description = SimpleNamespace(software_version=version,
+                                           settings=json.dumps({'robot': robot}))
+
+    def call_within(self, timeout: float):
+        return self.description
+
+
+@pytest.mark.parametrize('source, refusal', [
+    (Describing(True, '0.1.0', ''), None),
+    (Describing(True, '0.0.9', ''), 'runs sessgan 0.0.9, this campaign 0.1.0'),
+    (Describing(True, '0.1.0', 'flyer'), "hosts robot 'flyer'"),
+    (Describing(False), 'serves no /w0/bags service within'),
+])
+def test_a_worker_is_used_only_if_it_says_it_matches(evaluator, monkeypatch, source, refusal):
+    import sessgan_evolver.ros_evaluator as ros_evaluator
+
+    monkeypatch.setattr(ros_evaluator, 'IDENTITY_TIMEOUT', 0.2)
+    evaluator.expected_robot = 'diff_drive'
+    evaluator.bag_sources['/w0'] = source
+    found = evaluator.discover_workers()
+    if refusal is None:
+        assert found == ['/w0/evaluate']
+        return
+    if not source.client.service_is_ready():  # not up yet: looked at again, not waited for
+        assert found == [] and not evaluator.refused
+        time.sleep(0.3)
+        found = evaluator.discover_workers()
+    assert found == [] and evaluator.refused == {'/w0/evaluate'}
+    assert any(line.startswith('refusing worker /w0/evaluate') and refusal in line
+               for line in evaluator.logs), evaluator.logs

@@ -56,8 +56,14 @@ def test_evaluate_and_compare_run_on_the_external_stack(external_stack, tmp_path
     assert len(episodes) == 3 and int(summary['maps']) == 3
     failures = [row for row in episodes if row['valid_failure'] == 'True']
     assert failures and int(summary['valid_failures']) == len(failures)
-    # The worker wrote them under its own bags_root, in the subdirectory the command named.
-    assert list((tmp_path / 'worker_bags' / 'external' / 'evaluate').glob('*/episode.json'))
+    # The worker wrote them under its own bags_root, in the subdirectory the command named,
+    # and the command copied each over ROS into <output>/worker_bags/, byte for byte.
+    written = list((tmp_path / 'worker_bags' / 'external' / 'evaluate').glob('*/episode.json'))
+    assert written
+    for episode_json in written:
+        copy = tmp_path / 'evaluate' / 'worker_bags' / episode_json.parent.name
+        assert {f.name: f.read_bytes() for f in copy.iterdir()} == \
+            {f.name: f.read_bytes() for f in episode_json.parent.iterdir()}
     # Fault keys come from the worker's bags: the first contact the robot caused, else where
     # it ended (stuck, timeout).
     for row in failures:
@@ -109,5 +115,14 @@ def test_a_method_campaign_runs_on_the_external_stack(external_stack, tmp_path):
     assert failures, 'no failure: the test checks nothing'
     assert all(row['fault'] != '?' and Path(row['bag_path']).is_dir() for row in failures)
     assert not list((tmp_path / 'runs' / 'ext' / 'logs').glob('*.log')), 'it started a process'
+    # The worker's bags (its own bags_root) were collected into the campaign's bags/<run>/,
+    # byte for byte, over the worker's bags service (--worker-bags keep: both copies remain).
+    for row in failures:
+        copy = Path(row['bag_path'])
+        assert copy.parent == (tmp_path / 'bags' / 'ext').resolve()
+        original = tmp_path / 'worker_bags' / 'ext' / copy.name
+        assert {f.name: f.read_bytes() for f in copy.iterdir()} == \
+            {f.name: f.read_bytes() for f in original.iterdir()}
+    assert ran.stderr.count('collected from /w0') == len(failures)
     done = next(line for line in ran.stderr.splitlines() if '[campaign] done in' in line)
     assert f'{len(failures)} valid failures' in done

@@ -13,8 +13,10 @@ episode, for every method). Per run:
   valid failure whose fault was confirmed, and the search's wall seconds at that episode
   plus that fault's confirmation re-runs (CPU seconds beside it);
 * **fresh-seed failure rate of the final generator** (sessgan_evolver.fresh_seed): SESS-GAN's
-  fittest member of its last generation; ``random``, ``latent`` and ``screened`` (weights
-  frozen) leave the generator they sampled; ``cellular_automaton`` is its own generator;
+  fittest member of its last generation; ``random`` and ``latent`` (weights frozen) leave
+  the generator they sampled; ``screened`` leaves its archive (children of the failing tests
+  it kept, sessgan_evolver.screened_search.ArchiveSource; the generator when it found no
+  fault); ``cellular_automaton`` is its own generator;
   ``grid_ga`` leaves none. Every generator is evaluated on the same fresh seed pairs,
   disjoint from all seeds of all runs, once per distinct generator;
 * **TPKL and uniqueness of the failing maps**: of the maps of its distinct faults (first
@@ -56,6 +58,7 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import EpisodeObserver, InProcessEvaluator
+from sessgan_evolver.screened_search import ArchiveSource, ScreenedSearch
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
@@ -330,6 +333,9 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
             run_search(searcher, evaluator, config.budget, label)
             cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))
             source, source_key = _final_source(config, method)
+            if isinstance(searcher, ScreenedSearch) and searcher.parents:
+                source = ArchiveSource(searcher, f'screened archive ({label})')
+                source_key = f'screened:{label}'
         search_wall = time.perf_counter() - episode_log.started
         search_cpu = time.process_time() - episode_log.cpu_started
         records = episode_log.records
@@ -600,8 +606,9 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
         '* Every map goes through the same validity certificate; maps without a certified '
         'route are not simulated and still cost one episode.',
         '* SESS-GAN runs whole generations of population x K episodes; its final generator '
-        "is its last generation's fittest member. random, latent and screened leave the "
-        'generator they sampled (weights frozen); grid_ga leaves none.',
+        "is its last generation's fittest member. random and latent leave the generator they "
+        'sampled (weights frozen); screened its archive (children of its failing tests, start '
+        'and goal kept); grid_ga leaves none.',
         '* Files: runs.csv (every run), faults.csv (every distinct fault), episodes.csv '
         '(every episode), fresh_seed.csv, faults/<method>-seed<s>/ (bags and pictures of '
         'confirmed faults), runs/ (SESS-GAN campaigns).',

@@ -24,9 +24,9 @@ import csv
 import math
 import time
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from sessgan_gen.checkpoint import (
     load_checkpoint,
     training_map,
 )
+from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.environment_sampler import resolve_sample_size
 from sessgan_gen.errors import SamplingRequestError
@@ -63,6 +64,21 @@ class MapSource(Protocol):
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         """Token maps (len(seeds), height, width), map i from seeds[i] alone."""
+        ...
+
+
+@runtime_checkable
+class EnvironmentSource(Protocol):
+    """A source that makes whole tests (map, start and goal) from seeds, not only maps (the
+    screened search's archive keeps the start and goal its failures had)."""
+
+    label: str
+    reference: np.ndarray
+
+    def maps(self, seeds: Sequence[int]) -> np.ndarray: ...
+
+    def environments(self, seeds: Sequence[int]) -> list[tuple[np.ndarray, Environment]]:
+        """(token map, Environment) of each seed, from that seed alone."""
         ...
 
 
@@ -301,11 +317,20 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
     observer, evaluator.observer = evaluator.observer, log
     started = time.perf_counter()
     try:
-        maps = source.maps([map_seed for map_seed, _ in plan.pairs])
-        for index, ((map_seed, sim_seed), cells) in enumerate(zip(plan.pairs, maps)):
-            environment = make_environment(cells, evaluator.scenario,
-                                           f'fresh-{index:04d}-s{map_seed}', seed=map_seed,
-                                           mission=evaluator.mission, fleet=evaluator.fleet)
+        map_seeds = [map_seed for map_seed, _ in plan.pairs]
+        if isinstance(source, EnvironmentSource):
+            tests = source.environments(map_seeds)
+            maps = [cells for cells, _ in tests]
+            environments = [replace(environment, id=f'fresh-{index:04d}-s{map_seed}')
+                            for index, (map_seed, (_, environment))
+                            in enumerate(zip(map_seeds, tests))]
+        else:
+            maps = list(source.maps(map_seeds))
+            environments = [make_environment(cells, evaluator.scenario,
+                                             f'fresh-{index:04d}-s{map_seed}', seed=map_seed,
+                                             mission=evaluator.mission, fleet=evaluator.fleet)
+                            for index, (map_seed, cells) in enumerate(zip(map_seeds, maps))]
+        for index, ((_, sim_seed), environment) in enumerate(zip(plan.pairs, environments)):
             evaluator.run_environment(environment, sim_seed, source.label)
             if progress is not None:
                 progress(index + 1, len(plan.pairs))

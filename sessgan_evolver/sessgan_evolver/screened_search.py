@@ -18,9 +18,10 @@ and where the map changed around the fault place the failure is a new distinct f
   children), so productive lineages get more budget; a parent whose last ``retire_after``
   children showed no new situation is retired.
 * **Operators** (:class:`Operator`), also by Thompson sampling on their record in this
-  run: the parent's noise mutated only around its fault place (``local``), or on the finest
-  scale everywhere, the parent's start and goal kept (re-certified on the child's map) with
-  its simulator seed; ``RELOCATE`` (the same map, new start and goal) is available.
+  run: the parent's noise mutated only around its fault place (``local``), or on the two
+  finest scales everywhere (mildly or strongly), the parent's start and goal kept
+  (re-certified on the child's map) with its simulator seed; ``RELOCATE`` (the same map,
+  new start and goal) is available.
 * **Exploration**: at least ``exploration`` of all tests are fresh samples of the generator
   (the best of ``fresh_candidates`` by the screen), so new regions keep being found.
 * **Screen** (cheap work, timed in ``cheap_wall_time``): each candidate's route is certified
@@ -118,9 +119,14 @@ RELOCATE = Operator('relocate', keep_route=False, new_sim_seed=True)
 
 DEFAULT_OPERATORS = (
     Operator('local_0.8', 0.8, local=True),
-    Operator('fine_0.3', 0.3, scales=(-1,)),
-    Operator('fine_0.15', 0.15, scales=(-1,)),
+    Operator('two_finest_0.4', 0.4, scales=(-2, -1)),
+    Operator('two_finest_0.9', 0.9, scales=(-2, -1)),
 )
+"""Chosen by ``tests/benchmarks/bench_child_tests.py`` (factory, Nearness-Diagram, pilot seeds
+21 and 22, 37 and 40 failing parents, 2 children each): per child run, a new fault
+situation in 6-13 % (around the fault place), 10-15 % (two finest scales at 0.4) and
+10-23 % (at 0.7-0.9, the map changed in 12-16 % of its cells) against 3-4 % for the finest
+scale alone (near-duplicates of the parent's situation) and 12-13 % for a fresh sample."""
 
 
 @dataclass(frozen=True)
@@ -335,14 +341,16 @@ class ScreenedSearch:
             self.operator_records[operator.name].trials += 1
         return test
 
-    def _mutate(self, parent: Parent, operator: Operator) -> NoiseMaps:
+    def _mutate(self, parent: Parent, operator: Operator,
+                rng: np.random.Generator | None = None) -> NoiseMaps:
+        rng = self.rng if rng is None else rng
         noise = parent.test.noise
         if operator.strength == 0:
             return noise
         scales = None if operator.scales is None else tuple(
             scale % len(noise) for scale in operator.scales)
         if not operator.local:
-            return mutate_noise(noise, self.rng, operator.strength, scales=scales)
+            return mutate_noise(noise, rng, operator.strength, scales=scales)
         rule = self.config.rule
         height, width = np.shape(parent.test.cells)
         side = rule.coarse_cells
@@ -350,7 +358,7 @@ class ScreenedSearch:
                   max(0.0, (parent.key.col * side - rule.context_cells) / width),
                   min(1.0, ((parent.key.row + 1) * side + rule.context_cells) / height),
                   min(1.0, ((parent.key.col + 1) * side + rule.context_cells) / width))
-        return mutate_noise_region(noise, self.rng, operator.strength, region,
+        return mutate_noise_region(noise, rng, operator.strength, region,
                                    scales or (len(noise) - 1,))
 
     def _parent_records(self) -> list[Record]:
@@ -443,3 +451,54 @@ class ScreenedSearch:
         except FaultError as err:
             raise SearchMethodError(f'the screened search keys failures by their episode '
                                     f'trace: {err}') from err
+
+
+ARCHIVE_TRIES = 8
+"""Children an archive test draws before it falls back to its parent's own map."""
+
+
+class ArchiveSource:
+    """A finished screened search's archive as a generator of tests, for fresh-seed
+    evaluation (sessgan_evolver.fresh_seed): what a user takes home besides the faults.
+
+    Map seed ``m`` alone picks one of the search's parents (tests that showed a new fault
+    situation) and makes a child of it with the operator that earned the most new situations
+    in the run (posterior mean), the parent's start and goal kept and re-certified, as the
+    search made children; after ``ARCHIVE_TRIES`` children without a certified route the test
+    is the parent's own map. The simulator seed is the evaluation's (fresh), so an archived
+    failure shows again only where it is a property of the test, not of one agent draw."""
+
+    def __init__(self, search: ScreenedSearch, label: str) -> None:
+        if not search.parents:
+            raise SearchMethodError('the screened search has no archive: it found no fault')
+        self.search = search
+        self.label = label
+        self.reference = search.example
+        records = search.operator_records
+        self.operator = search.operators[max(
+            records, key=lambda name: (1 + records[name].successes) / (2 + records[name].trials))]
+
+    def maps(self, seeds: Sequence[int]) -> np.ndarray:
+        return np.stack([cells for cells, _ in self.environments(seeds)])
+
+    def environments(self, seeds: Sequence[int]) -> list[tuple[np.ndarray, Environment]]:
+        """(token map, Environment) of each map seed (the class docstring)."""
+        search, spec = self.search, self.search.spec
+        made = []
+        for seed in seeds:
+            rng = np.random.default_rng([int(seed), 20])
+            parent = search.parents[int(rng.integers(len(search.parents)))]
+            cells, certified = parent.test.cells, None
+            for _ in range(ARCHIVE_TRIES):
+                child = search._express([search._mutate(parent, self.operator, rng)])[0]
+                candidate = certify_route(tokens_to_occupancy(child, spec), spec,
+                                          *parent.route)
+                if candidate.feasible:
+                    cells, certified = child, candidate
+                    break
+            if certified is None:
+                certified = certify_route(tokens_to_occupancy(cells, spec), spec,
+                                          *parent.route)
+            made.append((np.asarray(cells), environment_of(certified, spec, 'archive',
+                                                           int(seed))))
+        return made

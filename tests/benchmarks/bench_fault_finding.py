@@ -7,8 +7,9 @@ report's own table, the figures the goals are stated in:
 
 * SESS-GAN's confirmed distinct faults per 1,000 episodes against random sampling's and the
   grid GA's (ratio of the means over seeds, and the seed-by-seed ratios);
-* the fresh-seed valid-failure rate of SESS-GAN's final generator against the shipped
-  generator's, and its fresh maps' TPKL against the shipped generator's;
+* the fresh-seed valid-failure rate of each method's final generator (SESS-GAN's fittest
+  member, the screened search's archive) against the shipped generator's, and its fresh
+  maps' TPKL against the shipped generator's;
 * every method's confirmed distinct faults against random sampling's (the ``screened``
   search's goal: 2.8x), its cheap work's share of its search wall time, and a stricter
   count, *fault situations*: confirmed faults of a run grouped when they have the same kind
@@ -180,15 +181,17 @@ def run_one(args: argparse.Namespace, controller: str, budget: int, command: str
         for method in config.methods:
             if method != 'random':
                 print(situation_ratios(result.runs, method))
-    sessgan = [r for r in result.runs if r.figures.method == 'sessgan']
-    shipped = next((s for key, s in result.fresh.items() if key == 'pyramid:base'), None)
-    if sessgan and shipped is not None:
-        rates = [r.figures.fresh_failure_rate for r in sessgan]
-        print(f'fresh-seed failure rate: SESS-GAN final generators {rates} vs shipped '
-              f'{shipped.failure_rate}')
-        tpkls = [result.fresh[r.source_key].tpkl for r in sessgan]
-        print(f'fresh-seed TPKL: SESS-GAN {[round(t, 3) for t in tpkls]} vs shipped '
+    shipped = result.fresh.get('pyramid:base')
+    if shipped is not None:
+        print(f'fresh seeds, shipped generator: failure rate {shipped.failure_rate}, TPKL '
               f'{shipped.tpkl:.3f}')
+    for method in config.methods:
+        runs = [r for r in result.runs if r.figures.method == method
+                and r.source_key not in ('', 'pyramid:base')]
+        if runs:
+            print(f'fresh seeds, {method} final generators / archives: failure rates '
+                  f'{[r.figures.fresh_failure_rate for r in runs]}, TPKL '
+                  f'{[round(result.fresh[r.source_key].tpkl, 3) for r in runs]}')
     sys.stdout.flush()
 
 

@@ -16,8 +16,15 @@ from sessgan_evolver.faults import (
     fault_key,
     same_situation,
 )
+from sessgan_evolver.fresh_seed import EnvironmentSource, SeedPlan, evaluate_source
 from sessgan_evolver.in_process import InProcessEvaluator
-from sessgan_evolver.screened_search import RELOCATE, Operator, ScreenedConfig, ScreenedSearch
+from sessgan_evolver.screened_search import (
+    RELOCATE,
+    ArchiveSource,
+    Operator,
+    ScreenedConfig,
+    ScreenedSearch,
+)
 from sessgan_evolver.screening import (
     FEATURE_NAMES,
     CertifiedCandidate,
@@ -36,6 +43,7 @@ from sessgan_evolver.search_methods import (
     make_baseline,
 )
 from sessgan_gen.scenarios import get_scenario
+from sessgan_gen.token_map import tokens_to_occupancy
 from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
@@ -399,3 +407,41 @@ def test_a_parent_whose_children_repeat_known_situations_is_retired():
     first.credit(True)
     first.credit(False)
     assert first.barren == 1 and search._pick_parent() == 0
+
+
+def test_the_archive_makes_children_of_its_failing_tests_with_their_start_and_goal():
+    with pytest.raises(SearchMethodError, match='no archive'):
+        ArchiveSource(ScreenedSearch('factory', 1, config=SMALL), 'empty')
+    search = with_parents(SMALL)
+    source = ArchiveSource(search, 'archive')
+    assert isinstance(source, EnvironmentSource) and source.reference is search.example
+    made = source.environments([11, 12, 13, 11])
+    goals = {(p.test.environment.goal.x, p.test.environment.goal.y): p for p in search.parents}
+    for cells, environment in made:
+        # Every test is a certified child of a parent, with that parent's start and goal.
+        parent = goals[(environment.goal.x, environment.goal.y)]
+        assert environment.feasible
+        assert environment.start == parent.test.environment.start
+        assert np.array_equal(environment.occupancy,
+                              tokens_to_occupancy(cells, search.spec))
+    # A map seed alone decides its test.
+    assert np.array_equal(made[0][0], made[3][0]) and made[0][1].start == made[3][1].start
+    assert np.array_equal(source.maps([11, 12]), np.stack([made[0][0], made[1][0]]))
+    # Mutated, not a copy of the parents' maps (all four would be copies only by chance).
+    assert any(not any(np.array_equal(cells, p.test.cells) for p in search.parents)
+               for cells, _ in made)
+
+
+def test_fresh_seed_evaluation_runs_an_archive_s_tests_as_made():
+    search = with_parents(SMALL)
+    source = ArchiveSource(search, 'archive')
+    plan = SeedPlan([(21, 5), (22, 6)], 0, 0, 0)
+    with InProcessEvaluator('factory', time_limit=2.0) as evaluator:
+        result = evaluate_source(source, plan, evaluator)
+    expected = source.environments([21, 22])
+    assert [record.environment.start for record in result.records] == \
+        [environment.start for _, environment in expected]
+    assert [record.environment.id for record in result.records] == ['fresh-0000-s21',
+                                                                     'fresh-0001-s22']
+    assert [record.sim_seed for record in result.records] == [5, 6]
+    assert result.summary.generator == 'archive' and result.summary.valid_maps == 2

@@ -66,7 +66,7 @@ SEED_SCHEDULES = ('fixed', 'per-generation', 'rotating')
 SESSGAN_METHOD = 'sessgan'
 """The paper's weight evolution (this module's Campaign); every other method of
 search_methods.METHODS runs as a sessgan_evolver.method_campaign.MethodCampaign."""
-DEFAULT_METHOD = SESSGAN_METHOD
+DEFAULT_METHOD = 'screened'
 """What the ``campaign`` command (and ``./sessgan demo``) runs without --method: the best
 measured. A CampaignConfig built in code defaults to sessgan, the Campaign class's method."""
 

@@ -23,7 +23,8 @@ def test_an_episode_its_controller_missed_is_rerun_not_recorded(node_processes, 
                          name='mute_first_scan')
     result = subprocess.run(
         ['ros2', 'run', 'sessgan_evolver', 'campaign', '--external', '--scenario', 'factory',
-         '--generations', '1', '--population', '1', '--maps-per-member', '2',
+         '--method', 'sessgan', '--generations', '1', '--population', '1',
+         '--maps-per-member', '2',
          '--time-limit', '10', '--seed', '5', '--no-record-failures', '--run', 'missed',
          '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')],
         capture_output=True, text=True, timeout=600)

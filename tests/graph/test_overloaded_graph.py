@@ -77,8 +77,9 @@ def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(
     start_stalling_controller(node_processes, '/w0')
     result = subprocess.run(
         ['ros2', 'run', 'sessgan_evolver', 'campaign', '--external', '--scenario', 'factory',
-         '--generations', '1', '--population', '1', '--maps-per-member', '1',
-         '--time-limit', '10', '--seed', '5', '--run', 'stalled', '--adaptive-rtf',
+         '--method', 'sessgan', '--generations', '1', '--population', '1',
+         '--maps-per-member', '1', '--time-limit', '10', '--seed', '5', '--run', 'stalled',
+         '--adaptive-rtf',
          '--harness-tries', '5', '--no-record-failures', '--runs-root', str(tmp_path / 'runs'),
          '--bags-root', str(tmp_path / 'bags')],
         capture_output=True, text=True, timeout=600)

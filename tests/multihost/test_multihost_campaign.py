@@ -35,7 +35,7 @@ def test_a_campaign_runs_on_workers_of_two_other_hosts(multihost, tmp_path):
     for process in processes.processes[::2]:
         process.wait_for_output('simulator ready', timeout=120.0)
     campaign = processes.start(campaign_command(network, [
-        '--scenario', 'factory', '--generations', '1', '--population', '2',
+        '--method', 'sessgan', '--scenario', 'factory', '--generations', '1', '--population', '2',
         '--maps-per-member', '2', '--time-limit', '15', '--seed', '3', '--run', 'spread',
         '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')]),
         name='campaign')
@@ -77,7 +77,7 @@ def test_a_campaign_runs_on_workers_of_two_other_hosts(multihost, tmp_path):
 
     # --worker-bags remove: the workers keep nothing of a run once it is collected.
     again = processes.start(campaign_command(network, [
-        '--scenario', 'factory', '--generations', '1', '--population', '2',
+        '--method', 'sessgan', '--scenario', 'factory', '--generations', '1', '--population', '2',
         '--maps-per-member', '1', '--time-limit', '15', '--seed', '4', '--run', 'moved',
         '--worker-bags', 'remove', '--runs-root', str(tmp_path / 'runs'), '--bags-root',
         str(tmp_path / 'bags')]), name='campaign_remove')
@@ -114,7 +114,7 @@ def test_a_worker_host_lost_mid_episode_is_replaced_and_used_again_when_back(
     w1_simulator, w1_controller = processes.processes[2:4]
     # 6 episodes a generation for 2 workers: /w1 is given the next one as soon as it ends one.
     campaign = processes.start(campaign_command(network, [
-        '--scenario', 'factory', '--generations', '2', '--population', '2',
+        '--method', 'sessgan', '--scenario', 'factory', '--generations', '2', '--population', '2',
         '--maps-per-member', '3', '--time-limit', '6', '--seed', '5', '--run', 'faulty',
         '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')]),
         name='campaign')
@@ -173,7 +173,7 @@ def test_workers_of_another_domain_version_or_scenario_are_not_used(multihost, t
         if process.name.startswith('simulator'):
             process.wait_for_output('simulator ready', timeout=120.0)
     campaign = processes.start(campaign_command(network, [
-        '--scenario', 'factory', '--generations', '1', '--population', '2',
+        '--method', 'sessgan', '--scenario', 'factory', '--generations', '1', '--population', '2',
         '--maps-per-member', '2', '--time-limit', '10', '--seed', '3', '--run', 'picky',
         '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')]),
         name='campaign')

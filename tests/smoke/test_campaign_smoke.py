@@ -16,7 +16,7 @@ from tests.ros_processes import REPO_ROOT
 pytestmark = pytest.mark.smoke
 
 # Small but real: two workers, three generations, each episode at most 20 sim seconds.
-TINY = ['--scenario', 'factory', '--generations', '3', '--population', '3',
+TINY = ['--method', 'sessgan', '--scenario', 'factory', '--generations', '3', '--population', '3',
         '--maps-per-member', '1', '--workers', '2', '--time-limit', '20', '--seed', '5']
 IGNORED_COLUMNS = {'wall_time', 'bag_path', 'harness_reruns'}
 """Columns that differ between runs with the same results (harness re-runs are no result)."""

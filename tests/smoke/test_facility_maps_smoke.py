@@ -98,8 +98,9 @@ def test_a_generator_of_no_valid_test_is_warned_about(walled, tmp_path, capsys):
 def test_a_campaign_without_a_valid_test_exits_1_and_names_no_bag_folder(walled, tmp_path,
                                                                          capsys):
     argv = ['--in-process', '--scenario', 'factory', '--checkpoint', str(walled),
-            '--generations', '1', '--population', '2', '--maps-per-member', '1',
-            '--time-limit', '1', '--run', 'walled', '--runs-root', str(tmp_path / 'runs'),
+            '--method', 'sessgan', '--generations', '1', '--population', '2',
+            '--maps-per-member', '1', '--time-limit', '1', '--run', 'walled',
+            '--runs-root', str(tmp_path / 'runs'),
             '--bags-root', str(tmp_path / 'bags')]
     assert campaign_main(argv) == 1
     captured = capsys.readouterr()
@@ -118,8 +119,9 @@ def test_an_incomplete_checkpoint_is_warned_about(walled, tmp_path, capsys):
                         str(tmp_path / 'p.yaml')]) == 0
     assert 'stopped after scale 1 of 2' in capsys.readouterr().err
     argv = ['--in-process', '--scenario', 'factory', '--checkpoint', str(partial),
-            '--generations', '1', '--population', '2', '--maps-per-member', '1',
-            '--time-limit', '1', '--run', 'partial', '--runs-root', str(tmp_path / 'runs'),
+            '--method', 'sessgan', '--generations', '1', '--population', '2',
+            '--maps-per-member', '1', '--time-limit', '1', '--run', 'partial',
+            '--runs-root', str(tmp_path / 'runs'),
             '--bags-root', str(tmp_path / 'bags')]
     campaign_main(argv)
     assert 'stopped after scale 1 of 2' in capsys.readouterr().err

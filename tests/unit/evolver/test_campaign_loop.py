@@ -138,7 +138,8 @@ def test_a_bad_checkpoint_is_refused_before_a_run_directory_exists(tmp_path):
 
 
 def test_every_campaign_option_is_in_config_json(checkpoint, tmp_path):
-    argv = ['--scenario', 'factory', '--generations', '1', '--population', '2',
+    argv = ['--method', 'sessgan', '--scenario', 'factory', '--generations', '1',
+            '--population', '2',
             '--maps-per-member', '1', '--workers', '1', '--seed', '11', '--checkpoint',
             checkpoint, '--time-limit', '4', '--mode', 'clocked', '--external',
             '--fitness-tpkl-tolerance', '0.2', '--run', 'options', '--runs-root',

@@ -60,8 +60,8 @@ def test_export_generate_writes_the_learned_size_or_the_one_asked(facility, tmp_
 
 def campaign_argv(facility: str, tmp_path, run: str, *extra: str) -> list[str]:
     return ['--in-process', '--scenario', 'factory', '--checkpoint', facility,
-            '--generations', '1', '--population', '2', '--maps-per-member', '1',
-            '--time-limit', '1', '--no-record-failures', '--run', run,
+            '--method', 'sessgan', '--generations', '1', '--population', '2',
+            '--maps-per-member', '1', '--time-limit', '1', '--no-record-failures', '--run', run,
             '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags'),
             *extra]
 

@@ -123,7 +123,8 @@ def test_a_controller_silent_on_every_try_stops_the_campaign_with_a_resume_hint(
 
     monkeypatch.setattr(in_process.EpisodeRunner, 'run', always_silent)
     status = campaign_cli.main([
-        '--in-process', '--scenario', 'factory', '--generations', '1', '--population', '2',
+        '--in-process', '--method', 'sessgan', '--scenario', 'factory', '--generations', '1',
+        '--population', '2',
         '--maps-per-member', '1', '--time-limit', '2', '--harness-tries', '2', '--run', 'silent',
         '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')])
     err = capsys.readouterr().err
@@ -206,7 +207,8 @@ def test_a_run_directory_that_cannot_be_written_stops_the_campaign_cleanly(
 
     monkeypatch.setattr(RunStore, 'append_row', no_space)
     status = campaign_cli.main([
-        '--in-process', '--scenario', 'factory', '--generations', '1', '--population', '2',
+        '--in-process', '--method', 'sessgan', '--scenario', 'factory', '--generations', '1',
+        '--population', '2',
         '--maps-per-member', '1', '--time-limit', '2', '--run', 'full',
         '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')])
     err = capsys.readouterr().err

@@ -47,7 +47,7 @@ def test_a_tiny_image_fails_clearly_and_leaves_no_files(tmp_path, capsys):
         'image': 'tiny.pgm', 'resolution': 0.05, 'origin': [0, 0, 0]}))
     output = tmp_path / 'out' / 'tiny.pt'
     assert train_cli.main(['--map-yaml', str(tmp_path / 'tiny.yaml'), '--output', str(output),
-                           *TINY]) == 1
+                           *TINY]) == 2  # an unusable map is a usage error
     err = capsys.readouterr().err
     assert 'the map is 1x1 cells' in err and 'at least 8 cells per side' in err
     assert 'Expected more than 1 value' not in err  # not torch's message

@@ -29,7 +29,7 @@ from typing import Any, Protocol, overload, runtime_checkable
 
 import numpy as np
 
-from sessgan_gen.validation import require_positive
+from sessgan_core.validation import require_positive
 
 
 @overload

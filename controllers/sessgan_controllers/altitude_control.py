@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from sessgan_controllers.errors import InvalidConfigError
-from sessgan_gen.validation import require_positive
+from sessgan_core.validation import require_positive
 
 Decision = TypeVar('Decision')
 

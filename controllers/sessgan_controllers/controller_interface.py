@@ -29,7 +29,7 @@ from typing import Any, Protocol, overload, runtime_checkable
 
 import numpy as np
 
-from sessgan_gen.validation import require_positive
+from sessgan_core.validation import require_positive
 
 
 @overload
@@ -200,7 +200,7 @@ class MapData:
     @classmethod
     def of(cls, environment: Any) -> MapData:
         """The map of anything with ``occupancy``, ``resolution`` and ``origin`` (a
-        sessgan_gen Environment, say), as a controller gets it from the ``map`` topic."""
+        sessgan_core Environment, say), as a controller gets it from the ``map`` topic."""
         return cls(np.asarray(environment.occupancy, dtype=np.int8),
                    float(environment.resolution),
                    (float(environment.origin[0]), float(environment.origin[1])))

@@ -84,7 +84,7 @@ from sessgan_controllers.messages import (
     twist_stamped_from_command,
 )
 from sessgan_controllers.registry import ControllerSpec, get_controller
-from sessgan_gen.node_help import exit_if_help
+from sessgan_core.node_help import exit_if_help
 
 GOAL_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=1,

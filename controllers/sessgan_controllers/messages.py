@@ -18,7 +18,7 @@ from sessgan_controllers.controller_interface import (
     ScanData,
     VelocityCommand,
 )
-from sessgan_gen.quaternion import yaw_from_quaternion
+from sessgan_core.quaternion import yaw_from_quaternion
 
 
 def scan_from_msg(msg: LaserScan) -> ScanData:

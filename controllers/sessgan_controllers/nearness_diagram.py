@@ -91,7 +91,7 @@ from sessgan_controllers.route_guidance import (
     RouteGuide,
     RouteGuidedController,
 )
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.validation import require_non_negative, require_positive
 
 FAR_TARGET = 1e6
 """Distance in metres of the intermediate target behind an open (free) discontinuity."""

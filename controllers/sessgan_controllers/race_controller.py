@@ -61,7 +61,7 @@ from sessgan_controllers.route_guidance import (
     RouteGuidedController,
     route_parameter,
 )
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.validation import require_non_negative, require_positive
 
 
 @dataclass

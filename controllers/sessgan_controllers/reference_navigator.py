@@ -95,7 +95,7 @@ from sessgan_controllers.path_following import (
     to_body,
 )
 from sessgan_controllers.path_planning import Path, PlannerConfig, PlanningError, plan_path
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.validation import require_non_negative, require_positive
 
 ROBOTS = ('diff_drive', 'car', 'flyer')
 

@@ -36,7 +36,7 @@ from sessgan_controllers.costmap import FREE, Costmap, CostmapConfig
 from sessgan_controllers.errors import InvalidConfigError
 from sessgan_controllers.path_following import PathTracker
 from sessgan_controllers.path_planning import PlannerConfig, PlanningError, plan_path
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.validation import require_non_negative, require_positive
 
 
 @dataclass(frozen=True)

@@ -64,7 +64,7 @@ from sessgan_controllers.route_guidance import (
     RouteGuide,
     RouteGuidedController,
 )
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.validation import require_non_negative, require_positive
 
 
 @dataclass

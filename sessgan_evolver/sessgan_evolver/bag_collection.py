@@ -22,10 +22,10 @@ import tempfile
 from pathlib import Path
 from typing import Protocol
 
+from sessgan_core.atomic_files import fsync_directory, fsync_tree
+from sessgan_core.environment import check_environment_id
+from sessgan_core.errors import InvalidEnvironmentError
 from sessgan_evolver.errors import BagCollectionError
-from sessgan_gen.atomic_files import fsync_directory, fsync_tree
-from sessgan_gen.environment import check_environment_id
-from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_sim.bag_recording import EPISODE_FILE, is_episode_bag
 
 CHUNK_BYTES = 1 << 20

@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.fleet import fleet_to_json
+from sessgan_core.quaternion import quaternion_from_yaw_pitch
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import BagExportError
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.fleet import fleet_to_json
-from sessgan_gen.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
 from sessgan_sim.bag_recording import BagRecord, jazzy_typestore, write_episode_bag
 from sessgan_sim.frames import (

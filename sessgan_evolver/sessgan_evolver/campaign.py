@@ -23,6 +23,13 @@ import numpy as np
 
 from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.registry import get_controller
+from sessgan_core.environment import Environment
+from sessgan_core.errors import InvalidFleetError, InvalidMissionError
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import DEFAULT_DWELL_TIME, MissionSpec
+from sessgan_core.progress import ProgressPrinter, format_duration
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import occupancy_to_tokens
 from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import CampaignError
@@ -48,15 +55,9 @@ from sessgan_gen.checkpoint import (
     load_checkpoint,
     training_map,
 )
-from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
 from sessgan_gen.environment_sampler import resolve_sample_size
-from sessgan_gen.errors import InvalidFleetError, InvalidMissionError, SamplingRequestError
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
-from sessgan_gen.progress import ProgressPrinter, format_duration
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import occupancy_to_tokens
+from sessgan_gen.errors import SamplingRequestError
 from sessgan_sim.bag_recording import BagStorage
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError

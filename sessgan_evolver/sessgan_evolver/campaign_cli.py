@@ -17,6 +17,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from sessgan_core.config_cli import build_parser, config_from_namespace
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
+from sessgan_core.scenarios import get_scenario
 from sessgan_evolver.campaign import (
     DEFAULT_METHOD,
     SESSGAN_METHOD,
@@ -33,10 +37,7 @@ from sessgan_evolver.process_supervisor import (
     worker_cores,
 )
 from sessgan_evolver.ros_evaluator import GENERATOR_NAMESPACE, RosEvaluator
-from sessgan_gen.config_cli import build_parser, config_from_namespace
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
-from sessgan_gen.scenarios import get_scenario
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -146,7 +147,7 @@ def run_campaign(argv: list[str]) -> int:
     try:
         config = config_from_args(args)
         config.validate()
-    except (SessganEvolverError, SessganGenError, ValueError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     run_name = args.run or f'{config.scenario}-seed{config.seed}'
@@ -160,7 +161,7 @@ def run_campaign(argv: list[str]) -> int:
     try:
         campaign = make_campaign(config, run_name, args.runs_root, args.bags_root, log,
                                  invocation_of(args, argv))
-    except (SessganEvolverError, SessganGenError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     except OSError as err:  # the run directory cannot be made
@@ -218,7 +219,7 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
         # OSError: the run directory cannot be written (a full disk): nothing more can be.
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')
         return 1
-    except (SessganEvolverError, SessganGenError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         log(f'error: {err}')
         return 1
     finally:
@@ -248,7 +249,7 @@ def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
         log(f'error: {err}\nstopped; continue later with --resume --run {run_name} '
             '--in-process')
         return 1
-    except (SessganEvolverError, SessganGenError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         log(f'error: {err}')
         return 1
     return report_result(result, log)

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.scenarios import BLOCKED, FREE, LOW_OBSTACLE, Scenario, get_scenario
+from sessgan_core.token_map import load_example_map
 from sessgan_evolver.errors import CellularAutomatonError
-from sessgan_gen.errors import SessganGenError
-from sessgan_gen.scenarios import BLOCKED, FREE, LOW_OBSTACLE, Scenario, get_scenario
-from sessgan_gen.token_map import load_example_map
 
 
 @dataclass(frozen=True)
@@ -112,7 +112,7 @@ class CellularAutomatonGenerator:
     def _example_border(self) -> int | None:
         try:
             example = load_example_map(self.spec.name).cells
-        except (OSError, SessganGenError):  # a user scenario without an example: no border
+        except (OSError, SessganCoreError):  # a user scenario without an example: no border
             return None
         ring = np.concatenate([example[0], example[-1], example[:, 0], example[:, -1]])
         return int(ring[0]) if np.all(ring == ring[0]) else None

@@ -18,12 +18,13 @@ from pathlib import Path
 
 import torch
 
+from sessgan_core.config_cli import add_old_spelling, field_docs
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.ros_spin import INTERRUPTED_STATUS, run_command
 from sessgan_evolver.comparison import CompareConfig, run_comparison
 from sessgan_evolver.errors import CompareError, SessganEvolverError
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
-from sessgan_gen.config_cli import add_old_spelling, field_docs
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
 
 
 def _int_tuple(text: str) -> tuple[int, ...]:
@@ -85,12 +86,12 @@ def compare(arguments: list[str]) -> int:
         if (output / 'report.md').exists():
             raise CompareError(
                 f'{output} holds a comparison already: choose another --output-dir')
-    except (SessganEvolverError, SessganGenError, ValueError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     try:
         result = run_comparison(config, output, command, log)
-    except (SessganEvolverError, SessganGenError, ValueError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:

@@ -39,6 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_core.errors import InvalidFleetError, InvalidMissionError
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import DEFAULT_DWELL_TIME, MissionSpec
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import occupancy_to_tokens
 from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig, check_controller
 from sessgan_evolver.errors import CompareError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
@@ -64,11 +69,6 @@ from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.checkpoint import checkpoint_training_map
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
-from sessgan_gen.errors import InvalidFleetError, InvalidMissionError
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import occupancy_to_tokens
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.metrics import navigation_columns

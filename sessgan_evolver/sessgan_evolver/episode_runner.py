@@ -48,11 +48,11 @@ from sessgan_controllers.controller_interface import (
 )
 from sessgan_controllers.errors import UnknownControllerError
 from sessgan_controllers.registry import get_controller
+from sessgan_core.environment import Environment
+from sessgan_core.quaternion import quaternion_from_yaw, yaw_from_quaternion
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.validation import require_non_negative
 from sessgan_evolver.errors import EpisodeRunnerError
-from sessgan_gen.environment import Environment
-from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.validation import require_non_negative
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation, TickProfile
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import ContactEvent

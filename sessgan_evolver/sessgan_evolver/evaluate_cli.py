@@ -23,6 +23,14 @@ from typing import Any
 
 import torch
 
+from sessgan_core.config_cli import add_old_spelling
+from sessgan_core.environment import MAX_ROBOTS
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import DEFAULT_DWELL_TIME, MissionSpec
+from sessgan_core.progress import ProgressPrinter
+from sessgan_core.ros_spin import INTERRUPTED_STATUS, run_command
+from sessgan_core.scenarios import get_scenario
 from sessgan_evolver.campaign import check_controller
 from sessgan_evolver.errors import FreshSeedError, SessganEvolverError
 from sessgan_evolver.fault_records import confirm_faults
@@ -47,14 +55,7 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.checkpoint import incomplete_warning
-from sessgan_gen.config_cli import add_old_spelling
-from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
-from sessgan_gen.progress import ProgressPrinter
-from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
-from sessgan_gen.scenarios import get_scenario
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
 
@@ -220,7 +221,7 @@ def evaluate(arguments: list[str]) -> int:
         plan = fresh_seed_plan(args.seed, args.episodes, map_seeds, sim_seeds)
         check_disjoint(plan, runs)
         sources = build_sources(args, scenario)
-    except (SessganEvolverError, SessganGenError, OSError, ValueError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError, OSError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     output = args.output or Path('runs') / f'evaluate-{scenario}-seed{args.seed}'
@@ -248,7 +249,7 @@ def evaluate(arguments: list[str]) -> int:
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
         return INTERRUPTED_STATUS
-    except (SessganEvolverError, SessganGenError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 1
     table = summary_table(summaries)

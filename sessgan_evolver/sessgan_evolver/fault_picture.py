@@ -29,17 +29,17 @@ import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first
 import numpy as np  # noqa: E402
 from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
 
-from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json  # noqa: E402
-from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
-from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
-from sessgan_gen.environment import Environment, Pose2D  # noqa: E402
-from sessgan_gen.fleet import fleet_from_json  # noqa: E402
-from sessgan_gen.route_certificate import RouteCertificate  # noqa: E402
-from sessgan_gen.valid_tests import (  # noqa: E402
+from sessgan_core.environment import Environment, Pose2D  # noqa: E402
+from sessgan_core.fleet import fleet_from_json  # noqa: E402
+from sessgan_core.route_certificate import RouteCertificate  # noqa: E402
+from sessgan_core.valid_tests import (  # noqa: E402
     certify_environment,
     certify_fleet,
     certify_mission,
 )
+from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json  # noqa: E402
+from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
+from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
 from sessgan_sim.bag_recording import jazzy_typestore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -103,7 +103,7 @@ def _corners(route: RouteCertificate | None) -> np.ndarray:
 def fleet_members(environment: Environment, trajectories: Sequence[np.ndarray] = ()
                   ) -> list[FleetMember]:
     """Robots r1, r2, ... of a fleet environment with their certified routes (each among the
-    other robots parked on their goals, sessgan_gen.fleet) and, when given, where they
+    other robots parked on their goals, sessgan_core.fleet) and, when given, where they
     drove (``trajectories``, r1 first)."""
     if not environment.fleet:
         return []
@@ -116,7 +116,7 @@ def fleet_members(environment: Environment, trajectories: Sequence[np.ndarray] =
 
 def certified_route(environment: Environment) -> np.ndarray:
     """Corners (n, 2) of the taut certified route of an environment's own start and goal
-    (sessgan_gen.valid_tests.certify_environment), through every leg of a mission, among the
+    (sessgan_core.valid_tests.certify_environment), through every leg of a mission, among the
     other robots of a fleet; empty when there is none (or a leg has none)."""
     if environment.fleet:
         return _corners(certify_fleet(environment)[0])

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_core.environment import Environment
 from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
 from sessgan_evolver.errors import BagReadError, FaultError
@@ -31,7 +32,6 @@ from sessgan_evolver.faults import (
     is_valid_failure,
     key_of_failure,
 )
-from sessgan_gen.environment import Environment
 from sessgan_sim.bag_recording import jazzy_typestore
 
 UNPLACED = '?'

@@ -40,9 +40,9 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_core.environment import Environment
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import FaultError
-from sessgan_gen.environment import Environment
 from sessgan_sim.metrics import ContactKind, is_controller_failure
 
 EXACT_FIELDS = ('outcome', 'collisions', 'fault_collisions', 'ticks', 'risk_score',

@@ -32,8 +32,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from sessgan_core.validation import require_non_negative
 from sessgan_evolver.errors import FitnessError
-from sessgan_gen.validation import require_non_negative
 
 
 class EpisodeMetricsLike(Protocol):

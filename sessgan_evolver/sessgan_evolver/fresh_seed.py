@@ -30,6 +30,9 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from sessgan_core.environment import Environment
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.cellular_automaton import CellularAutomatonGenerator
 from sessgan_evolver.errors import FreshSeedError, RunStoreError
 from sessgan_evolver.faults import FaultEntry, FaultRule, group_faults
@@ -44,14 +47,11 @@ from sessgan_gen.checkpoint import (
     load_checkpoint,
     training_map,
 )
-from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_gen.environment_sampler import resolve_sample_size
 from sessgan_gen.errors import SamplingRequestError
 from sessgan_gen.sampling import sample_token_maps
-from sessgan_gen.token_map import load_example_map
 from sessgan_gen.track_cleanup import clean_generated_maps
-from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.metrics import NAVIGATION_COLUMNS, navigation_columns
 
 

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_evolver.errors import GenomeError
 from sessgan_evolver.genome import Genome, clamp_positive
-from sessgan_gen.validation import require_non_negative, require_positive
 
 
 @dataclass(frozen=True)

@@ -18,15 +18,15 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from sessgan_core.environment import Environment
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import MissionSpec
 from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.campaign import EpisodeJob
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeRunner
 from sessgan_evolver.faults import is_valid_failure
 from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, HarnessRetries
-from sessgan_gen.environment import Environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.missions import MissionSpec
 from sessgan_sim.bag_recording import episode_bag_directory
 from sessgan_sim.errors import BagWriteError
 from sessgan_sim.metrics import EpisodeMetrics, Outcome, is_harness_outcome

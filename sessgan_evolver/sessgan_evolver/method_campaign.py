@@ -31,6 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_core.environment import Environment
+from sessgan_core.progress import ProgressPrinter, format_duration
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver import __version__
 from sessgan_evolver.campaign import (
     SESSGAN_METHOD,
@@ -52,12 +57,7 @@ from sessgan_evolver.search_methods import (
     SearchMethod,
     make_baseline,
 )
-from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
-from sessgan_gen.progress import ProgressPrinter, format_duration
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 
 SAMPLE_MAPS_PER_BATCH = 4
 """Maps of each batch kept for the report's figure."""

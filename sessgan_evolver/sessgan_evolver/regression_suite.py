@@ -31,8 +31,8 @@ from typing import Any
 
 import yaml
 
+from sessgan_core.atomic_files import atomic_write_bytes
 from sessgan_evolver.errors import BagReadError, SuiteError
-from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_sim.metrics import FAILURE_OUTCOMES
 from sessgan_sim.metrics import HARNESS_OUTCOMES as SIM_HARNESS_OUTCOMES
 

@@ -29,7 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from sessgan_gen.ros_spin import init_rclpy, run_command
+from sessgan_core.ros_spin import init_rclpy, run_command
 
 EXIT_AS_EXPECTED, EXIT_DIFFERENT, EXIT_ERROR = 0, 1, 2
 
@@ -127,9 +127,9 @@ def replay(args, episode) -> int:
 
 
 def bag_environment(bag: Path, episode: dict):
-    from sessgan_gen.environment import Environment, Pose2D
-    from sessgan_gen.fleet import fleet_from_json
-    from sessgan_gen.map_server_io import read_map_server
+    from sessgan_core.environment import Environment, Pose2D
+    from sessgan_core.fleet import fleet_from_json
+    from sessgan_core.map_server_io import read_map_server
 
     occupancy, resolution, origin = read_map_server(bag / 'map.yaml')
     return Environment(
@@ -150,9 +150,9 @@ def resimulate(args, episode: dict) -> int:
     from rclpy.action import ActionClient
 
     from sessgan_controllers.registry import CONTROLLERS
+    from sessgan_core.ros_conversion import environment_to_msg
+    from sessgan_core.scenarios import get_scenario
     from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
-    from sessgan_gen.ros_conversion import environment_to_msg
-    from sessgan_gen.scenarios import get_scenario
     from sessgan_interfaces.action import EvaluateEnvironment
     from sessgan_sim.errors import InvalidConfigError
     from sessgan_sim.metrics import is_controller_failure
@@ -305,6 +305,7 @@ def main(argv=None) -> int:
 
 def replay_or_resimulate(argv) -> int:
     args = parse_args(argv)
+    from sessgan_core.errors import SessganCoreError
     from sessgan_evolver.bag_reading import (
         bag_directory,
         check_bag_complete,
@@ -330,7 +331,8 @@ def replay_or_resimulate(argv) -> int:
             check_episode_fields(episode, bag_directory(args.bag) / 'episode.json')
             return resimulate(args, episode)
         return replay(args, episode)
-    except (SessganEvolverError, SessganGenError, OSError, KeyError, ValueError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError, OSError, KeyError,
+            ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return EXIT_ERROR
 

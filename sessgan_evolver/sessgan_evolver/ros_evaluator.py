@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from sessgan_core.environment import Environment
 from sessgan_evolver.campaign import CampaignConfig, CampaignError, EpisodeJob
 from sessgan_evolver.errors import BagCollectionError
 from sessgan_evolver.harness import HarnessRetries
@@ -25,7 +26,6 @@ from sessgan_evolver.process_supervisor import (
     WorkerPair,
     WorkerPool,
 )
-from sessgan_gen.environment import Environment
 from sessgan_sim.metrics import Outcome, is_harness_outcome
 
 if TYPE_CHECKING:  # ROS types, imported where they are used so --help works without ROS
@@ -256,7 +256,7 @@ class RosEvaluator:
 
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
-        from sessgan_gen.ros_conversion import environment_from_msg
+        from sessgan_core.ros_conversion import environment_from_msg
         from sessgan_interfaces.srv import GenerateEnvironments
 
         request = GenerateEnvironments.Request(
@@ -313,7 +313,7 @@ class RosEvaluator:
         return True
 
     def goal_for(self, job: EpisodeJob) -> EvaluateEnvironment.Goal:
-        from sessgan_gen.ros_conversion import environment_to_msg
+        from sessgan_core.ros_conversion import environment_to_msg
         from sessgan_interfaces.action import EvaluateEnvironment
 
         goal = EvaluateEnvironment.Goal()

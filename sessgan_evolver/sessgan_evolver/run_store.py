@@ -39,13 +39,14 @@ from typing import Any
 
 import torch
 
+from sessgan_core.atomic_files import atomic_write_bytes
+from sessgan_core.environment import MAX_ENVIRONMENT_ID_LENGTH, check_environment_id
+from sessgan_core.errors import InvalidEnvironmentError
+from sessgan_core.json_data import to_json_data
 from sessgan_evolver import __version__
 from sessgan_evolver.errors import RunStoreError
-from sessgan_gen.atomic_files import atomic_write_bytes
 from sessgan_gen.checkpoint import check_checkpoint_file, not_a_checkpoint_message
-from sessgan_gen.environment import MAX_ENVIRONMENT_ID_LENGTH, check_environment_id
-from sessgan_gen.errors import CheckpointError, InvalidEnvironmentError
-from sessgan_gen.json_data import to_json_data
+from sessgan_gen.errors import CheckpointError
 
 CHECKPOINT_FORMAT = 'sessgan_evolver.checkpoint/1'
 """Tag stored in every population checkpoint."""
@@ -408,7 +409,7 @@ def _csv_value(value: Any) -> Any:
 
 
 def _plain(value: Any) -> Any:
-    """JSON-ready plain data (see sessgan_gen.json_data)."""
+    """JSON-ready plain data (see sessgan_core.json_data)."""
     try:
         return to_json_data(value)
     except TypeError as err:

@@ -49,6 +49,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sessgan_core.environment import Environment
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import tokens_to_occupancy
 from sessgan_evolver.errors import FaultError, SearchMethodError
 from sessgan_evolver.faults import (
     FaultKey,
@@ -79,11 +82,8 @@ from sessgan_evolver.search_methods import (
     method_rng,
 )
 from sessgan_gen.checkpoint import checkpoint_training_map
-from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl
 from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import tokens_to_occupancy
 from sessgan_gen.track_cleanup import clean_generated_maps
 
 

@@ -22,10 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sessgan_evolver.errors import SearchMethodError
-from sessgan_evolver.faults import FaultKey, FaultRule, place_context
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.route_certificate import (
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.route_certificate import (
     Placement,
     certify,
     map_clearance,
@@ -33,7 +31,9 @@ from sessgan_gen.route_certificate import (
     place_start_goal,
     required_clearances,
 )
-from sessgan_gen.scenarios import Scenario
+from sessgan_core.scenarios import Scenario
+from sessgan_evolver.errors import SearchMethodError
+from sessgan_evolver.faults import FaultKey, FaultRule, place_context
 
 Pose = tuple[float, float, float]
 """(x, y, yaw): metres and radians, map frame."""

@@ -18,14 +18,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sessgan_core.environment import Environment
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.campaign import Campaign, CampaignConfig
 from sessgan_evolver.episode_runner import EpisodeRun
 from sessgan_evolver.errors import SearchError
 from sessgan_evolver.faults import FaultKey, FaultRule, is_valid_failure, key_of_failure
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search_methods import Evaluated, SearchMethod
-from sessgan_gen.environment import Environment
-from sessgan_gen.valid_tests import make_environment
 
 
 @dataclass

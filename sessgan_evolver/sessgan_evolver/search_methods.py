@@ -35,6 +35,8 @@ from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
+from sessgan_core.environment import Environment
+from sessgan_core.scenarios import get_scenario
 from sessgan_evolver.cellular_automaton import (
     CellularAutomatonConfig,
     CellularAutomatonGenerator,
@@ -54,7 +56,6 @@ from sessgan_gen.checkpoint import (
     default_checkpoint_path,
     load_checkpoint,
 )
-from sessgan_gen.environment import Environment
 from sessgan_gen.environment_metrics import tile_pattern_kl
 from sessgan_gen.environment_sampler import resolve_sample_size
 from sessgan_gen.errors import SamplingRequestError
@@ -64,7 +65,6 @@ from sessgan_gen.sampling import (
     sample_token_maps_from_noise,
     seed_noise_maps,
 )
-from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.track_cleanup import clean_generated_maps
 
 SEED_BOUND = 2**32

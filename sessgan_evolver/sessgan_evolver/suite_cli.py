@@ -32,6 +32,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sessgan_core.config_cli import add_old_spelling
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.progress import ProgressPrinter
 from sessgan_evolver.errors import SessganEvolverError, SuiteError
 from sessgan_evolver.regression_suite import (
     EXIT_HARNESS,
@@ -47,9 +50,7 @@ from sessgan_evolver.regression_suite import (
     load_suite_source,
     write_outputs,
 )
-from sessgan_gen.config_cli import add_old_spelling
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.progress import ProgressPrinter
 
 RECORD_CHOICES = ('all', 'failures', 'none')
 
@@ -148,7 +149,8 @@ def prepare_in_process(entry: SuiteEntry, controller: str) -> tuple[PreparedEntr
     try:
         settings, notes = resimulation_settings(episode)
         environment = bag_environment(entry.bag, dict(episode))
-    except (SessganSimError, SessganGenError, OSError, KeyError, ValueError) as err:
+    except (SessganSimError, SessganCoreError, SessganGenError, OSError, KeyError,
+            ValueError) as err:
         raise SuiteError(f'{where}: cannot rebuild the recorded episode: {err}') from err
     if settings.mode != 'lockstep':
         settings = dataclasses.replace(settings, mode='lockstep')
@@ -230,7 +232,7 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
     for progress in progresses:
         try:
             environments.append(bag_environment(progress.entry.bag, dict(progress.entry.episode)))
-        except (SessganGenError, OSError, KeyError, ValueError) as err:
+        except (SessganCoreError, SessganGenError, OSError, KeyError, ValueError) as err:
             raise SuiteError(f'scenario {progress.entry.name} ({progress.entry.bag}): cannot '
                              f'read the recorded map: {err}') from err
     config = CampaignConfig(scenario=progresses[0].entry.scenario or 'factory',
@@ -313,7 +315,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 prepared.append(item)
                 for note in notes:
                     print(f'note: {note}', file=sys.stderr)
-    except (SessganEvolverError, SessganGenError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         runner.close()
         print(f'error: {err}', file=sys.stderr)
         return EXIT_USAGE
@@ -345,7 +347,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         interrupted = True
         print('\ninterrupted: reporting the scenarios that ran', file=sys.stderr)
-    except (SessganEvolverError, SessganGenError) as err:
+    except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         print(f'error: {err}', file=sys.stderr)
         status = EXIT_HARNESS
     finally:

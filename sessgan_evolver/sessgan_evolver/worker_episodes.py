@@ -28,16 +28,16 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from sessgan_core.environment import Environment
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import MissionSpec
 from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
 from sessgan_evolver.episode_runner import EpisodeRun
 from sessgan_evolver.errors import BagReadError, ExternalWorkerError
 from sessgan_evolver.fault_tally import trace_from_bag
 from sessgan_evolver.faults import is_valid_failure
 from sessgan_evolver.in_process import EpisodeObserver, invalid_map_run
-from sessgan_gen.environment import Environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.missions import MissionSpec
 from sessgan_sim.bag_recording import check_record_subdirectory
 
 JobRunner = Callable[[Sequence[EpisodeJob], Callable[[EpisodeJob, dict], None]], None]

@@ -20,11 +20,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from sessgan_gen.atomic_files import atomic_write_bytes
-from sessgan_gen.errors import CheckpointError, SessganGenError, UnknownScenarioError
+from sessgan_core.atomic_files import atomic_write_bytes
+from sessgan_core.errors import SessganCoreError, UnknownScenarioError
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import load_example_map, read_token_map
+from sessgan_gen.errors import CheckpointError
 from sessgan_gen.model import GeneratorPyramid, pyramid_from_state_dict, resolve_device
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, read_token_map
 
 CHECKPOINT_FORMAT = 'sessgan_gen.pyramid'
 FORMAT_VERSION = 1
@@ -90,7 +91,7 @@ def training_map(metadata: Mapping[str, Any]) -> np.ndarray:
             return load_example_map(scenario).cells
         if source.endswith('.txt') and Path(source).is_file():
             return read_token_map(source, scenario).cells
-    except SessganGenError as err:
+    except SessganCoreError as err:
         raise CheckpointError(f'cannot read the training map {source!r} of the checkpoint: '
                               f'{err}') from err
     raise CheckpointError(

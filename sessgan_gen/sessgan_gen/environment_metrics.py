@@ -1,7 +1,7 @@
 """Environment metrics of ARCHITECTURE.md: tile-pattern KL divergence and uniqueness.
 
 Both work on integer grids of any small alphabet (token ids, or the common
-free/low/blocked encoding of :func:`sessgan_gen.token_map.to_common_encoding`
+free/low/blocked encoding of :func:`sessgan_core.token_map.to_common_encoding`
 to compare scenarios). Every k x k window (stride 1) gets an exact integer
 code: a positional number in base ``alphabet size`` while it fits 62 bits,
 otherwise dense ranks built from the four corner windows of half the side,

@@ -12,21 +12,21 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from sessgan_core.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import MissionSpec
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.valid_tests import make_environment
 from sessgan_gen.checkpoint import (
     check_checkpoint_file,
     default_checkpoint_path,
     load_checkpoint,
     map_size,
 )
-from sessgan_gen.environment import MAX_CELLS_PER_SIDE, MAX_TOTAL_CELLS, Environment
 from sessgan_gen.errors import CheckpointError, SamplingRequestError
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.missions import MissionSpec
 from sessgan_gen.model import GeneratorPyramid
 from sessgan_gen.sampling import sample_token_maps
-from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.track_cleanup import clean_token_map
-from sessgan_gen.valid_tests import make_environment
 
 MAX_SEEDS_PER_REQUEST = 4096
 
@@ -98,11 +98,11 @@ class EnvironmentSampler:
 
         ``size`` is (height, width) in cells; None, or a zero side, means the checkpoint's
         training map's (:func:`resolve_sample_size`).
-        ``mission``: stations before home drawn on each map (sessgan_gen.missions); None: plain
+        ``mission``: stations before home drawn on each map (sessgan_core.missions); None: plain
         start -> goal episodes.
         ``post_process``: apply the scenario's ``track_cleanup`` (sessgan_gen.track_cleanup)
         to every map, when it has one (the race track); False gives the generator's raw maps.
-        ``fleet``: robots under test on each map (sessgan_gen.fleet); None: one.
+        ``fleet``: robots under test on each map (sessgan_core.fleet); None: one.
         """
         mission = (mission or MissionSpec()).validate()
         fleet = (fleet or FleetSpec()).validate(mission.stations)

@@ -19,9 +19,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from sessgan_gen.config_cli import parse_config
+from sessgan_core.config_cli import parse_config
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.ros_spin import run_command
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.ros_spin import run_command
 
 
 @dataclass
@@ -70,14 +71,14 @@ def check_options(config: ExportConfig) -> Path:
         if value < 0:
             raise SessganGenError(f'{option} must be >= 0, got {value}')
     if config.scenario:
-        from sessgan_gen.scenarios import get_scenario
+        from sessgan_core.scenarios import get_scenario
 
         get_scenario(config.scenario)
     for option, path in (('--map-file', config.map_file), ('--checkpoint', config.checkpoint)):
         if path and not Path(path).is_file():
             raise SessganGenError(f'{option} {path} does not exist')
     if config.map_file:  # a file that is no token map is a bad option too
-        from sessgan_gen.token_map import read_token_map
+        from sessgan_core.token_map import read_token_map
 
         read_token_map(config.map_file)
     if config.bag and not (Path(config.bag) / 'map.yaml').is_file():
@@ -89,7 +90,7 @@ def export(config: ExportConfig) -> Path:
     """Write the map ``config`` names; returns the YAML path. SessganGenError (or ValueError)
     says what is wrong with the options or the source."""
     output = check_options(config)
-    from sessgan_gen.map_server_io import (
+    from sessgan_core.map_server_io import (
         export_environment,
         export_token_map,
         read_map_server,
@@ -98,7 +99,7 @@ def export(config: ExportConfig) -> Path:
 
     output.parent.mkdir(parents=True, exist_ok=True)
     if config.map_file:
-        from sessgan_gen.token_map import read_token_map
+        from sessgan_core.token_map import read_token_map
 
         export_token_map(output, read_token_map(config.map_file))
     elif config.generate:
@@ -134,12 +135,12 @@ def run_export(argv: Sequence[str] | None) -> int:
                           description=__doc__.split('\n\n')[0])
     try:
         check_options(config)
-    except (SessganGenError, ValueError) as err:
+    except (SessganCoreError, SessganGenError, ValueError) as err:
         print(f'export: error: {err}', file=sys.stderr)
         return 2
     try:
         output = export(config)
-    except (SessganGenError, ValueError, OSError) as err:
+    except (SessganCoreError, SessganGenError, ValueError, OSError) as err:
         print(f'export: error: {err}', file=sys.stderr)
         return 1
     print(f'{output} and {output.with_suffix(".pgm")}')

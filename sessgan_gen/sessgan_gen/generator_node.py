@@ -7,9 +7,9 @@ Publishes (relative names, so namespaces work):
 Serves ``generate_environments`` (sessgan_interfaces/GenerateEnvironments).
 
 With ``mission_stations`` > 0 every environment is a pick-up -> place mission: that many
-stations drawn from the map seed before home, every leg certified (sessgan_gen.missions).
+stations drawn from the map seed before home, every leg certified (sessgan_core.missions).
 With ``robots`` > 1 every environment is a fleet episode: robots r1, r2, ... with their own
-start, goal and certified route beside the environment's own (sessgan_gen.fleet).
+start, goal and certified route beside the environment's own (sessgan_core.fleet).
 """
 
 from __future__ import annotations
@@ -21,15 +21,16 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from sessgan_core.environment import MAX_ROBOTS
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import DEFAULT_DWELL_TIME, MAX_MISSION_STATIONS, MissionSpec
+from sessgan_core.node_help import exit_if_help
+from sessgan_core.ros_conversion import environment_to_msg
+from sessgan_core.ros_spin import exit_process, run_node
 from sessgan_gen.checkpoint import incomplete_warning
-from sessgan_gen.environment import MAX_ROBOTS
 from sessgan_gen.environment_sampler import DEFAULT_MAX_CELLS_PER_REQUEST, EnvironmentSampler
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.missions import DEFAULT_DWELL_TIME, MAX_MISSION_STATIONS, MissionSpec
-from sessgan_gen.node_help import exit_if_help
-from sessgan_gen.ros_conversion import environment_to_msg
-from sessgan_gen.ros_spin import exit_process, run_node
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 from sessgan_interfaces.srv import GenerateEnvironments
 
@@ -89,7 +90,7 @@ class GeneratorNode(Node):
             environment = self.sampler.sample(
                 [self.next_seed], self.get_parameter('checkpoint').value, scenario, size,
                 mission=self.mission, fleet=self.fleet)[0]
-        except (SessganGenError, ValueError) as err:
+        except (SessganCoreError, SessganGenError, ValueError) as err:
             self.get_logger().error(f'cannot generate an environment: {err}')
             self.timer.cancel()
             return
@@ -110,7 +111,7 @@ class GeneratorNode(Node):
                 list(request.seeds), checkpoint, scenario, (request.height, request.width),
                 generation=request.generation, member=request.member, mission=self.mission,
                 fleet=self.fleet)
-        except (SessganGenError, ValueError, RuntimeError) as err:
+        except (SessganCoreError, SessganGenError, ValueError, RuntimeError) as err:
             response.success = False
             response.message = str(err)
             self.get_logger().warning(f'generate_environments refused: {err}')
@@ -123,12 +124,12 @@ class GeneratorNode(Node):
 
 def main(args=None) -> None:
     """Spin the generator until a signal (which ends it at once and cleanly, also while it
-    samples: sessgan_gen.ros_spin); an unusable scenario, checkpoint or parameter ends the
+    samples: sessgan_core.ros_spin); an unusable scenario, checkpoint or parameter ends the
     process with a one-line error and exit status 1."""
     exit_if_help('sessgan_gen generator', __doc__ or '', GeneratorNode, args)
     try:
         status = run_node(GeneratorNode, args=args)
-    except (SessganGenError, ValueError, ParameterException) as err:
+    except (SessganCoreError, SessganGenError, ValueError, ParameterException) as err:
         rclpy.logging.get_logger('sessgan_gen').fatal(f'cannot start the generator: {err}')
         status = 1
     exit_process(status)

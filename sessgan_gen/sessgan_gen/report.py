@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import to_common_encoding
+from sessgan_core.valid_tests import make_environment
 from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint, training_map
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness
 from sessgan_gen.sampling import sample_seeds, sample_token_maps
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import to_common_encoding
-from sessgan_gen.valid_tests import make_environment
 
 REPORT_SCENARIOS = ('factory', 'racetrack', 'drone')
 UNIQUENESS_SIZES = (8, 16)

@@ -10,7 +10,10 @@ from pathlib import Path
 
 import torch
 
-from sessgan_gen.config_cli import parse_config
+from sessgan_core.config_cli import parse_config
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.ros_spin import run_command
+from sessgan_core.scenarios import get_scenario
 from sessgan_gen.errors import SessganGenError
 from sessgan_gen.report import (
     REPORT_SCENARIOS,
@@ -19,8 +22,6 @@ from sessgan_gen.report import (
     uniqueness_markdown,
     write_report,
 )
-from sessgan_gen.ros_spin import run_command
-from sessgan_gen.scenarios import get_scenario
 
 
 @dataclass
@@ -76,7 +77,7 @@ def run_report(argv: Sequence[str] | None) -> int:
                     'generators (paper Fig. 11 and Table 1).')
     try:
         scenarios = check_options(config)
-    except SessganGenError as err:
+    except (SessganCoreError, SessganGenError) as err:
         print(f'report: error: {err}', file=sys.stderr)
         return 2
     if config.threads:
@@ -85,7 +86,7 @@ def run_report(argv: Sequence[str] | None) -> int:
     try:
         data = compute_report(scenarios, checkpoints, config.samples, config.seed)
         paths = write_report(data, config.output_dir)
-    except (SessganGenError, ValueError, OSError) as err:
+    except (SessganCoreError, SessganGenError, ValueError, OSError) as err:
         print(f'report: error: {err}', file=sys.stderr)
         return 1
     print(tpkl_markdown(data))

@@ -32,7 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sessgan_gen.scenarios import Scenario, TrackCleanup, get_scenario
+from sessgan_core.scenarios import Scenario, TrackCleanup, get_scenario
+from sessgan_core.valid_tests import reachable_regions
 from sessgan_gen.track_realism import (
     paint_discs,
     prune_spurs,
@@ -40,7 +41,6 @@ from sessgan_gen.track_realism import (
     skeleton_end_points,
     track_clearance,
 )
-from sessgan_gen.valid_tests import reachable_regions
 
 
 def fill_islands(track: np.ndarray, max_cells: int) -> np.ndarray:

@@ -9,7 +9,7 @@ Definitions (lengths in cells inside, metres in the results):
 
 * **Clearance** of a track cell: distance from its centre to the nearest point of a
   non-track cell square; the outside of the grid is non-track (as in
-  :mod:`sessgan_gen.route_certificate`). A straight of width w has clearance w / 2 on its
+  :mod:`sessgan_core.route_certificate`). A straight of width w has clearance w / 2 on its
   centre line.
 * **Inscribed discs**: every track cell q is the centre of a disc of radius clearance(q)
   that lies inside the track. The **local width** at a route point is the diameter of the
@@ -43,10 +43,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sessgan_gen.environment import Environment
-from sessgan_gen.grid_search import flat_grid, label_regions
-from sessgan_gen.token_map import resolve_scenario
-from sessgan_gen.valid_tests import (
+from sessgan_core.environment import Environment
+from sessgan_core.grid_search import flat_grid, label_regions
+from sessgan_core.token_map import resolve_scenario
+from sessgan_core.valid_tests import (
     certify_environment,
     occupancy_passable_mask,
     shortest_path_in_free,
@@ -380,7 +380,7 @@ def measure_environment(environment: Environment, spur_length: int | None = None
                         curvature_step_m: float = DEFAULT_CURVATURE_STEP_M,
                         smoothing_m: float = DEFAULT_SMOOTHING_M) -> TrackRealism:
     """The track-realism measures of an Environment, on its own certified start-to-goal
-    route (:func:`sessgan_gen.valid_tests.certify_environment`; no route measures when it is
+    route (:func:`sessgan_core.valid_tests.certify_environment`; no route measures when it is
     not a valid test). Track = the cells its scenario's robot may occupy."""
     spec = resolve_scenario(environment.scenario)
     track = occupancy_passable_mask(environment.occupancy, spec)

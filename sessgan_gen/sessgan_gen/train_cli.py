@@ -13,12 +13,13 @@ from typing import NamedTuple, TextIO
 import numpy as np
 import torch
 
+from sessgan_core.config_cli import parse_config
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.progress import ProgressPrinter, format_duration
+from sessgan_core.ros_spin import INTERRUPTED_STATUS, run_command
+from sessgan_core.scenarios import Scenario, get_scenario
 from sessgan_gen.checkpoint import load_training_checkpoint, read_checkpoint, save_checkpoint
-from sessgan_gen.config_cli import parse_config
 from sessgan_gen.errors import CheckpointError, SessganGenError
-from sessgan_gen.progress import ProgressPrinter, format_duration
-from sessgan_gen.ros_spin import INTERRUPTED_STATUS, run_command
-from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_gen.seeding import seed_everything
 from sessgan_gen.training import (
     TrainConfig,
@@ -51,7 +52,7 @@ def load_training_map(config: TrainConfig, log: TextIO | None = None) -> Trainin
     """The map the config asks to learn, checked to be large enough; an imported map_server
     map is described on ``log`` (default stderr), with warnings for a map that is mostly wall
     or unknown."""
-    from sessgan_gen import token_map  # the other half of the package; imported on use
+    from sessgan_core import token_map  # imported on use
 
     log = log or sys.stderr
 
@@ -61,7 +62,7 @@ def load_training_map(config: TrainConfig, log: TextIO | None = None) -> Trainin
     origin = (0.0, 0.0, 0.0)
     described = ''
     if config.map_yaml:
-        from sessgan_gen.map_server_io import import_facility_map
+        from sessgan_core.map_server_io import import_facility_map
 
         imported = import_facility_map(config.map_yaml, scenario)
         loaded = imported.token_map
@@ -101,8 +102,8 @@ def write_imported_map(output: Path, cells: np.ndarray, scenario: Scenario,
     """Write the token map learned from a map_server map next to the checkpoint: as tokens and
     as the map_server map it is at the scenario's cell size, at the original's ``origin`` (so it
     overlays the original in RViz)."""
-    from sessgan_gen.map_server_io import write_map_server
-    from sessgan_gen.token_map import TokenMap, tokens_to_occupancy, write_token_map
+    from sessgan_core.map_server_io import write_map_server
+    from sessgan_core.token_map import TokenMap, tokens_to_occupancy, write_token_map
 
     text_path, yaml_path = imported_map_paths(output)
     output.parent.mkdir(parents=True, exist_ok=True)
@@ -164,7 +165,7 @@ def run_training(argv: Sequence[str] | None) -> int:
         # The inputs the options name, read before anything is written: a map or checkpoint
         # that is not there or cannot be learned is a usage error too.
         training_map = check_inputs(config)
-    except (SessganGenError, ValueError) as err:
+    except (SessganCoreError, SessganGenError, ValueError) as err:
         print(f'train: error: {err}', file=sys.stderr)
         return 2
     try:
@@ -173,7 +174,7 @@ def run_training(argv: Sequence[str] | None) -> int:
         print('train: interrupted; run again with --resume to continue from the last '
               'finished scale', file=sys.stderr)
         return INTERRUPTED_STATUS
-    except (SessganGenError, ValueError, OSError) as err:
+    except (SessganCoreError, SessganGenError, ValueError, OSError) as err:
         print(f'train: error: {err}', file=sys.stderr)
         return 1
 

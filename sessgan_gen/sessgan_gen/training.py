@@ -29,6 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from sessgan_core.scenarios import Scenario
 from sessgan_gen import __version__
 from sessgan_gen.checkpoint import training_map_rows
 from sessgan_gen.downsampling import downsample_pyramid, one_hot
@@ -42,7 +43,6 @@ from sessgan_gen.model import (
     resolve_device,
     upsample,
 )
-from sessgan_gen.scenarios import Scenario
 
 LR_DECAY_FRACTIONS = (0.4, 0.625)
 """Fractions of a scale's iterations after which the learning rate drops by

@@ -2,7 +2,7 @@
 
 Each agent patrols back and forth along a seeded path through free space: two
 random cells of the footprint-free space (walls inflated by the agent's radius)
-joined by a 4-connected shortest path (sessgan_gen.valid_tests), at a constant
+joined by a 4-connected shortest path (sessgan_core.valid_tests), at a constant
 speed. Agents are kinematic: static pybullet bodies moved every physics step,
 which the robot under test can hit (a contact counts as a collision) but cannot
 push. They move in the robot's plane (ground agents for ground robots, flyers at the
@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.valid_tests import inflate, shortest_path_in_free
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.valid_tests import inflate, shortest_path_in_free
+from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.robots import Robot
 from sessgan_sim.world import CollisionGroup

@@ -16,7 +16,7 @@ the writer's pid, host and process start time), and clean-up
 a writer of this host that is gone: a directory someone else named ``*.tmp-<pid>`` is never
 touched. A bag's directory is ``<record directory>/<episode id>``
 (:func:`episode_bag_directory`); the id must be a safe name
-(``sessgan_gen.environment.check_environment_id``: no path separators, no '..', at most 128
+(``sessgan_core.environment.check_environment_id``: no path separators, no '..', at most 128
 characters), checked before anything on disk is touched. An existing directory is replaced
 (``overwrite``) only if it is itself a failure bag (:func:`is_episode_bag`), never a
 directory someone else made. The messages arrive already CDR-serialized (the node serializes them
@@ -63,12 +63,12 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from sessgan_gen.atomic_files import fsync_directory, fsync_tree
-from sessgan_gen.environment import check_environment_id
-from sessgan_gen.errors import InvalidEnvironmentError
-from sessgan_gen.json_data import to_json_data
-from sessgan_gen.map_server_io import write_map_server
-from sessgan_gen.validation import require_positive
+from sessgan_core.atomic_files import fsync_directory, fsync_tree
+from sessgan_core.environment import check_environment_id
+from sessgan_core.errors import InvalidEnvironmentError
+from sessgan_core.json_data import to_json_data
+from sessgan_core.map_server_io import write_map_server
+from sessgan_core.validation import require_positive
 from sessgan_sim import __version__
 from sessgan_sim.errors import BagWriteError
 
@@ -514,7 +514,7 @@ def _checked_record(index: int, record: BagRecord | tuple[str, str, int, bytes]
 
 
 def _json_ready(value: Any) -> Any:
-    """Plain JSON data (see sessgan_gen.json_data)."""
+    """Plain JSON data (see sessgan_core.json_data)."""
     try:
         return to_json_data(value)
     except TypeError as err:

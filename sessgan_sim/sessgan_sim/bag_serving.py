@@ -13,8 +13,8 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from sessgan_gen.environment import check_environment_id
-from sessgan_gen.errors import InvalidEnvironmentError
+from sessgan_core.environment import check_environment_id
+from sessgan_core.errors import InvalidEnvironmentError
 from sessgan_sim.bag_recording import is_episode_bag, record_directory_under
 from sessgan_sim.errors import BagServeError, BagWriteError
 

@@ -15,7 +15,7 @@ import struct
 
 import numpy as np
 
-from sessgan_gen.quaternion import quaternion_from_yaw
+from sessgan_core.quaternion import quaternion_from_yaw
 
 ENCAPSULATION = b'\x00\x01\x00\x00'
 _ZERO_COVARIANCE = bytes(36 * 8)

@@ -43,12 +43,12 @@ from typing import NamedTuple
 import numpy as np
 import pybullet as p
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.errors import SessganGenError
-from sessgan_gen.grid_search import descend, distance_field
-from sessgan_gen.route_certificate import CertificateGrid, map_clearance, required_clearances
-from sessgan_gen.scenarios import Scenario, get_scenario
-from sessgan_gen.validation import require_positive
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.grid_search import descend, distance_field
+from sessgan_core.route_certificate import CertificateGrid, map_clearance, required_clearances
+from sessgan_core.scenarios import Scenario, get_scenario
+from sessgan_core.validation import require_positive
 from sessgan_sim.agents import AgentConfig, DummyAgents
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import (
@@ -492,7 +492,7 @@ class Episode:
             record.config = config
             robots = [robot, *(create_robot(str(config.robot), config.robot_params)
                                for _ in environment.fleet)]
-        except (SessganGenError, UnknownRobotError) as err:
+        except (SessganCoreError, UnknownRobotError) as err:
             self._end(record, Outcome.INVALID_ENVIRONMENT, str(err))
             self._latest = [self._blank_observation(record)]
             return self._latest[0]

@@ -17,8 +17,8 @@ import enum
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from sessgan_gen.environment import Pose2D
-from sessgan_gen.validation import require_non_negative
+from sessgan_core.environment import Pose2D
+from sessgan_core.validation import require_non_negative
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import FAILURE_OUTCOMES, STANDING_SPEED, Outcome
 

@@ -49,10 +49,10 @@ from typing import Any, ClassVar, NamedTuple
 
 import pybullet as p
 
-from sessgan_gen.environment import Pose2D
-from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
-from sessgan_gen.scenarios import FREE, LOW_OBSTACLE
-from sessgan_gen.validation import require_positive
+from sessgan_core.environment import Pose2D
+from sessgan_core.quaternion import quaternion_from_yaw, yaw_from_quaternion
+from sessgan_core.scenarios import FREE, LOW_OBSTACLE
+from sessgan_core.validation import require_positive
 from sessgan_sim.errors import InvalidConfigError, UnknownRobotError
 from sessgan_sim.world import ROBOT_MASK, CollisionGroup
 

@@ -9,7 +9,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TransformStamped, Twist
 from tf2_msgs.msg import TFMessage
 
-from sessgan_gen.quaternion import quaternion_from_yaw_pitch
+from sessgan_core.quaternion import quaternion_from_yaw_pitch
 from sessgan_sim import cdr
 from sessgan_sim.frames import (
     BASE_FOOTPRINT,

@@ -46,8 +46,8 @@ from typing import NamedTuple
 import numpy as np
 import pybullet as p
 
-from sessgan_gen.environment import Pose2D
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.environment import Pose2D
+from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_sim.agents import DummyAgents
 from sessgan_sim.errors import InvalidConfigError, SessganSimError
 from sessgan_sim.robots import Robot

@@ -45,15 +45,15 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
-from sessgan_gen.config_cli import field_docs
-from sessgan_gen.environment import Environment
-from sessgan_gen.errors import SessganGenError
-from sessgan_gen.node_help import exit_if_help
-from sessgan_gen.ros_conversion import environment_from_msg, occupancy_from_grid_msg
-from sessgan_gen.ros_spin import exit_process, run_node
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import occupancy_to_tokens
-from sessgan_gen.valid_tests import make_environment
+from sessgan_core.config_cli import field_docs
+from sessgan_core.environment import Environment
+from sessgan_core.errors import SessganCoreError
+from sessgan_core.node_help import exit_if_help
+from sessgan_core.ros_conversion import environment_from_msg, occupancy_from_grid_msg
+from sessgan_core.ros_spin import exit_process, run_node
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import occupancy_to_tokens
+from sessgan_core.valid_tests import make_environment
 from sessgan_interfaces.action import EvaluateEnvironment
 from sessgan_interfaces.msg import EpisodeMetrics as EpisodeMetricsMsg
 from sessgan_interfaces.srv import WorkerBags
@@ -181,7 +181,7 @@ class SimulatorNode(Node):
                 return result
             try:
                 environment = environment_from_msg(request.environment)
-            except (SessganGenError, SessganSimError, ValueError) as err:
+            except (SessganCoreError, SessganSimError, ValueError) as err:
                 result.metrics = invalid_metrics(request.environment.id, str(err))
                 self.get_logger().warning(f'invalid environment {request.environment.id!r}: {err}')
                 goal_handle.succeed()
@@ -232,7 +232,7 @@ class SimulatorNode(Node):
                                            seed=self.free_seed,
                                            mission=self.settings.mission(),
                                            fleet=self.settings.fleet())
-        except (SessganGenError, ValueError) as err:
+        except (SessganCoreError, ValueError) as err:
             self.get_logger().error(f'ignoring the map on environment: {err}')
             return
         if not self.busy.acquire(blocking=False):

@@ -19,12 +19,12 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, get_type_hints
 
-from sessgan_gen.errors import InvalidFleetError, InvalidMissionError, SessganGenError
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.json_data import to_json_data
-from sessgan_gen.missions import DEFAULT_DWELL_TIME, MissionSpec
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.errors import InvalidFleetError, InvalidMissionError, SessganCoreError
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.json_data import to_json_data
+from sessgan_core.missions import DEFAULT_DWELL_TIME, MissionSpec
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
 from sessgan_sim.bag_recording import BagStorage, check_record_subdirectory
 from sessgan_sim.command_pace import PaceRule
@@ -257,7 +257,7 @@ class SimulatorSettings:
                 f"'control_rate' ({self.control_rate})")
         try:
             get_scenario(self.scenario)
-        except SessganGenError as err:
+        except SessganCoreError as err:
             raise InvalidConfigError(f"parameter 'scenario': {err}") from err
         overrides = self.robot_param_values()
         if self.robot:

@@ -43,9 +43,9 @@ from types import TracebackType
 import numpy as np
 import pybullet as p
 
-from sessgan_gen.environment import Environment
-from sessgan_gen.scenarios import BLOCKED, LOW_OBSTACLE
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.environment import Environment
+from sessgan_core.scenarios import BLOCKED, LOW_OBSTACLE
+from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_sim.errors import InvalidConfigError, WorldError
 
 

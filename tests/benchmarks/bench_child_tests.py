@@ -39,21 +39,22 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[2]
-for package in ('sessgan_gen', 'sessgan_sim', 'sessgan_evolver', 'controllers'):
+for package in ('sessgan_core', 'sessgan_gen', 'sessgan_sim', 'sessgan_evolver',
+                'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
+from sessgan_core.environment import Environment  # noqa: E402
+from sessgan_core.scenarios import get_scenario  # noqa: E402
+from sessgan_core.token_map import tokens_to_occupancy  # noqa: E402
+from sessgan_core.valid_tests import make_environment  # noqa: E402
 from sessgan_evolver.faults import FaultKey, FaultRule, SituationArchive  # noqa: E402
 from sessgan_evolver.in_process import InProcessEvaluator  # noqa: E402
 from sessgan_evolver.map_operators import mutate_noise, mutate_noise_region  # noqa: E402
 from sessgan_evolver.screening import certify_route, environment_of  # noqa: E402
 from sessgan_evolver.search import EpisodeLog  # noqa: E402
 from sessgan_evolver.search_methods import load_pyramid  # noqa: E402
-from sessgan_gen.environment import Environment  # noqa: E402
 from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps  # noqa: E402
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
-from sessgan_gen.token_map import tokens_to_occupancy  # noqa: E402
 from sessgan_gen.track_cleanup import clean_generated_maps  # noqa: E402
-from sessgan_gen.valid_tests import make_environment  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-for package in ('sessgan_gen', 'sessgan_sim', 'controllers'):
+for package in ('sessgan_core', 'sessgan_gen', 'sessgan_sim', 'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
 from sessgan_controllers.controller_interface import (  # noqa: E402
@@ -53,10 +53,10 @@ from sessgan_controllers.controller_interface import (  # noqa: E402
     observed,
 )
 from sessgan_controllers.registry import CONTROLLERS, ControllerSpec  # noqa: E402
-from sessgan_gen.environment import Environment  # noqa: E402
+from sessgan_core.environment import Environment  # noqa: E402
+from sessgan_core.progress import ProgressPrinter, format_duration  # noqa: E402
+from sessgan_core.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
-from sessgan_gen.progress import ProgressPrinter, format_duration  # noqa: E402
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
 from sessgan_sim.episode import Episode, EpisodeConfig  # noqa: E402
 from sessgan_sim.metrics import EpisodeMetrics, Outcome  # noqa: E402
 

@@ -24,17 +24,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'sessgan_gen'))
+for package in ('sessgan_core', 'sessgan_gen'):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / package))
 
+from sessgan_core.scenarios import get_scenario  # noqa: E402
+from sessgan_core.token_map import load_example_map  # noqa: E402
+from sessgan_core.valid_tests import make_environment  # noqa: E402
 from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint  # noqa: E402
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report  # noqa: E402
 from sessgan_gen.model import GeneratorPyramid  # noqa: E402
 from sessgan_gen.sampling import sample_seeds, sample_token_maps  # noqa: E402
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.seeding import seed_everything  # noqa: E402
-from sessgan_gen.token_map import load_example_map  # noqa: E402
 from sessgan_gen.training import TrainConfig, Trainer, resolve_config  # noqa: E402
-from sessgan_gen.valid_tests import make_environment  # noqa: E402
 
 FACTORY = get_scenario('factory')
 

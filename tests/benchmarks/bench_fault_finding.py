@@ -37,7 +37,8 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[2]
-for package in ('sessgan_gen', 'sessgan_sim', 'sessgan_evolver', 'controllers'):
+for package in ('sessgan_core', 'sessgan_gen', 'sessgan_sim', 'sessgan_evolver',
+                'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
 from sessgan_evolver.comparison import (  # noqa: E402

@@ -23,14 +23,15 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'sessgan_gen'))
+for package in ('sessgan_core', 'sessgan_gen'):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / package))
 
+from sessgan_core.scenarios import get_scenario  # noqa: E402
+from sessgan_core.token_map import load_example_map  # noqa: E402
 from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint  # noqa: E402
 from sessgan_gen.model import GeneratorPyramid, pyramid_scale_shapes  # noqa: E402
 from sessgan_gen.sampling import batch_size_for, sample_seeds, sample_token_maps  # noqa: E402
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.seeding import seed_everything  # noqa: E402
-from sessgan_gen.token_map import load_example_map  # noqa: E402
 from sessgan_gen.training import TrainConfig, Trainer, resolve_config  # noqa: E402
 
 SCENARIOS = ('factory', 'drone', 'racetrack')

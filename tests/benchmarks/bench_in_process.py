@@ -31,14 +31,15 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-for package in ('sessgan_gen', 'sessgan_sim', 'sessgan_evolver', 'controllers'):
+for package in ('sessgan_core', 'sessgan_gen', 'sessgan_sim', 'sessgan_evolver',
+                'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
 from sessgan_controllers.registry import CONTROLLERS  # noqa: E402
+from sessgan_core.scenarios import SCENARIOS  # noqa: E402
+from sessgan_core.token_map import load_example_map  # noqa: E402
+from sessgan_core.valid_tests import make_environment  # noqa: E402
 from sessgan_evolver.episode_runner import EpisodeRunner  # noqa: E402
-from sessgan_gen.scenarios import SCENARIOS  # noqa: E402
-from sessgan_gen.token_map import load_example_map  # noqa: E402
-from sessgan_gen.valid_tests import make_environment  # noqa: E402
 
 
 def controllers_of(scenario: str) -> list[str]:

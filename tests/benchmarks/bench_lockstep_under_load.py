@@ -20,8 +20,8 @@ import time
 
 from bench_simulator_node import bench_graph, reference_episode, run_episodes, start_worker
 
+from sessgan_core.ros_spin import run_command
 from sessgan_evolver.process_supervisor import worker_cores
-from sessgan_gen.ros_spin import run_command
 
 
 def main() -> int:

@@ -40,14 +40,14 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-for package in ('sessgan_gen', 'sessgan_sim', 'controllers'):
+for package in ('sessgan_core', 'sessgan_gen', 'sessgan_sim', 'controllers'):
     sys.path.insert(0, str(ROOT / package))
 
 from sessgan_controllers.controller_interface import Goal, MapData, observed  # noqa: E402
 from sessgan_controllers.registry import get_controller  # noqa: E402
-from sessgan_gen.environment import Environment  # noqa: E402
+from sessgan_core.environment import Environment  # noqa: E402
+from sessgan_core.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
 from sessgan_sim.episode import Episode, EpisodeConfig  # noqa: E402
 from sessgan_sim.metrics import EpisodeMetrics  # noqa: E402
 

@@ -43,12 +43,12 @@ import numpy as np
 import pybullet as p
 
 ROOT = Path(__file__).resolve().parents[2]
-for package in ('sessgan_gen', 'sessgan_sim'):
+for package in ('sessgan_core', 'sessgan_sim'):
     sys.path.insert(0, str(ROOT / package))
 
-from sessgan_gen.environment import Environment  # noqa: E402
-from sessgan_gen.token_map import load_example_map  # noqa: E402
-from sessgan_gen.valid_tests import make_environment  # noqa: E402
+from sessgan_core.environment import Environment  # noqa: E402
+from sessgan_core.token_map import load_example_map  # noqa: E402
+from sessgan_core.valid_tests import make_environment  # noqa: E402
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation  # noqa: E402
 from sessgan_sim.robots import BodyCommand  # noqa: E402
 from sessgan_sim.sensors import ClearanceSensor, Lidar, LidarConfig, RayCaster  # noqa: E402

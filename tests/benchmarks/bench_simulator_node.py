@@ -39,8 +39,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from sessgan_core.ros_spin import init_rclpy, run_command
 from sessgan_evolver.process_supervisor import ChildProcess, ProcessSupervisor, worker_cores
-from sessgan_gen.ros_spin import init_rclpy, run_command
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randrange(10, 100)))
@@ -338,9 +338,9 @@ def measure_pair(graph: ProcessSupervisor, node, message, episodes: int, sim_cor
 
 def reference_episode():
     """The factory reference environment and its Environment message."""
-    from sessgan_gen.ros_conversion import environment_to_msg
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_gen.valid_tests import make_environment
+    from sessgan_core.ros_conversion import environment_to_msg
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'reference')
     return environment, environment_to_msg(environment)

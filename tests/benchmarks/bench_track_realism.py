@@ -28,14 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'sessgan_gen'))
+for package in ('sessgan_core', 'sessgan_gen'):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / package))
 
-from sessgan_gen.environment import Environment  # noqa: E402
+from sessgan_core.environment import Environment  # noqa: E402
+from sessgan_core.progress import ProgressPrinter  # noqa: E402
+from sessgan_core.token_map import load_example_map  # noqa: E402
+from sessgan_core.valid_tests import certify_environment, make_environment  # noqa: E402
 from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
-from sessgan_gen.progress import ProgressPrinter  # noqa: E402
-from sessgan_gen.token_map import load_example_map  # noqa: E402
 from sessgan_gen.track_realism import TrackRealism, measure_environment  # noqa: E402
-from sessgan_gen.valid_tests import certify_environment, make_environment  # noqa: E402
 
 FIRST_SEED = 800_000
 BATCH = 20

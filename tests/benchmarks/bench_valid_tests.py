@@ -22,12 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'sessgan_gen'))
+for package in ('sessgan_core', 'sessgan_gen'):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / package))
 
+from sessgan_core.progress import ProgressPrinter  # noqa: E402
+from sessgan_core.route_certificate import required_clearances  # noqa: E402
+from sessgan_core.scenarios import get_scenario  # noqa: E402
 from sessgan_gen.environment_sampler import EnvironmentSampler  # noqa: E402
-from sessgan_gen.progress import ProgressPrinter  # noqa: E402
-from sessgan_gen.route_certificate import required_clearances  # noqa: E402
-from sessgan_gen.scenarios import get_scenario  # noqa: E402
 
 FIRST_SEED = 700_000
 BATCH = 50

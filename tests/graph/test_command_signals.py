@@ -1,6 +1,6 @@
 """Commands that use rclpy (campaign, replay, the benchmarks) stop on SIGINT as on SIGTERM:
 the signal is a KeyboardInterrupt in the main thread while ROS is still up, so the command
-stops its processes and exits 130 without a traceback (sessgan_gen.ros_spin.run_command and
+stops its processes and exits 130 without a traceback (sessgan_core.ros_spin.run_command and
 init_rclpy). With rclpy's own handlers the context was shut down under the spinning command,
 which then raised ExternalShutdownException (a traceback and exit 1) whenever the shutdown
 was seen before the KeyboardInterrupt."""
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.graph
 PROBE = """
 import os, signal, sys, threading
 import rclpy
-from sessgan_gen.ros_spin import init_rclpy, run_command
+from sessgan_core.ros_spin import init_rclpy, run_command
 
 def body():
     init_rclpy([])

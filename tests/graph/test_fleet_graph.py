@@ -27,8 +27,8 @@ def crossing_environment(environment_id: str = 'fleet-crossing'):
     they meet half way and pass each other."""
     import dataclasses
 
-    from sessgan_gen.environment import FleetRobot, Pose2D
-    from sessgan_gen.valid_tests import certify_fleet, make_environment
+    from sessgan_core.environment import FleetRobot, Pose2D
+    from sessgan_core.valid_tests import certify_fleet, make_environment
 
     base = make_environment(room(16), 'factory', environment_id, seed=0)
     environment = dataclasses.replace(
@@ -44,7 +44,7 @@ def crossing_environment(environment_id: str = 'fleet-crossing'):
 
 
 def test_two_robots_cross_each_other_and_reach_their_goals(node_processes, ros_node):
-    from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_core.ros_conversion import environment_to_msg
 
     namespace = '/fleet'
     start_simulator(node_processes, namespace, 'dummy_agents:=0')
@@ -62,8 +62,8 @@ def test_two_robots_cross_each_other_and_reach_their_goals(node_processes, ros_n
 
 def test_lockstep_waits_for_every_robot_and_the_bag_holds_both(node_processes, ros_node,
                                                                 tmp_path):
+    from sessgan_core.ros_conversion import environment_to_msg
     from sessgan_evolver.bag_reading import read_bag_topics
-    from sessgan_gen.ros_conversion import environment_to_msg
 
     namespace = '/fleet_bag'
     start_simulator(node_processes, namespace, 'dummy_agents:=0', f'bags_root:={tmp_path}')
@@ -91,7 +91,7 @@ def test_lockstep_waits_for_every_robot_and_the_bag_holds_both(node_processes, r
 
 
 def test_a_missing_robot_controller_is_named(node_processes, ros_node):
-    from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_core.ros_conversion import environment_to_msg
 
     namespace = '/fleet_missing'
     start_simulator(node_processes, namespace, 'dummy_agents:=0',

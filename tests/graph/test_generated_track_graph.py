@@ -23,7 +23,7 @@ tier too: tests/unit/controllers/test_reference_navigator_episodes.py)."""
 
 
 def test_the_car_drives_a_served_generated_track(node_processes, ros_node):
-    from sessgan_gen.valid_tests import reachable_regions
+    from sessgan_core.valid_tests import reachable_regions
     from sessgan_interfaces.srv import GenerateEnvironments
 
     start_generator(node_processes, '/gen_track', 'scenario:=racetrack')

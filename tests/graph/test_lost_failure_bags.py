@@ -24,8 +24,8 @@ class Log:
 
 def test_a_bag_lost_to_a_full_disk_is_reported_with_its_reason(ros_workspace, tmp_path,
                                                                 monkeypatch):
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_gen.valid_tests import make_environment
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
     from sessgan_sim import bag_recording
     from sessgan_sim.episode import Episode, EpisodeConfig
     from sessgan_sim.simulator_settings import SimulatorSettings

@@ -25,9 +25,9 @@ DWELL_TIME = 2.0
 
 def mission_environment(stations: int = 1):
     """The factory example with ``stations`` stations before home (core Environment)."""
-    from sessgan_gen.missions import MissionSpec
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_gen.valid_tests import make_environment
+    from sessgan_core.missions import MissionSpec
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory',
                                    'factory-mission', seed=0,
@@ -52,7 +52,7 @@ def watch_goals(ros_node, namespace: str):
 
 
 def test_two_leg_mission_reaches_the_station_and_home(node_processes, ros_node):
-    from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_core.ros_conversion import environment_to_msg
 
     environment = mission_environment()
     station, home = environment.stations[0], environment.goal
@@ -83,7 +83,7 @@ def test_two_leg_mission_reaches_the_station_and_home(node_processes, ros_node):
 
 
 def test_mission_failure_bag_replays_and_resimulates(node_processes, ros_node, tmp_path):
-    from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_core.ros_conversion import environment_to_msg
 
     environment = mission_environment()
     namespace = '/mission_bag'
@@ -116,9 +116,9 @@ def test_mission_failure_bag_replays_and_resimulates(node_processes, ros_node, t
 
 
 def test_a_nav2_stack_gets_each_waypoint_as_a_navigate_to_pose_goal(node_processes, ros_node):
-    from sessgan_gen.missions import MissionSpec
-    from sessgan_gen.ros_conversion import environment_to_msg
-    from sessgan_gen.valid_tests import make_environment
+    from sessgan_core.missions import MissionSpec
+    from sessgan_core.ros_conversion import environment_to_msg
+    from sessgan_core.valid_tests import make_environment
     from tests.graph.test_clocked_mode import start_stand_in
     from tests.graph.test_simulator_graph import room
 

@@ -52,7 +52,7 @@ def test_a_stalling_stack_in_clocked_mode_ends_overloaded_not_as_a_failure(
 
 def test_a_fleet_robot_whose_stack_stalls_ends_the_clocked_episode_overloaded(
         node_processes, ros_node):
-    from sessgan_gen.ros_conversion import environment_to_msg
+    from sessgan_core.ros_conversion import environment_to_msg
     from tests.graph.test_fleet_graph import crossing_environment
 
     namespace = '/overload_fleet'

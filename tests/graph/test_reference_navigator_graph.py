@@ -47,7 +47,7 @@ def evaluate_with_reruns(ros_node, namespace: str, environment, tries: int = 3):
 
 
 def example_environment(scenario: str):
-    from sessgan_gen.token_map import load_example_map
+    from sessgan_core.token_map import load_example_map
 
     return environment_msg(load_example_map(scenario).cells, scenario, f'{scenario}-example')
 

@@ -21,8 +21,8 @@ pytestmark = pytest.mark.graph
 
 def room_bag(directory: Path) -> Path:
     """A bag of an empty room (no agents), recorded in process."""
+    from sessgan_core.valid_tests import make_environment
     from sessgan_evolver.in_process import InProcessEvaluator
-    from sessgan_gen.valid_tests import make_environment
     from sessgan_sim.simulator_settings import SimulatorSettings
 
     environment = make_environment(room(), 'factory', 'room')

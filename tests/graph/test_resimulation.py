@@ -63,7 +63,7 @@ def resimulate_same(bag: str, *options: str) -> dict[str, tuple[str, str]]:
 
 
 def factory_example():
-    from sessgan_gen.token_map import load_example_map
+    from sessgan_core.token_map import load_example_map
 
     return environment_msg(load_example_map('factory').cells, 'factory', 'factory-example')
 

@@ -66,8 +66,8 @@ def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0,
 
 
 def environment_msg(cells, scenario: str, env_id: str):
-    from sessgan_gen.ros_conversion import environment_to_msg
-    from sessgan_gen.valid_tests import make_environment
+    from sessgan_core.ros_conversion import environment_to_msg
+    from sessgan_core.valid_tests import make_environment
 
     return environment_to_msg(make_environment(cells, scenario, env_id))
 
@@ -214,7 +214,7 @@ def test_a_client_cannot_write_or_delete_outside_the_bags_root(node_processes, r
 ])
 def test_builtin_controller_reaches_goal_on_example_map(node_processes, ros_node, scenario,
                                                         controller):
-    from sessgan_gen.token_map import load_example_map
+    from sessgan_core.token_map import load_example_map
 
     namespace = f'/ex_{scenario}'
     start_simulator(node_processes, namespace)
@@ -247,7 +247,7 @@ def test_a_failure_in_a_valid_test_leaves_a_complete_bag(node_processes, ros_nod
 
 def test_collisions_in_an_invalid_test_are_not_recorded_as_failures(node_processes, ros_node,
                                                                     tmp_path):
-    from sessgan_gen.token_map import read_token_map
+    from sessgan_core.token_map import read_token_map
 
     # A 0.5 m zig-zag corridor leaves the 0.4 m robot 5 cm per side: no certified route.
     start_simulator(node_processes, '/dogleg', 'dummy_agents:=0', f'bags_root:={tmp_path}')
@@ -268,8 +268,8 @@ def test_collisions_in_an_invalid_test_are_not_recorded_as_failures(node_process
 
 
 def test_a_route_follower_reaches_the_goal_of_a_certified_map(node_processes, ros_node):
+    from sessgan_core.ros_conversion import environment_to_msg
     from sessgan_gen.environment_sampler import EnvironmentSampler
-    from sessgan_gen.ros_conversion import environment_to_msg
 
     start_simulator(node_processes, '/route', 'dummy_agents:=0')
     node_processes.start([sys.executable, str(ROUTE_FOLLOWER), '--ros-args', '-r',

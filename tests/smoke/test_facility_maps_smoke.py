@@ -14,12 +14,12 @@ import torch
 import yaml
 from PIL import Image
 
+from sessgan_core.map_server_io import read_map_server
+from sessgan_core.scenarios import get_scenario
 from sessgan_evolver.campaign_cli import main as campaign_main
 from sessgan_gen import train_cli
 from sessgan_gen.checkpoint import load_checkpoint, save_checkpoint, training_map
 from sessgan_gen.export_cli import main as export_main
-from sessgan_gen.map_server_io import read_map_server
-from sessgan_gen.scenarios import get_scenario
 from tests.unit.gen.test_facility_import import slam_map
 
 pytestmark = pytest.mark.smoke

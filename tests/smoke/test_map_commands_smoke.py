@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.map_server_io import read_map_server, write_map_server
+from sessgan_core.token_map import read_token_map, tokens_to_occupancy
 from sessgan_gen.export_cli import main as export_main
-from sessgan_gen.map_server_io import read_map_server, write_map_server
-from sessgan_gen.token_map import read_token_map, tokens_to_occupancy
 from sessgan_gen.train_cli import main as train_main
-from tests.unit.gen.test_map_server_io import write_negated_facility
+from tests.unit.core.test_map_server_io import write_negated_facility
 
 pytestmark = pytest.mark.smoke
 torch.set_num_threads(1)

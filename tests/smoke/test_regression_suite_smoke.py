@@ -70,9 +70,9 @@ def test_ctrl_c_stops_the_suite_and_reports_what_ran(ros_workspace, tmp_path):
     import sys
     import time
 
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
     from sessgan_evolver.in_process import InProcessEvaluator
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_gen.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'example')
     with InProcessEvaluator('factory', 'nearness_diagram',

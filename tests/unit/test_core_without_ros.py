@@ -11,12 +11,13 @@ import pytest
 pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = {'sessgan_gen': ROOT / 'sessgan_gen', 'sessgan_sim': ROOT / 'sessgan_sim',
+PACKAGES = {'sessgan_core': ROOT / 'sessgan_core', 'sessgan_gen': ROOT / 'sessgan_gen',
+            'sessgan_sim': ROOT / 'sessgan_sim',
             'sessgan_evolver': ROOT / 'sessgan_evolver',
             'sessgan_controllers': ROOT / 'controllers'}
 # Modules that are ROS adapters by design: nodes, CLIs that start nodes, message conversion;
 # and subpackages that are (sessgan_sim.worker: the simulator node's side, in parts).
-ROS_MODULES = {'sessgan_gen.generator_node', 'sessgan_gen.ros_conversion',
+ROS_MODULES = {'sessgan_gen.generator_node', 'sessgan_core.ros_conversion',
                'sessgan_sim.simulator_node', 'sessgan_sim.ros_messages',
                'sessgan_controllers.controller_node', 'sessgan_controllers.messages',
                'sessgan_evolver.campaign_cli', 'sessgan_evolver.replay_cli'}

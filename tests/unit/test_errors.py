@@ -13,10 +13,12 @@ import pytest
 pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = {'sessgan_gen': 'SessganGenError', 'sessgan_sim': 'SessganSimError',
+PACKAGES = {'sessgan_core': 'SessganCoreError', 'sessgan_gen': 'SessganGenError',
+            'sessgan_sim': 'SessganSimError',
             'sessgan_evolver': 'SessganEvolverError',
             'sessgan_controllers': 'SessganControllersError'}
-FOLDERS = {'sessgan_gen': 'sessgan_gen', 'sessgan_sim': 'sessgan_sim',
+FOLDERS = {'sessgan_core': 'sessgan_core', 'sessgan_gen': 'sessgan_gen',
+           'sessgan_sim': 'sessgan_sim',
            'sessgan_evolver': 'sessgan_evolver', 'sessgan_controllers': 'controllers'}
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from sessgan_gen.fleet import fleet_to_json
+from sessgan_core.fleet import fleet_to_json
 from sessgan_sim.bag_recording import (
     BagWriteError,
     episode_bag_directory,

@@ -19,8 +19,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan, Range
 from tf2_msgs.msg import TFMessage
 
-from sessgan_gen.environment import Pose2D
-from sessgan_gen.ros_conversion import occupancy_grid_msg
+from sessgan_core.environment import Pose2D
+from sessgan_core.ros_conversion import occupancy_grid_msg
 from sessgan_sim import cdr
 from sessgan_sim import ros_messages as rm
 from sessgan_sim.bag_recording import BagRecord

@@ -24,12 +24,12 @@ from sessgan_controllers.controller_interface import (
     observed,
 )
 from sessgan_controllers.registry import get_controller
-from sessgan_gen.environment import Environment, Pose2D
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.route_certificate import certify, map_clearance, required_clearances
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import load_example_map, read_token_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.route_certificate import certify, map_clearance, required_clearances
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map, read_token_map
-from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.metrics import EpisodeMetrics, Outcome, is_controller_failure
 

@@ -17,10 +17,10 @@ import pytest
 from sessgan_controllers.controller_interface import Goal, MapData, observed
 from sessgan_controllers.reference_navigator import ReferenceNavigator
 from sessgan_controllers.registry import get_controller
-from sessgan_gen.environment import Environment
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
+from sessgan_core.environment import Environment
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.metrics import EpisodeMetrics, Outcome
 

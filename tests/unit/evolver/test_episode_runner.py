@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.episode_runner import EpisodeRunner, EpisodeRunnerError
 from sessgan_evolver.in_process import NOT_SIMULATED, InProcessEvaluator
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.map_server_io import read_map_server
 from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError
 from sessgan_evolver.campaign_cli import main as campaign_main
 from sessgan_evolver.comparison import CompareConfig, _final_source
@@ -19,7 +20,6 @@ from sessgan_evolver.search_methods import BASELINES, make_baseline
 from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.errors import SamplingRequestError
 from sessgan_gen.export_cli import main as export_main
-from sessgan_gen.map_server_io import read_map_server
 from tests.unit.gen.facility_checkpoint import (
     FACILITY_HEIGHT,
     FACILITY_WIDTH,

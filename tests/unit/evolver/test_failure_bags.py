@@ -10,6 +10,8 @@ import pytest
 import yaml
 from rosbags.typesys import Stores, get_typestore
 
+from sessgan_core.environment import check_environment_id
+from sessgan_core.errors import InvalidEnvironmentError
 from sessgan_evolver.bag_reading import (
     check_bag_complete,
     iter_bag_messages,
@@ -17,8 +19,6 @@ from sessgan_evolver.bag_reading import (
     read_episode_bag,
 )
 from sessgan_evolver.errors import BagReadError
-from sessgan_gen.environment import check_environment_id
-from sessgan_gen.errors import InvalidEnvironmentError
 from sessgan_sim.bag_recording import (
     BagRecord,
     BagWriteError,

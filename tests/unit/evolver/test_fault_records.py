@@ -7,6 +7,8 @@ import json
 import numpy as np
 import pytest
 
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.bag_export import BagExportError, trace_records, write_trace_bag
 from sessgan_evolver.bag_reading import iter_bag_messages, read_bag_topics
 from sessgan_evolver.fault_picture import (
@@ -20,8 +22,6 @@ from sessgan_evolver.fault_records import PICTURE_FILE, confirm_faults
 from sessgan_evolver.faults import FaultRule, group_faults
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.bag_recording import jazzy_typestore
 
 pytestmark = pytest.mark.unit

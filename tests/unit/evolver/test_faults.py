@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.faults import (
     FaultError,
@@ -17,8 +19,6 @@ from sessgan_evolver.faults import (
     is_valid_failure,
     key_of_failure,
 )
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

@@ -3,13 +3,13 @@ with every robot's topics (issue 13)."""
 
 import pytest
 
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.bag_reading import read_bag_topics
 from sessgan_evolver.episode_runner import EpisodeRunner
 from sessgan_evolver.fault_picture import scene_from_bag
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

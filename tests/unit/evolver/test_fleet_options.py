@@ -3,6 +3,10 @@ replayed environment and the fault picture."""
 
 import pytest
 
+from sessgan_core.environment import MAX_ROBOTS
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver import campaign_cli, compare_cli, evaluate_cli, replay_cli
 from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.bag_reading import read_episode_json
@@ -13,10 +17,6 @@ from sessgan_evolver.fault_picture import (
     scene_from_bag,
     write_scene_png,
 )
-from sessgan_gen.environment import MAX_ROBOTS
-from sessgan_gen.fleet import FleetSpec
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

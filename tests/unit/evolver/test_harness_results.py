@@ -136,8 +136,8 @@ def test_a_controller_silent_on_every_try_stops_the_campaign_with_a_resume_hint(
 
 def test_evaluate_and_compare_rerun_harness_outcomes_too(tmp_path):
     """They run their episodes through InProcessEvaluator.run_environment: the same rule."""
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_gen.valid_tests import make_environment
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'example')
     observed = []

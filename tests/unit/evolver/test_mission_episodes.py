@@ -3,13 +3,13 @@ and the trace bag's goals."""
 
 import pytest
 
+from sessgan_core.missions import MissionSpec
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.bag_export import write_trace_bag
 from sessgan_evolver.bag_reading import iter_bag_messages, read_bag_topics
 from sessgan_evolver.episode_runner import EpisodeRunner
 from sessgan_evolver.fault_picture import scene_from_bag, scene_from_run, write_scene_png
-from sessgan_gen.missions import MissionSpec
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 from sessgan_sim.bag_recording import jazzy_typestore
 
 pytestmark = pytest.mark.unit

@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver import suite_cli
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.regression_suite import (
@@ -28,8 +30,6 @@ from sessgan_evolver.regression_suite import (
     suite_from_bag_directory,
     write_suite_file,
 )
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 
@@ -325,14 +325,14 @@ def test_a_campaign_keeps_its_failure_bags_as_a_suite(failure_bag, tmp_path, cap
 @pytest.mark.parametrize('text', ['ci', '000-collision_static-r2c1', '_x', '../..', 'ü b/c',
                                   '.hidden', 'x' * 300, '', 'a..b', 'a...b'])
 def test_record_directory_names_are_ones_a_simulator_accepts(text):
-    from sessgan_gen.environment import check_environment_id
+    from sessgan_core.environment import check_environment_id
 
     check_environment_id(suite_cli.safe_name(text))  # raises for a name it would refuse
 
 
 def test_mission_and_fleet_bags_rerun_exactly_in_process(tmp_path):
-    from sessgan_gen.fleet import FleetSpec
-    from sessgan_gen.missions import MissionSpec
+    from sessgan_core.fleet import FleetSpec
+    from sessgan_core.missions import MissionSpec
 
     cells = load_example_map('factory').cells
     environments = [

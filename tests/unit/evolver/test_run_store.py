@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.atomic_files import atomic_write_bytes
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import RunStoreError
 from sessgan_evolver.fitness import (
@@ -21,7 +22,6 @@ from sessgan_evolver.fitness import (
 from sessgan_evolver.genome import Genome
 from sessgan_evolver.run_store import RunStore
 from sessgan_evolver.seeding import shared_seeds
-from sessgan_gen.atomic_files import atomic_write_bytes
 
 pytestmark = pytest.mark.unit
 

@@ -7,6 +7,9 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import tokens_to_occupancy
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.faults import (
     FaultEvent,
@@ -42,9 +45,6 @@ from sessgan_evolver.search_methods import (
     SearchMethodError,
     make_baseline,
 )
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import tokens_to_occupancy
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 torch.set_num_threads(1)
@@ -184,9 +184,9 @@ def test_mutated_children_keep_their_parents_start_and_goal_on_a_changed_map():
 
 
 def factory_candidate(seed: int = 0) -> CertifiedCandidate:
+    from sessgan_core.token_map import tokens_to_occupancy
     from sessgan_evolver.search_methods import load_pyramid
     from sessgan_gen.sampling import sample_token_maps
-    from sessgan_gen.token_map import tokens_to_occupancy
 
     spec = get_scenario('factory')
     cells = sample_token_maps(load_pyramid('factory', None), [seed])[0]
@@ -220,7 +220,7 @@ def test_archive_knows_a_fault_place_only_with_the_same_surroundings():
 
 
 def make_environment_of(candidate: CertifiedCandidate):
-    from sessgan_gen.environment import Environment, Pose2D
+    from sessgan_core.environment import Environment, Pose2D
 
     placement = candidate.placement
     assert placement.start is not None and placement.goal is not None

@@ -71,9 +71,9 @@ def test_sessgan_runs_the_real_campaign_for_whole_generations(tmp_path):
 
 
 def test_a_search_draws_the_evaluators_fleet_and_runs_a_methods_own_environment():
+    from sessgan_core.fleet import FleetSpec
     from sessgan_evolver.screened_search import ScreenedConfig, ScreenedSearch
     from sessgan_evolver.search_methods import RandomSampling
-    from sessgan_gen.fleet import FleetSpec
 
     log = EpisodeLog()
     with InProcessEvaluator('factory', time_limit=0.5, simulate_invalid=False,

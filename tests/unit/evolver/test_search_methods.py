@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.search_methods import (
     METHODS,
     Evaluated,
@@ -19,7 +20,6 @@ from sessgan_evolver.search_methods import (
 )
 from sessgan_gen.checkpoint import default_checkpoint_path, load_checkpoint
 from sessgan_gen.sampling import sample_token_maps
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 torch.set_num_threads(1)
@@ -50,9 +50,9 @@ def test_random_sampling_is_seeded_and_samples_the_generator():
 def test_generator_methods_serve_race_tracks_as_the_sampler_does():
     # The racetrack scenario's track_cleanup: random sampling and the shipped generator of a
     # fresh-seed evaluation give the maps a campaign's generator node serves.
+    from sessgan_core.token_map import tokens_to_occupancy
     from sessgan_evolver.fresh_seed import PyramidSource
     from sessgan_gen.environment_sampler import EnvironmentSampler
-    from sessgan_gen.token_map import tokens_to_occupancy
 
     proposal = RandomSampling('racetrack', seed=3, batch=1).ask()[0]
     served = EnvironmentSampler().sample([proposal.map_seed], scenario='racetrack')[0]

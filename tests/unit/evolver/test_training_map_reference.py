@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.token_map import load_example_map, occupancy_to_tokens
 from sessgan_evolver.campaign import Campaign, CampaignConfig
 from sessgan_evolver.comparison import CompareConfig, _final_source
 from sessgan_evolver.fresh_seed import AutomatonSource, PyramidSource
@@ -25,7 +26,6 @@ from sessgan_gen.checkpoint import (
 from sessgan_gen.environment_metrics import tile_pattern_kl
 from sessgan_gen.errors import CheckpointError
 from sessgan_gen.report import collect_samples
-from sessgan_gen.token_map import load_example_map, occupancy_to_tokens
 from tests.unit.gen.facility_checkpoint import train_facility_checkpoint
 
 pytestmark = pytest.mark.unit

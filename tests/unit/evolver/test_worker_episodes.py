@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.compare_cli import parse_args
 from sessgan_evolver.errors import ExternalWorkerError
 from sessgan_evolver.faults import FaultRule, key_of_failure
 from sessgan_evolver.in_process import NOT_SIMULATED, InProcessEvaluator
 from sessgan_evolver.worker_episodes import WorkerEvaluator
 from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sessgan_gen.token_map import read_token_map
+from sessgan_core.token_map import read_token_map
 from sessgan_gen.train_cli import main as train_main
 
 FACILITY_HEIGHT, FACILITY_WIDTH = 20, 28

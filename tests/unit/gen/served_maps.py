@@ -3,9 +3,9 @@
 
 from collections.abc import Iterable, Mapping
 
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import occupancy_to_tokens
 from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import occupancy_to_tokens
 
 
 def served_token_maps(seeds: Mapping[str, Iterable[int]]) -> dict[str, list]:

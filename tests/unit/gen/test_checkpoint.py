@@ -8,6 +8,7 @@ import json
 import pytest
 import torch
 
+from sessgan_core.errors import UnknownScenarioError
 from sessgan_gen.checkpoint import (
     CHECKPOINT_DIR,
     checkpoint_bytes,
@@ -17,7 +18,7 @@ from sessgan_gen.checkpoint import (
     metadata_path,
     save_checkpoint,
 )
-from sessgan_gen.errors import CheckpointError, UnknownScenarioError
+from sessgan_gen.errors import CheckpointError
 from sessgan_gen.model import GeneratorPyramid, pyramid_scale_shapes
 
 pytestmark = pytest.mark.unit

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from sessgan_gen.environment import (
+from sessgan_core.environment import (
     MAX_TOTAL_CELLS,
     Environment,
     Pose2D,
     check_grid_size,
 )
+from sessgan_core.errors import InvalidEnvironmentError
 from sessgan_gen.environment_sampler import EnvironmentSampler, SamplingRequestError
-from sessgan_gen.errors import InvalidEnvironmentError
 
 pytestmark = pytest.mark.unit
 torch.set_num_threads(1)

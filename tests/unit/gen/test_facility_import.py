@@ -9,8 +9,8 @@ import pytest
 import yaml
 from PIL import Image
 
-from sessgan_gen.errors import MapFormatError
-from sessgan_gen.map_server_io import import_facility_map, read_map_server
+from sessgan_core.errors import MapFormatError
+from sessgan_core.map_server_io import import_facility_map, read_map_server
 from sessgan_gen.model import pyramid_scale_shapes
 from sessgan_gen.training import check_training_map, long_training_warning
 

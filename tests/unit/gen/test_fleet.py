@@ -10,21 +10,21 @@ import math
 import numpy as np
 import pytest
 
-from sessgan_gen.environment import MAX_ROBOTS, Environment, FleetRobot, Pose2D
-from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.errors import InvalidFleetError
-from sessgan_gen.fleet import (
+from sessgan_core.environment import MAX_ROBOTS, Environment, FleetRobot, Pose2D
+from sessgan_core.errors import InvalidFleetError
+from sessgan_core.fleet import (
     FleetRejection,
     FleetSpec,
     fleet_from_json,
     fleet_to_json,
     separation,
 )
-from sessgan_gen.missions import MissionSpec
-from sessgan_gen.route_certificate import map_clearance, required_clearances
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import certify_fleet, environment_is_feasible, make_environment
+from sessgan_core.missions import MissionSpec
+from sessgan_core.route_certificate import map_clearance, required_clearances
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import certify_fleet, environment_is_feasible, make_environment
+from sessgan_gen.environment_sampler import EnvironmentSampler
 from tests.unit.gen.served_maps import served_token_maps
 
 pytestmark = pytest.mark.unit
@@ -67,7 +67,7 @@ def test_the_sampler_with_one_robot_draws_what_it_draws_without_the_option():
 
 
 def check_fleet(environment: Environment, robots: int) -> None:
-    """Every rule of sessgan_gen.fleet on one feasible fleet environment."""
+    """Every rule of sessgan_core.fleet on one feasible fleet environment."""
     spec = get_scenario(environment.scenario)
     place_need, route_need = required_clearances(spec)
     assert environment.robots == robots and len(environment.fleet) == robots - 1
@@ -195,8 +195,8 @@ def test_fleet_json_round_trip():
 
 def test_environment_message_round_trip():
     pytest.importorskip('sessgan_interfaces')
-    from sessgan_gen.errors import InvalidEnvironmentError
-    from sessgan_gen.ros_conversion import environment_from_msg, environment_to_msg
+    from sessgan_core.errors import InvalidEnvironmentError
+    from sessgan_core.ros_conversion import environment_from_msg, environment_to_msg
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'e', seed=1,
                                    fleet=FleetSpec(3))

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.errors import InvalidEnvironmentError, InvalidMissionError
-from sessgan_gen.missions import MAX_MISSION_STATIONS, MissionSpec
-from sessgan_gen.route_certificate import map_clearance, required_clearances
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import (
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.errors import InvalidEnvironmentError, InvalidMissionError
+from sessgan_core.missions import MAX_MISSION_STATIONS, MissionSpec
+from sessgan_core.route_certificate import map_clearance, required_clearances
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import (
     certify_mission,
     environment_is_feasible,
     make_environment,

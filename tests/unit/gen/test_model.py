@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from sessgan_core.scenarios import get_scenario
 from sessgan_gen.downsampling import downsample_pyramid, one_hot, token_aware_downsample
 from sessgan_gen.errors import CheckpointError
 from sessgan_gen.model import (
@@ -15,7 +16,6 @@ from sessgan_gen.model import (
     receptive_field,
     scaled_shapes,
 )
-from sessgan_gen.scenarios import get_scenario
 
 pytestmark = pytest.mark.unit
 torch.set_num_threads(1)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.scenarios import get_scenario
 from sessgan_gen.checkpoint import save_checkpoint
 from sessgan_gen.model import GeneratorPyramid, pyramid_scale_shapes
 from sessgan_gen.report import (
@@ -22,7 +23,6 @@ from sessgan_gen.report import (
     write_report,
 )
 from sessgan_gen.report_cli import main
-from sessgan_gen.scenarios import get_scenario
 
 pytestmark = pytest.mark.unit
 torch.set_num_threads(1)

@@ -5,9 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sessgan_gen.environment_sampler import EnvironmentSampler
-from sessgan_gen.grid_search import bfs, flat_grid
-from sessgan_gen.route_certificate import (
+from sessgan_core.grid_search import bfs, flat_grid
+from sessgan_core.route_certificate import (
     bottleneck_clearance,
     certificate_subdivision,
     clearance_field,
@@ -16,9 +15,10 @@ from sessgan_gen.route_certificate import (
     required_clearances,
     track_length_steps,
 )
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import tokens_to_occupancy
-from sessgan_gen.valid_tests import certify_environment, make_environment
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import tokens_to_occupancy
+from sessgan_core.valid_tests import certify_environment, make_environment
+from sessgan_gen.environment_sampler import EnvironmentSampler
 
 pytestmark = pytest.mark.unit
 

@@ -5,10 +5,11 @@ import dataclasses
 import numpy as np
 import pytest
 
+from sessgan_core.scenarios import TrackCleanup, get_scenario, register_scenario
+from sessgan_core.token_map import load_example_map, tokens_to_occupancy
+from sessgan_core.valid_tests import reachable_regions
 from sessgan_gen.environment_sampler import EnvironmentSampler
 from sessgan_gen.sampling import sample_token_maps
-from sessgan_gen.scenarios import TrackCleanup, get_scenario, register_scenario
-from sessgan_gen.token_map import load_example_map, tokens_to_occupancy
 from sessgan_gen.track_cleanup import (
     bridge_gaps,
     clean_generated_maps,
@@ -21,7 +22,6 @@ from sessgan_gen.track_cleanup import (
     remove_spurs,
 )
 from sessgan_gen.track_realism import count_dead_ends, skeleton, track_clearance
-from sessgan_gen.valid_tests import reachable_regions
 
 pytestmark = pytest.mark.unit
 

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from sessgan_gen.scenarios import get_scenario
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.valid_tests import make_environment
 from sessgan_gen.track_realism import (
     count_dead_ends,
     measure_environment,
@@ -14,7 +15,6 @@ from sessgan_gen.track_realism import (
     skeleton,
     track_clearance,
 )
-from sessgan_gen.valid_tests import make_environment
 
 pytestmark = pytest.mark.unit
 

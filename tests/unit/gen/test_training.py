@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.config_cli import build_parser, parse_config
+from sessgan_core.scenarios import get_scenario
 from sessgan_gen.checkpoint import checkpoint_bytes, load_training_checkpoint, save_checkpoint
-from sessgan_gen.config_cli import build_parser, parse_config
-from sessgan_gen.scenarios import get_scenario
 from sessgan_gen.seeding import seed_everything
 from sessgan_gen.training import (
     TrainConfig,

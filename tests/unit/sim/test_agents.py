@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_sim.agents import AgentConfig, DummyAgents, PatrolPath
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.grid_search import distance_field
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.grid_search import distance_field
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_sim.agents import AgentConfig
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError, InvalidConfigError

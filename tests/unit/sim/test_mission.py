@@ -3,7 +3,7 @@ and the leg an episode failed on."""
 
 import pytest
 
-from sessgan_gen.environment import Pose2D
+from sessgan_core.environment import Pose2D
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import STANDING_SPEED, Outcome
 from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
@@ -98,10 +98,10 @@ def test_a_mission_needs_a_waypoint_and_a_sane_dwell():
 
 
 def test_a_mission_gets_the_scenario_time_limit_per_leg_and_its_dwells():
-    from sessgan_gen.missions import MissionSpec
-    from sessgan_gen.scenarios import get_scenario
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_gen.valid_tests import make_environment
+    from sessgan_core.missions import MissionSpec
+    from sessgan_core.scenarios import get_scenario
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
     from sessgan_sim.episode import ROUTE_TIME_FACTOR, Episode, EpisodeConfig
 
     cells = load_example_map('factory').cells

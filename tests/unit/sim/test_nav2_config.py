@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from sessgan_gen.scenarios import get_scenario
+from sessgan_core.scenarios import get_scenario
 from sessgan_sim.robots import DiffDriveParams
 from sessgan_sim.simulator_settings import GoalInterface, SimulatorSettings, StepMode
 

@@ -87,9 +87,9 @@ def test_a_fleet_succeeds_when_every_robot_does():
 
 
 def test_a_real_episode_has_consistent_navigation_metrics():
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
     from sessgan_evolver.in_process import InProcessEvaluator
-    from sessgan_gen.token_map import load_example_map
-    from sessgan_gen.valid_tests import make_environment
 
     environment = make_environment(load_example_map('factory').cells, 'factory', 'example')
     with InProcessEvaluator('factory', 'reference_navigator') as evaluator:

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sessgan_gen.environment import Environment, Pose2D
+from sessgan_core.environment import Environment, Pose2D
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import Outcome

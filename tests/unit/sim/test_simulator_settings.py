@@ -99,7 +99,7 @@ def test_non_default_settings_reach_the_episode_config():
 
 def recorded_episode(settings: SimulatorSettings, scenario: str = 'factory') -> dict:
     """What a failure bag's episode.json holds about its simulator."""
-    from sessgan_gen.scenarios import get_scenario
+    from sessgan_core.scenarios import get_scenario
 
     config = settings.episode_config(seed=11).resolved(get_scenario(scenario))
     return {'scenario': scenario, 'robot': config.robot, 'time_limit': config.time_limit,

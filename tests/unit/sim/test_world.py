@@ -6,9 +6,9 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import make_environment
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import make_environment
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError, WorldError
 from sessgan_sim.sensors import LidarConfig, RayCaster

@@ -1,17 +1,17 @@
 """Fleets: more robots under test in one world, each with its own start, goal and route.
 
 Robot ``r0`` drives the environment's own start and goal, drawn and certified by
-:func:`sessgan_gen.route_certificate.place_start_goal`; robots ``r1``, ``r2``, ... are
+:func:`sessgan_core.route_certificate.place_start_goal`; robots ``r1``, ``r2``, ... are
 drawn by :func:`place_fleet` from the same map seed on a random stream of their own, so a
 one-robot map (:class:`FleetSpec` with ``robots=1``, the default) is exactly the plain
 episode's. Every fleet robot follows the rules of start and goal (module
-:mod:`sessgan_gen.route_certificate`), and more:
+:mod:`sessgan_core.route_certificate`), and more:
 
 * Its start and goal have the clearance start and goal need (``robot_radius +
   clearance_margin``), and lie at least :func:`separation` (two footprints with their
   margins) from every other robot's start and goal: no robot starts inside another or
   parks on another's goal.
-* Its goal is far along its route (at least :func:`~sessgan_gen.route_certificate.min_route_steps`
+* Its goal is far along its route (at least :func:`~sessgan_core.route_certificate.min_route_steps`
   and at least half as far as the farthest clear point); both yaws point along the route.
 * A robot that arrives stays parked on its goal, so every robot's route (``r0``'s included)
   is certified with every *other* robot parked on its goal, a disc of the robot's radius.
@@ -30,10 +30,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from sessgan_gen.environment import MAX_ROBOTS, FleetRobot, Pose2D
-from sessgan_gen.errors import InvalidFleetError
-from sessgan_gen.grid_search import bfs, flat_grid, to_cell, to_flat
-from sessgan_gen.route_certificate import (
+from sessgan_core.environment import MAX_ROBOTS, FleetRobot, Pose2D
+from sessgan_core.errors import InvalidFleetError
+from sessgan_core.grid_search import bfs, flat_grid, to_cell, to_flat
+from sessgan_core.route_certificate import (
     HEADING_LOOKAHEAD_M,
     START_TRIES,
     CertificateGrid,
@@ -44,7 +44,7 @@ from sessgan_gen.route_certificate import (
     min_route_steps,
     required_clearances,
 )
-from sessgan_gen.scenarios import Scenario
+from sessgan_core.scenarios import Scenario
 
 FLEET_SEED_KEY = 0xF1EE
 """Spawn key of the fleet's random stream (start, goal and stations keep theirs)."""
@@ -154,7 +154,7 @@ def _route_yaws(grid: CertificateGrid, path: list[Cell]) -> tuple[float, float]:
 def place_fleet(placement: Placement, spec: Scenario, seed: int,
                 fleet: FleetSpec | None = None) -> FleetPlacement:
     """Draw robots r1..r(N-1) on the map of robot r0's certified ``placement`` (from
-    :func:`~sessgan_gen.route_certificate.place_start_goal`) from ``seed``, by the rules in
+    :func:`~sessgan_core.route_certificate.place_start_goal`) from ``seed``, by the rules in
     the module docstring. Deterministic per (map, seed, robots); r0 is never moved."""
     fleet = (fleet or FleetSpec()).validate()
     if placement.start is None or placement.goal is None or placement.certificate is None:

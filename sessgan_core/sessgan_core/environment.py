@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sessgan_gen.errors import InvalidEnvironmentError
-from sessgan_gen.scenarios import OCCUPANCY_VALUES, get_scenario
-from sessgan_gen.validation import require_non_negative, require_positive
+from sessgan_core.errors import InvalidEnvironmentError
+from sessgan_core.scenarios import OCCUPANCY_VALUES, get_scenario
+from sessgan_core.validation import require_non_negative, require_positive
 
 MAX_CELLS_PER_SIDE = 4096
 """Grids larger than this per side are rejected as absurd (memory and build time)."""
@@ -28,7 +28,7 @@ allowed, took 262 s and 3.3 GB to build); generating a 1024 x 1024 map took 6.4 
 0.7 GB."""
 
 MAX_STATIONS = 16
-"""Most mission stations an Environment may hold (sessgan_gen.missions.MAX_MISSION_STATIONS)."""
+"""Most mission stations an Environment may hold (sessgan_core.missions.MAX_MISSION_STATIONS)."""
 
 MAX_ROBOTS = 8
 """Most robots under test in one fleet episode (each adds a controller and its topics)."""
@@ -111,7 +111,8 @@ class Environment:
     generation: int = -1
     member: int = -1
     feasible: bool = True
-    """A valid test: start and goal joined by a certified route (sessgan_gen.route_certificate)."""
+    """A valid test: start and goal joined by a certified route
+    (sessgan_core.route_certificate)."""
     route_length: float = 0.0
     """m, length of the certified route (0 when not a valid test or not known)."""
     route_min_clearance: float = 0.0
@@ -119,12 +120,12 @@ class Environment:
     extra: dict = field(default_factory=dict)
     stations: tuple[Pose2D, ...] = ()
     """Mission stations (pick-up, place, ...) visited in order before ``goal``, which is then
-    home; () for a plain start -> goal episode (sessgan_gen.missions)."""
+    home; () for a plain start -> goal episode (sessgan_core.missions)."""
     dwell_time: float = 0.0
     """Sim seconds the robot stands still at each station before its next goal goes out."""
     fleet: tuple[FleetRobot, ...] = ()
     """More robots under test in the same world, each with its own start and goal (a fleet
-    episode); () for one robot under test (sessgan_gen.fleet)."""
+    episode); () for one robot under test (sessgan_core.fleet)."""
 
     @property
     def waypoints(self) -> tuple[Pose2D, ...]:

@@ -6,7 +6,7 @@ import io
 
 import pytest
 
-from sessgan_gen.progress import ProgressPrinter, format_duration
+from sessgan_core.progress import ProgressPrinter, format_duration
 
 pytestmark = pytest.mark.unit
 

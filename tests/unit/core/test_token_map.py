@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sessgan_gen.errors import MapFormatError, UnknownScenarioError
-from sessgan_gen.scenarios import SCENARIOS, get_scenario
-from sessgan_gen.token_map import (
+from sessgan_core.errors import MapFormatError, UnknownScenarioError
+from sessgan_core.scenarios import SCENARIOS, get_scenario
+from sessgan_core.token_map import (
     EXAMPLE_MAP_DIR,
     TokenMap,
     format_token_map,

@@ -5,9 +5,9 @@ certificate themselves: test_route_certificate.py)."""
 import numpy as np
 import pytest
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.token_map import parse_token_map
-from sessgan_gen.valid_tests import (
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.token_map import parse_token_map
+from sessgan_core.valid_tests import (
     environment_is_feasible,
     footprint_free_mask,
     inflate,
@@ -185,7 +185,7 @@ def test_a_short_route_is_not_a_valid_test():
 
 
 def test_descend_follows_a_distance_field_to_its_origin():
-    from sessgan_gen.grid_search import descend, distance_field
+    from sessgan_core.grid_search import descend, distance_field
 
     mask = free("""
         .....

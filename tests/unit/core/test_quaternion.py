@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sessgan_gen.quaternion import (
+from sessgan_core.quaternion import (
     quaternion_from_yaw,
     quaternion_from_yaw_pitch,
     yaw_from_quaternion,
@@ -57,7 +57,8 @@ def test_yaw_pitch_points_a_down_looking_sensor_down(yaw):
 
 def test_no_package_has_its_own_copy_of_the_conversion():
     copies = re.compile(r'atan2\(2\.0 \* \(|sin\(\w+ / 2(\.0)?\)')
-    found = [str(path.relative_to(ROOT)) for folder in ('sessgan_gen', 'sessgan_sim',
-                                                        'sessgan_evolver', 'controllers')
+    found = [str(path.relative_to(ROOT)) for folder in ('sessgan_core', 'sessgan_gen',
+                                                        'sessgan_sim', 'sessgan_evolver',
+                                                        'controllers')
              for path in (ROOT / folder).rglob('*.py') if copies.search(path.read_text())]
-    assert found == ['sessgan_gen/sessgan_gen/quaternion.py']
+    assert found == ['sessgan_core/sessgan_core/quaternion.py']

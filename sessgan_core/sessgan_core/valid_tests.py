@@ -11,9 +11,9 @@ Conventions:
   blocked cell *square* comes closer than the robot's radius to the cell's centre, and the
   grid's outside counts as blocked. Agents use it to patrol.
 * **Valid tests** (:func:`make_environment`): start, goal and the route certificate come from
-  :mod:`sessgan_gen.route_certificate` (start and goal with clearance, a route that keeps a
+  :mod:`sessgan_core.route_certificate` (start and goal with clearance, a route that keeps a
   safety margin, far apart along it).
-* **Connectivity**: 4-connected moves only (sessgan_gen.grid_search).
+* **Connectivity**: 4-connected moves only (sessgan_core.grid_search).
 """
 
 from __future__ import annotations
@@ -24,19 +24,19 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sessgan_gen.environment import Environment, FleetRobot, Pose2D
-from sessgan_gen.fleet import FleetSpec, certify_robots, place_fleet
-from sessgan_gen.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
-from sessgan_gen.missions import MissionSpec, certify_legs, place_mission
-from sessgan_gen.route_certificate import (
+from sessgan_core.environment import Environment, FleetRobot, Pose2D
+from sessgan_core.fleet import FleetSpec, certify_robots, place_fleet
+from sessgan_core.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
+from sessgan_core.missions import MissionSpec, certify_legs, place_mission
+from sessgan_core.route_certificate import (
     RouteCertificate,
     certify,
     map_clearance,
     required_clearances,
 )
-from sessgan_gen.scenarios import Scenario
-from sessgan_gen.token_map import ScenarioLike, check_cells, resolve_scenario, tokens_to_occupancy
-from sessgan_gen.validation import require_non_negative
+from sessgan_core.scenarios import Scenario
+from sessgan_core.token_map import ScenarioLike, check_cells, resolve_scenario, tokens_to_occupancy
+from sessgan_core.validation import require_non_negative
 
 Cell = tuple[int, int]
 """A grid cell (row, col)."""
@@ -185,7 +185,7 @@ def certify_mission(environment: Environment) -> list[RouteCertificate | None]:
 
 def certify_fleet(environment: Environment) -> list[RouteCertificate | None]:
     """The certificate of every robot's route, r0 (start -> goal) first, each with the other
-    robots parked on their goals (sessgan_gen.fleet); None for a robot without one.
+    robots parked on their goals (sessgan_core.fleet); None for a robot without one.
     Recomputed from the grid like :func:`certify_environment`."""
     robots = [((environment.start.x, environment.start.y),
                (environment.goal.x, environment.goal.y))]
@@ -241,18 +241,18 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
 
     Resolution is the scenario's cell size (metres per cell) and the origin (0, 0), so cell
     (row, col) spans x in [col*res, (col+1)*res). Start and goal are drawn from ``seed`` by
-    :func:`sessgan_gen.route_certificate.place_start_goal`; ``feasible`` (a valid test) is
+    :func:`sessgan_core.route_certificate.place_start_goal`; ``feasible`` (a valid test) is
     True when they exist, with ``route_length`` and ``route_min_clearance`` (the bottleneck
     clearance) in metres. Otherwise start and goal both sit at :func:`most_open_cell`, yaw 0,
     and ``extra['rejection']`` says why. ``extra`` also holds the start and goal clearances.
 
-    ``mission`` (sessgan_gen.missions) asks for stations before home: they are drawn from
+    ``mission`` (sessgan_core.missions) asks for stations before home: they are drawn from
     the seed too, every leg certified; ``route_length`` is then the legs' total, and
     ``route_min_clearance`` the tightest leg's (``extra['leg_route_lengths']`` per leg). An
     infeasible mission keeps no stations. Without stations the Environment is the plain
     episode's, exactly.
 
-    ``fleet`` (sessgan_gen.fleet) asks for more robots under test: robots r1, r2, ... are
+    ``fleet`` (sessgan_core.fleet) asks for more robots under test: robots r1, r2, ... are
     drawn from the seed around the plain episode's start and goal (robot r0's), every route
     certified with the other robots parked on their goals; ``route_length`` is then r0's
     route among them and ``route_min_clearance`` the tightest robot's. A map that cannot

@@ -43,11 +43,11 @@ import numpy as np
 import yaml
 from PIL import Image
 
-from sessgan_gen.atomic_files import atomic_write_bytes
-from sessgan_gen.environment import MAX_CELLS_PER_SIDE, Environment
-from sessgan_gen.errors import MapFormatError
-from sessgan_gen.scenarios import BLOCKED, FREE
-from sessgan_gen.token_map import (
+from sessgan_core.atomic_files import atomic_write_bytes
+from sessgan_core.environment import MAX_CELLS_PER_SIDE, Environment
+from sessgan_core.errors import MapFormatError
+from sessgan_core.scenarios import BLOCKED, FREE
+from sessgan_core.token_map import (
     UNKNOWN,
     ScenarioLike,
     TokenMap,
@@ -56,7 +56,7 @@ from sessgan_gen.token_map import (
     resolve_scenario,
     tokens_to_occupancy,
 )
-from sessgan_gen.validation import require_positive
+from sessgan_core.validation import require_positive
 
 DEFAULT_OCCUPIED_THRESH = 0.65
 DEFAULT_FREE_THRESH = 0.25

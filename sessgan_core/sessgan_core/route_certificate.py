@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sessgan_gen.grid_search import (
+from sessgan_core.grid_search import (
     FlatGrid,
     bfs,
     flat_grid,
@@ -43,7 +43,7 @@ from sessgan_gen.grid_search import (
     to_flat,
     walk_back,
 )
-from sessgan_gen.scenarios import Scenario
+from sessgan_core.scenarios import Scenario
 
 Cell = tuple[int, int]
 """A certificate-grid cell (row, col); row 0 at the map origin (lowest y)."""

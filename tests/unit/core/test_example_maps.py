@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from sessgan_gen.scenarios import get_scenario
-from sessgan_gen.token_map import load_example_map
-from sessgan_gen.valid_tests import (
+from sessgan_core.scenarios import get_scenario
+from sessgan_core.token_map import load_example_map
+from sessgan_core.valid_tests import (
     certify_environment,
     footprint_free_mask,
     inflate,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sessgan_gen.errors import UnknownScenarioError
+from sessgan_core.errors import UnknownScenarioError
 
 # Common occupancy encoding (nav_msgs/OccupancyGrid values), shared by all scenarios.
 FREE = 0
@@ -90,7 +90,7 @@ class Scenario:
     """Default number of moving dummy agents."""
     clearance_margin: float = 0.25
     """m beyond the robot's radius that start and goal keep from every obstacle: room to
-    turn and to leave (sessgan_gen.route_certificate)."""
+    turn and to leave (sessgan_core.route_certificate)."""
     route_margin: float = 0.1
     """m beyond the robot's radius that the certified route keeps from every obstacle (Nav2's
     inscribed radius plus an inflation margin); at most ``clearance_margin``."""
@@ -99,7 +99,7 @@ class Scenario:
     goal_track_fraction: float = 0.0
     """The goal lies at least this fraction of the track's length along the route from the
     start, the track's length being the longest certified route between two clear points of
-    the start's region (sessgan_gen.route_certificate.track_length_steps); 0: off (the
+    the start's region (sessgan_core.route_certificate.track_length_steps); 0: off (the
     goal is only at least half the map's shorter side and half the farthest clear point
     away)."""
 

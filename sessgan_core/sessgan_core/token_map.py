@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sessgan_gen.atomic_files import atomic_write_bytes
-from sessgan_gen.errors import MapFormatError, UnknownScenarioError
-from sessgan_gen.scenarios import BLOCKED, FREE, LOW_OBSTACLE, SCENARIOS, Scenario, get_scenario
+from sessgan_core.atomic_files import atomic_write_bytes
+from sessgan_core.errors import MapFormatError, UnknownScenarioError
+from sessgan_core.scenarios import BLOCKED, FREE, LOW_OBSTACLE, SCENARIOS, Scenario, get_scenario
 
 EXAMPLE_MAP_DIR = Path(__file__).parent / 'data' / 'maps'
 """Folder of the shipped example maps, one ``<scenario>.txt`` per scenario."""

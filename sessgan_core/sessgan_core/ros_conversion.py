@@ -6,10 +6,10 @@ import numpy as np
 from geometry_msgs.msg import Pose
 from nav_msgs.msg import OccupancyGrid
 
-from sessgan_gen.environment import Environment, FleetRobot, Pose2D, check_grid_size
-from sessgan_gen.errors import InvalidEnvironmentError
-from sessgan_gen.quaternion import quaternion_from_yaw, yaw_from_quaternion
-from sessgan_gen.validation import require_positive
+from sessgan_core.environment import Environment, FleetRobot, Pose2D, check_grid_size
+from sessgan_core.errors import InvalidEnvironmentError
+from sessgan_core.quaternion import quaternion_from_yaw, yaw_from_quaternion
+from sessgan_core.validation import require_positive
 from sessgan_interfaces.msg import Environment as EnvironmentMsg
 
 

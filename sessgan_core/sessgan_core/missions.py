@@ -4,18 +4,18 @@ A mission is the sequence of waypoints an episode's robot visits: ``stations`` (
 place, ...) and then home, the start pose it left from, with a dwell (loading) of
 ``dwell_time`` seconds standing still at each station. A plain start -> goal episode is the
 one-leg mission with no stations: :class:`MissionSpec` with ``stations=0``, the default, draws
-exactly the start and goal :func:`sessgan_gen.route_certificate.place_start_goal` draws.
+exactly the start and goal :func:`sessgan_core.route_certificate.place_start_goal` draws.
 
-Stations follow the rules of start and goal (module :mod:`sessgan_gen.route_certificate`):
+Stations follow the rules of start and goal (module :mod:`sessgan_core.route_certificate`):
 
 * The first station is the goal ``place_start_goal`` draws (far from the start along the
   route), so the first leg of a mission is the plain episode of the same map and seed.
 * Every further station is a point with the clearance start and goal need
   (``robot_radius + clearance_margin``), drawn from the seed on its own random stream, at
-  least :func:`~sessgan_gen.route_certificate.min_route_steps` along the route from the
+  least :func:`~sessgan_core.route_certificate.min_route_steps` along the route from the
   previous station and at least half as far as the farthest such point.
 * Home is the start's position; every yaw points along the route arriving there.
-* Every leg is certified on its own (:func:`~sessgan_gen.route_certificate.certify`): a
+* Every leg is certified on its own (:func:`~sessgan_core.route_certificate.certify`): a
   mission is a valid test only when every leg is.
 """
 
@@ -27,10 +27,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sessgan_gen.environment import MAX_STATIONS
-from sessgan_gen.errors import InvalidMissionError
-from sessgan_gen.grid_search import bfs, flat_grid, to_cell, to_flat
-from sessgan_gen.route_certificate import (
+from sessgan_core.environment import MAX_STATIONS
+from sessgan_core.errors import InvalidMissionError
+from sessgan_core.grid_search import bfs, flat_grid, to_cell, to_flat
+from sessgan_core.route_certificate import (
     HEADING_LOOKAHEAD_M,
     CertificateGrid,
     Placement,
@@ -41,8 +41,8 @@ from sessgan_gen.route_certificate import (
     place_start_goal,
     required_clearances,
 )
-from sessgan_gen.scenarios import Scenario
-from sessgan_gen.validation import require_non_negative
+from sessgan_core.scenarios import Scenario
+from sessgan_core.validation import require_non_negative
 
 MAX_MISSION_STATIONS = MAX_STATIONS
 """Most stations a mission may have before home (each adds a leg and a dwell)."""
@@ -157,7 +157,7 @@ def place_mission(occupancy: np.ndarray, resolution: float, origin: tuple[float,
                   ) -> MissionPlacement:
     """Draw a mission's start, stations and home from ``seed`` and certify every leg (the
     rules are in the module docstring). Deterministic per (map, seed, stations); with no
-    stations, exactly :func:`~sessgan_gen.route_certificate.place_start_goal`'s episode."""
+    stations, exactly :func:`~sessgan_core.route_certificate.place_start_goal`'s episode."""
     mission = (mission or MissionSpec()).validate()
     placement = place_start_goal(occupancy, resolution, origin, spec, seed)
     if placement.start is None or placement.goal is None or placement.certificate is None:

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import yaml
 
-from sessgan_gen.environment import Environment, Pose2D
-from sessgan_gen.errors import MapFormatError
-from sessgan_gen.map_server_io import (
+from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.errors import MapFormatError
+from sessgan_core.map_server_io import (
     export_environment,
     export_token_map,
     import_map_server,
@@ -17,7 +17,7 @@ from sessgan_gen.map_server_io import (
     resample_tokens,
     write_map_server,
 )
-from sessgan_gen.token_map import TokenMap
+from sessgan_core.token_map import TokenMap
 
 pytestmark = pytest.mark.unit
 
@@ -273,7 +273,7 @@ def write_negated_facility(directory, origin=(-3.2, 1.5, 0.0)):
 
 
 def test_map_server_map_imports_at_the_scenarios_cell_size(tmp_path):
-    from sessgan_gen.map_server_io import cells_at_cell_size, import_map_server_for_scenario
+    from sessgan_core.map_server_io import cells_at_cell_size, import_map_server_for_scenario
 
     yaml_path, expected = write_negated_facility(tmp_path)
     loaded = read_map_server(yaml_path)
@@ -287,7 +287,7 @@ def test_map_server_map_imports_at_the_scenarios_cell_size(tmp_path):
 
 
 def test_a_map_too_large_for_the_cell_size_is_refused(tmp_path):
-    from sessgan_gen.map_server_io import cells_at_cell_size, import_map_server_for_scenario
+    from sessgan_core.map_server_io import cells_at_cell_size, import_map_server_for_scenario
 
     write_pgm_p5(tmp_path / 'map.pgm', np.zeros((4, 4), dtype=np.uint8))
     write_yaml(tmp_path / 'map.yaml', resolution=1000.0)

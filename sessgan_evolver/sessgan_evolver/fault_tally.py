@@ -31,6 +31,7 @@ from sessgan_evolver.faults import (
     first_fault_event,
     is_valid_failure,
     key_of_failure,
+    place_context,
 )
 from sessgan_sim.bag_recording import jazzy_typestore
 
@@ -101,21 +102,51 @@ class FaultTracker:
 
         evaluator.observer = observe
 
+    def key_of(self, environment: Environment, metrics: Mapping[str, Any]) -> FaultKey | None:
+        """The fault key of a valid failure, from its trace (in process) or its failure bag;
+        None for an episode that is no valid failure or when neither says where it happened."""
+        traced = self._traced.pop(environment.id, None)
+        if not is_valid_failure(metrics):
+            return None
+        if traced is not None:
+            return traced
+        bag = str(metrics.get('bag_path') or '')
+        if not bag or not Path(bag).exists():
+            return None
+        try:
+            return key_from_bag(environment, bag, self.rule)
+        except (BagReadError, FaultError):
+            return None
+
     def label_of(self, environment: Environment, metrics: Mapping[str, Any]) -> str:
         """'' for an episode that is no valid failure, else its fault label (UNPLACED when
         neither a trace nor a readable failure bag says where it happened)."""
-        traced = self._traced.pop(environment.id, None)
-        if not is_valid_failure(metrics):
-            return ''
-        if traced is not None:
-            return traced.label
-        bag = str(metrics.get('bag_path') or '')
-        if not bag or not Path(bag).exists():
-            return UNPLACED
-        try:
-            return key_from_bag(environment, bag, self.rule).label
-        except (BagReadError, FaultError):
-            return UNPLACED
+        return fault_label(metrics, self.key_of(environment, metrics))
+
+
+def fault_label(metrics: Mapping[str, Any], key: FaultKey | None) -> str:
+    """The ``fault`` column of an episode: '' for no valid failure, else its key's label or
+    UNPLACED."""
+    if not is_valid_failure(metrics):
+        return ''
+    return key.label if key is not None else UNPLACED
+
+
+def key_from_label(label: str, occupancy: np.ndarray, rule: FaultRule) -> FaultKey | None:
+    """The fault key an episode row's ``fault`` label names, its context digest taken again
+    from the episode's map (the label keeps 8 characters of it); None for '' and UNPLACED."""
+    if label in ('', UNPLACED):
+        return None
+    kind, _, rest = label.rpartition('-r')
+    place, _, prefix = rest.partition('-')
+    row, _, col = place.partition('c')
+    if not (kind and row.isdigit() and col.isdigit() and prefix):
+        raise FaultError(f'not a fault label: {label!r}')
+    context = place_context(occupancy, int(row), int(col), rule)
+    if not context.startswith(prefix):
+        raise FaultError(f'fault label {label!r} does not match its map around '
+                         f'r{row}c{col}')
+    return FaultKey(kind, int(row), int(col), context)
 
 
 @dataclass

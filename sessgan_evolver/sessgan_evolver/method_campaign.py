@@ -45,8 +45,15 @@ from sessgan_evolver.campaign import (
     Evaluator,
     fmt,
 )
-from sessgan_evolver.errors import CampaignError, SearchMethodError
-from sessgan_evolver.fault_tally import FaultTally, FaultTracker, map_digest
+from sessgan_evolver.errors import CampaignError, FaultError, SearchMethodError
+from sessgan_evolver.fault_tally import (
+    FaultTally,
+    FaultTracker,
+    fault_label,
+    key_from_label,
+    map_digest,
+)
+from sessgan_evolver.faults import FaultRule
 from sessgan_evolver.fitness import generation_summary, member_fitness
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
@@ -135,7 +142,13 @@ class MethodCampaign:
                         'by other software or settings and cannot be resumed exactly')
                 environment = self.environment_of(proposal, str(row['environment_id']), batch,
                                                   member)
-                results.append(Evaluated(proposal, environment, row))
+                try:
+                    key = key_from_label(str(row.get('fault') or ''), environment.occupancy,
+                                         FaultRule())
+                except FaultError as err:
+                    raise CampaignError(f'batch {batch} episode {member}: {err}; cannot resume '
+                                        'exactly') from err
+                results.append(Evaluated(proposal, environment, row, fault_key=key))
             if len(recorded) == len(proposals):
                 self.method.tell(results)
         return complete, generations[0].get('tpkl_reference') if generations else None
@@ -206,7 +219,8 @@ class MethodCampaign:
             told, breakdowns = [], []
             for job, proposal, tpkl in zip(jobs, cut, tpkls):
                 metrics = results[job.key]
-                fault = tracker.label_of(job.environment, metrics)
+                key = tracker.key_of(job.environment, metrics)
+                fault = fault_label(metrics, key)
                 tally.add(fault)
                 self.store.append_episode({
                     'generation': batch, 'member': job.member, 'map': 0,
@@ -214,7 +228,7 @@ class MethodCampaign:
                     'map_seed': job.environment.seed, 'sim_seed': job.seed,
                     'map_digest': map_digest(proposal.cells), 'origin': proposal.origin,
                     'tpkl': tpkl, **metrics, 'fault': fault})
-                told.append(Evaluated(proposal, job.environment, metrics))
+                told.append(Evaluated(proposal, job.environment, metrics, fault_key=key))
                 breakdowns.append(member_fitness([metrics], tpkl, tpkl_reference, None,
                                                  config.fitness))
             tell_start = time.perf_counter()

@@ -445,6 +445,10 @@ class ScreenedSearch:
         self.cheap_wall_time += time.perf_counter() - started
 
     def _fault_key(self, result: Evaluated) -> FaultKey | None:
+        """The key the driver knows (read from a failure bag), else the trace's; None for a
+        valid failure that neither places (it then makes no parent and earns no credit)."""
+        if result.fault_key is not None or result.trace is None:
+            return result.fault_key
         try:
             return key_of_failure(result.environment, result.metrics, result.trace,
                                   self.config.rule)

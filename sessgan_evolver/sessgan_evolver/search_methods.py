@@ -43,6 +43,7 @@ from sessgan_evolver.cellular_automaton import (
 )
 from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.errors import SearchMethodError
+from sessgan_evolver.faults import FaultKey
 from sessgan_evolver.fitness import FitnessConfig, member_fitness
 from sessgan_evolver.map_operators import (
     NoiseMaps,
@@ -103,6 +104,9 @@ class Evaluated:
     metrics: Mapping[str, Any]
     trace: EpisodeTrace | None = None
     """The episode's trace (where a failure happened), when the driver kept one."""
+    fault_key: FaultKey | None = None
+    """The fault key of a valid failure when the driver knows it without a trace (a campaign
+    reads it from the failure bag of an episode that ran on a worker)."""
 
 
 class SearchMethod(Protocol):

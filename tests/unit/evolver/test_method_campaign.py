@@ -23,9 +23,15 @@ from sessgan_evolver.campaign_cli import (
     report_result,
 )
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
-from sessgan_evolver.errors import FreshSeedError
-from sessgan_evolver.fault_tally import UNPLACED, FaultTally, FaultTracker, key_from_bag
-from sessgan_evolver.faults import FaultRule, key_of_failure
+from sessgan_evolver.errors import FaultError, FreshSeedError
+from sessgan_evolver.fault_tally import (
+    UNPLACED,
+    FaultTally,
+    FaultTracker,
+    key_from_bag,
+    key_from_label,
+)
+from sessgan_evolver.faults import FaultKey, FaultRule, key_of_failure, place_context
 from sessgan_evolver.fresh_seed import campaign_sources, used_seeds
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.method_campaign import MethodCampaign
@@ -244,3 +250,38 @@ def test_the_fault_key_of_a_failure_bag_is_the_key_of_its_trace(tmp_path, time_l
             tracker = FaultTracker(rule)  # as the campaign over ROS: no trace, the bag
             assert tracker.label_of(environment, run.metrics) == key.label
     assert found == kinds
+
+
+def test_the_screened_search_learns_from_a_campaign_s_faults_and_resumes_exactly(tmp_path):
+    """A campaign tells the search each failure's fault key (from the trace in process, from
+    the failure bag over ROS; here the scripted trace), so the search makes children of its
+    failing tests; a resumed run rebuilds the keys from the recorded labels."""
+    config = method_config(method='screened', budget=14)
+    straight = MethodCampaign(config, 'straight', tmp_path / 'runs', tmp_path / 'bags',
+                              log=lambda _: None).run(ScriptedEvaluator())
+    rows = episode_rows(straight.run_dir)
+    assert len(rows) == 14 and any(row['fault'] for row in rows)
+    assert any(str(row['origin']).startswith('child of') for row in rows)
+    killed = MethodCampaign(config, 'killed', tmp_path / 'runs', tmp_path / 'bags',
+                            log=lambda _: None)
+    with pytest.raises(Interrupted):
+        killed.run(ScriptedEvaluator(interrupt_after=9))
+    resumed = MethodCampaign(config, 'killed', tmp_path / 'runs', tmp_path / 'bags',
+                             log=lambda _: None).run(ScriptedEvaluator(), resume=True)
+    assert episode_rows(resumed.run_dir) == rows
+
+
+def test_a_fault_label_names_its_key_on_its_map():
+    occupancy = np.zeros((32, 32), dtype=np.int8)
+    occupancy[10:12, 4:20] = 1
+    rule = FaultRule()
+    key = FaultKey('collision_static', 2, 3, place_context(occupancy, 2, 3, rule))
+    assert key_from_label(key.label, occupancy, rule) == key
+    assert key_from_label('', occupancy, rule) is None
+    assert key_from_label(UNPLACED, occupancy, rule) is None
+    moved = occupancy.copy()
+    moved[9, 12] = 1  # the map around the place differs: not this label's fault
+    with pytest.raises(FaultError, match='does not match'):
+        key_from_label(key.label, moved, rule)
+    with pytest.raises(FaultError, match='not a fault label'):
+        key_from_label('stuck', occupancy, rule)

@@ -50,11 +50,9 @@ from sessgan_gen.route_certificate import CertificateGrid, map_clearance, requir
 from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_gen.validation import require_positive
 from sessgan_sim.agents import AgentConfig, DummyAgents
+from sessgan_sim.contacts import ContactClassifier
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import (
-    CONTACT_DEBOUNCE,
-    STANDING_SPEED,
-    ContactKind,
     EpisodeMetrics,
     MetricsRecorder,
     Outcome,
@@ -319,6 +317,7 @@ class _RobotSimulation:
     lidar: Lidar
     clearance: ClearanceSensor
     range_finder: RangeFinder | None
+    contacts: ContactClassifier
     progress: ProgressField
     """The current leg's."""
     time_limit: float
@@ -331,9 +330,6 @@ class _RobotSimulation:
     """m/s, map-frame velocity of the robot's centre over the last physics step."""
     leg_progress: list[ProgressField] = field(default_factory=list)
     """Every leg's ProgressField, in order (a plain episode's one)."""
-    pushed_by: tuple[str, int] | None = None
-    """('agent', i) or ('robot', j) that last drove into the robot, until pushed_until."""
-    pushed_until: float = -math.inf
 
 
 class Episode:
@@ -534,7 +530,9 @@ class Episode:
                 robot=body, lidar=Lidar(config.lidar, np.random.default_rng(
                     noise_seed if each.index == 0 else fleet_seeds[2 * each.index - 2])),
                 clearance=ClearanceSensor(client, body, layout, clearance_range),
-                range_finder=None, progress=ProgressField(grid, np.zeros(0), []),
+                range_finder=None,
+                contacts=ContactClassifier(each.recorder, self._agents, self._robot_at),
+                progress=ProgressField(grid, np.zeros(0), []),
                 time_limit=float(config.time_limit or 0.0),
                 proximity_distance=float(config.proximity_distance or 0.0),
                 goal_tolerance=float(config.goal_tolerance or 0.0),
@@ -626,6 +624,7 @@ class Episode:
         before = [body.position for body in robots]
         positions = before + [body.position for body in stopped]
         velocities = [live.velocity for live in lives if live is not None]
+        contacts = [live.contacts for live in lives if live is not None]
         step_time = record.ticks * config.control_period
         for _ in range(config.physics_steps_per_tick):
             advance_agents(dt, positions)
@@ -646,8 +645,8 @@ class Episode:
                 partners = contact_partners(client, body.body_id)
                 if partners:
                     touching[index] = True
-                    self._record_contacts(running[index], partners, step_time, x, y,
-                                          (previous, velocities[index]))
+                    contacts[index].record(partners, step_time, x, y,
+                                           (previous, velocities[index]))
                 else:
                     touching[index] = False
                 travelled[index] += hypot(x - x_before, y - y_before)
@@ -862,67 +861,12 @@ class Episode:
                           f'stopped {self._distance_to_goal(record):.2f} m from it at '
                           f'{now:.2f} s')
 
-    def _record_contacts(self, record: _RobotUnderTest, partners: set[int], time: float,
-                         x: float, y: float,
-                         velocities: tuple[tuple[float, float], ...]) -> None:
-        """Record one physics step's contacts of ``record``'s robot, attributing each (see
-        sessgan_sim.metrics).
-
-        While an agent or another robot under test drives into the robot (and
-        CONTACT_DEBOUNCE after), whatever else the robot touches is its doing too: it was
-        shoved."""
-        live = record.live
-        assert live is not None
-        recorder = record.recorder
-        agents = self._agents
-        touches_static = False
-        for body in partners:
-            agent = agents.index_of(body)
-            other = self._robot_index_of(body) if agent is None else None
-            if agent is None and other is None:
-                touches_static = True
-                continue
-            if agent is not None:
-                partner_x, partner_y = agents.positions[agent, 0], agents.positions[agent, 1]
-            else:
-                partner_x, partner_y = self._records[other].live.robot.position  # type: ignore
-            dx, dy = partner_x - x, partner_y - y
-            distance = math.hypot(dx, dy) or 1e-9
-            # The robot drove into the partner if, just before or during the contact step,
-            # it moved toward it faster than a standing robot would.
-            approach = max((vx * dx + vy * dy) / distance for vx, vy in velocities)
-            pushed = live.pushed_by is not None and time <= live.pushed_until
-            if agent is not None:
-                if approach > STANDING_SPEED and not pushed:
-                    kind = ContactKind.ROBOT_INTO_AGENT
-                else:
-                    kind = ContactKind.AGENT_INTO_ROBOT
-                    live.pushed_by, live.pushed_until = ('agent', agent), time + CONTACT_DEBOUNCE
-                recorder.record_contact(time, agent, kind, x, y)
-                continue
-            assert other is not None
-            if approach > STANDING_SPEED and not pushed:
-                kind = ContactKind.ROBOT_INTO_ROBOT
-            else:
-                kind = ContactKind.ROBOT_HIT_BY_ROBOT
-                live.pushed_by, live.pushed_until = ('robot', other), time + CONTACT_DEBOUNCE
-            recorder.record_contact(time, -1, kind, x, y, other_robot=other)
-        if touches_static:
-            # Shoved into a wall by an agent or a robot: its doing (the event names it).
-            if live.pushed_by is not None and time <= live.pushed_until:
-                source, index = live.pushed_by
-                if source == 'agent':
-                    recorder.record_contact(time, -1, ContactKind.AGENT_INTO_ROBOT, x, y)
-                else:
-                    recorder.record_contact(time, -1, ContactKind.ROBOT_HIT_BY_ROBOT, x, y)
-            else:
-                recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
-
-    def _robot_index_of(self, body_id: int) -> int | None:
-        """Index of the robot under test whose body is ``body_id``; None for any other."""
+    def _robot_at(self, body_id: int) -> tuple[int, tuple[float, float]] | None:
+        """Index and position of the robot under test whose body is ``body_id``; None for any
+        other."""
         for record in self._records:
             if record.live is not None and record.live.robot.body_id == body_id:
-                return record.index
+                return record.index, record.live.robot.position
         return None
 
     @staticmethod

@@ -45,8 +45,7 @@ import pybullet as p
 
 from sessgan_gen.environment import Environment, Pose2D
 from sessgan_gen.errors import SessganGenError
-from sessgan_gen.grid_search import descend, distance_field
-from sessgan_gen.route_certificate import CertificateGrid, map_clearance, required_clearances
+from sessgan_gen.route_certificate import map_clearance, required_clearances
 from sessgan_gen.scenarios import Scenario, get_scenario
 from sessgan_gen.validation import require_positive
 from sessgan_sim.agents import AgentConfig, DummyAgents
@@ -59,6 +58,7 @@ from sessgan_sim.metrics import (
     fleet_metrics,
 )
 from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
+from sessgan_sim.progress import ProgressField, ProgressMonitor, progress_field
 from sessgan_sim.robots import STOP, BodyCommand, FlyerRobot, Robot, create_robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
@@ -293,22 +293,6 @@ class _RobotUnderTest:
     """Its simulation (None when the environment could not be built)."""
 
 
-class ProgressField(NamedTuple):
-    """Distance to the goal in certificate-grid steps that the stuck rule measures progress on.
-
-    Exact inside the certified route's space (clearance >= radius + route margin: where a
-    stack with an inflation margin drives, so a detour the route needs counts as progress),
-    extended a few steps into the band around it where a robot cutting a corner or touching
-    a wall may be, but never through a gap the certificate does not use; inf elsewhere. In a
-    map without a certified route it is the distance through any space the footprint fits.
-    """
-
-    grid: CertificateGrid
-    steps: np.ndarray
-    route: list[tuple[int, int]]
-    """The certified route's cells from start to goal ([] without one)."""
-
-
 @dataclass
 class _RobotSimulation:
     """The simulation of an episode whose environment could be built."""
@@ -318,18 +302,14 @@ class _RobotSimulation:
     clearance: ClearanceSensor
     range_finder: RangeFinder | None
     contacts: ContactClassifier
-    progress: ProgressField
-    """The current leg's."""
+    progress: ProgressMonitor
+    """The stuck rule, on the current leg's ProgressField."""
     time_limit: float
     proximity_distance: float
     goal_tolerance: float
-    best_progress: float = math.inf
-    last_progress_time: float = 0.0
     next_scan_time: float = 0.0
     velocity: tuple[float, float] = (0.0, 0.0)
     """m/s, map-frame velocity of the robot's centre over the last physics step."""
-    leg_progress: list[ProgressField] = field(default_factory=list)
-    """Every leg's ProgressField, in order (a plain episode's one)."""
 
 
 class Episode:
@@ -532,16 +512,17 @@ class Episode:
                 clearance=ClearanceSensor(client, body, layout, clearance_range),
                 range_finder=None,
                 contacts=ContactClassifier(each.recorder, self._agents, self._robot_at),
-                progress=ProgressField(grid, np.zeros(0), []),
+                progress=ProgressMonitor([
+                    progress_field(grid, leg_start, leg_goal, feasible, body.footprint_radius,
+                                   route_need)
+                    for leg_start, leg_goal in zip((each.start, *waypoints), waypoints)],
+                    config.stuck_timeout),
                 time_limit=float(config.time_limit or 0.0),
                 proximity_distance=float(config.proximity_distance or 0.0),
                 goal_tolerance=float(config.goal_tolerance or 0.0),
                 next_scan_time=record.lidar_info.scan_time)
-            each.live.leg_progress = [
-                self._progress_field(grid, leg_start, leg_goal, feasible, body, route_need)
-                for leg_start, leg_goal in zip((each.start, *waypoints), waypoints)]
-            each.live.progress = each.live.leg_progress[0]
-            keep_clear += [disc for leg_goal, progress in zip(waypoints, each.live.leg_progress)
+            keep_clear += [disc for leg_goal, progress in zip(waypoints,
+                                                              each.live.progress.legs)
                            for disc in self._agent_keep_clear(leg_goal, body, config, progress,
                                                               route_need)]
             if each.index > 0:  # agents start away from every robot, as from r0's start
@@ -561,7 +542,7 @@ class Episode:
                 live.range_finder.attach(live.robot, layout)
             each.mission = MissionTracker(each.waypoints, environment.dwell_time,
                                           live.goal_tolerance)
-            live.best_progress = self._progress_distance(live)
+            live.progress.start_leg(0, *live.robot.position)
             each.scan = live.lidar.scan()
         self._latest = [self._observation(each, scan_updated=True) for each in records]
         return self._latest[0]
@@ -831,11 +812,11 @@ class Episode:
                 self._end(record, Outcome.GOAL_REACHED,
                           f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
             return
+        progress = live.progress
         if event is MissionEvent.NEXT_LEG:
-            live.progress = live.leg_progress[mission.leg]
-            live.best_progress = self._progress_distance(live)
+            progress.start_leg(mission.leg, *live.robot.position)
         if event is not MissionEvent.NONE:
-            live.last_progress_time = now  # arriving and setting off are progress
+            progress.hold(now)  # arriving and setting off are progress
         if now >= live.time_limit - 1e-9:
             blocking = self._robots_nearby(live)
             self._end(record, Outcome.TIMEOUT,
@@ -845,21 +826,13 @@ class Episode:
                           f'{AGENT_WAIT_DISTANCE:.1f} m (waiting for each other?)'
                           if blocking else ''))
         elif mission.dwelling and distance <= live.goal_tolerance:
-            live.last_progress_time = now  # dwelling at a station is not being stuck
-        elif config.stuck_timeout > 0:
-            progress = self._progress_distance(live)
-            if progress < live.best_progress:
-                live.best_progress = progress
-                live.last_progress_time = now
-            elif self._agent_nearby(live):
-                # Waiting for an agent (or another robot) that blocks the way is not stuck
-                # (the time limit still bounds the wait).
-                live.last_progress_time = now
-            elif now - live.last_progress_time >= config.stuck_timeout - 1e-9:
-                self._end(record, Outcome.STUCK,
-                          f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
-                          f'stopped {self._distance_to_goal(record):.2f} m from it at '
-                          f'{now:.2f} s')
+            progress.hold(now)  # dwelling at a station is not being stuck
+        elif progress.stuck(now, *live.robot.position,
+                            # waiting for an agent or another robot in the way
+                            lambda: self._agent_nearby(live)):
+            self._end(record, Outcome.STUCK,
+                      f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
+                      f'stopped {self._distance_to_goal(record):.2f} m from it at {now:.2f} s')
 
     def _robot_at(self, body_id: int) -> tuple[int, tuple[float, float]] | None:
         """Index and position of the robot under test whose body is ``body_id``; None for any
@@ -868,27 +841,6 @@ class Episode:
             if record.live is not None and record.live.robot.body_id == body_id:
                 return record.index, record.live.robot.position
         return None
-
-    @staticmethod
-    def _progress_field(grid: CertificateGrid, leg_start: Pose2D, leg_goal: Pose2D,
-                        feasible: bool, robot: Robot, route_need: float) -> ProgressField:
-        """The ProgressField of one leg (a plain episode's one leg: start to goal)."""
-        goal = grid.cell_of(leg_goal.x, leg_goal.y)
-        start = grid.cell_of(leg_start.x, leg_start.y)
-        clearance = grid.clearance
-        # Diagonal steps: a diagonal gap the robot passes must not look like a detour.
-        steps = distance_field(clearance >= route_need - 1e-9, goal, diagonal=True)
-        route = descend(steps, start) if feasible else []
-        if not route:
-            return ProgressField(grid, distance_field(
-                clearance >= robot.footprint_radius * 0.75, goal, diagonal=True), [])
-        band = (clearance > 0.0) & ~np.isfinite(steps)
-        for _ in range(int(math.ceil(route_need / grid.cell_size)) + 1):
-            padded = np.pad(steps, 1, constant_values=np.inf)
-            nearest = np.minimum.reduce([padded[:-2, 1:-1], padded[2:, 1:-1],
-                                         padded[1:-1, :-2], padded[1:-1, 2:]]) + 1.0
-            steps = np.where(band, np.minimum(steps, nearest), steps)
-        return ProgressField(grid, steps, route)
 
     @staticmethod
     def _agent_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig,
@@ -937,18 +889,6 @@ class Episode:
                 if gap < AGENT_WAIT_DISTANCE:
                     nearby.append(record.index)
         return nearby
-
-    @staticmethod
-    def _progress_distance(live: _RobotSimulation) -> float:
-        """Distance (m) from the robot to the goal along its ProgressField; inf (never
-        progress) where the field does not reach."""
-        progress = live.progress
-        x, y = live.robot.position
-        row, col = progress.grid.cell_of(x, y)
-        steps = progress.steps
-        if 0 <= row < steps.shape[0] and 0 <= col < steps.shape[1]:
-            return float(steps[row, col]) * progress.grid.cell_size
-        return math.inf
 
     def _distance_to_goal(self, record: _RobotUnderTest) -> float:
         goal = self._goal(record)

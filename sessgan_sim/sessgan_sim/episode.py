@@ -122,8 +122,7 @@ class EpisodeConfig:
     keeps a car at 12 m/s moving 12 cm per step, well inside any barrier's 1 m cell."""
     time_limit: float | None = None
     """Sim seconds before the episode ends with outcome timeout. None: the scenario's limit,
-    raised to ROUTE_TIME_FACTOR x the certified route's length / the robot's top speed, so a
-    valid test always leaves time to drive its route."""
+    raised for the environment's route and mission (:meth:`time_limit_for`)."""
     proximity_distance: float | None = None
     """Clearance below which time counts as proximity time."""
     clearance_range: float | None = None
@@ -188,6 +187,25 @@ class EpisodeConfig:
             goal_tolerance=(self.goal_tolerance if self.goal_tolerance is not None
                             else scenario.cell_size),
         )
+
+    def time_limit_for(self, environment: Environment, top_speed: float) -> float:
+        """Sim seconds ``environment``'s episode lasts at most for a robot of ``top_speed``
+        m/s: :attr:`time_limit` when given. Else the scenario's, raised to ROUTE_TIME_FACTOR x
+        the longest certified route (of every robot under test) / ``top_speed``, so a valid
+        test always leaves time to drive its route; a mission gets the scenario's limit per
+        leg (at least the route's time) and time for every dwell."""
+        if self.time_limit is not None:
+            return self.time_limit
+        scenario = get_scenario(environment.scenario)
+        limit: float = scenario.time_limit
+        route_length = max([environment.route_length,
+                            *(member.route_length for member in environment.fleet)])
+        if route_length > 0:
+            limit = max(float(limit or 0.0), ROUTE_TIME_FACTOR * route_length / top_speed)
+        if environment.stations:
+            limit = (max(scenario.time_limit * environment.legs, float(limit or 0.0))
+                     + len(environment.stations) * environment.dwell_time)
+        return limit
 
     @property
     def control_period(self) -> float:
@@ -441,7 +459,7 @@ class Episode:
         try:
             environment.validate()
             record.waypoints = environment.waypoints
-            scenario_limit = config.time_limit is None
+            given = config
             config = record.config = config.resolved(get_scenario(environment.scenario))
             robot = create_robot(str(config.robot), config.robot_params)
             if isinstance(robot, FlyerRobot) and robot.top >= config.world.wall_height:
@@ -452,20 +470,8 @@ class Episode:
                 raise InvalidConfigError(
                     'a fleet episode needs the analytic lidar caster (lidar caster '
                     f'{config.lidar.caster!r} does not see the other robots)')
-            route_length = max([environment.route_length,
-                                *(member.route_length for member in environment.fleet)])
-            if scenario_limit and route_length > 0:
-                route_time = ROUTE_TIME_FACTOR * route_length / robot.top_speed
-                config = dataclasses.replace(
-                    config, time_limit=max(float(config.time_limit or 0.0), route_time))
-            if scenario_limit and environment.stations:
-                # A mission gets the scenario's limit per leg (at least the route's time, as
-                # above), and time for every dwell.
-                per_leg = get_scenario(environment.scenario).time_limit * environment.legs
-                config = dataclasses.replace(config, time_limit=max(
-                    per_leg, float(config.time_limit or 0.0))
-                    + len(environment.stations) * environment.dwell_time)
-            record.config = config
+            config = record.config = dataclasses.replace(
+                config, time_limit=given.time_limit_for(environment, robot.top_speed))
             robots = [robot, *(create_robot(str(config.robot), config.robot_params)
                                for _ in environment.fleet)]
         except (SessganGenError, UnknownRobotError) as err:

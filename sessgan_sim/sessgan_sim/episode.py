@@ -696,6 +696,10 @@ class Episode:
         profile.metrics += finished - sensors_done
         return results
 
+    def driving(self) -> list[int]:
+        """The robots under test that have no outcome yet (r0 is 0)."""
+        return [record.index for record in self._records if record.outcome is None]
+
     def abort(self, outcome: Outcome | str, detail: str = '') -> None:
         """End the running episode from outside (e.g. controller_unresponsive), for every
         robot that has not ended yet.

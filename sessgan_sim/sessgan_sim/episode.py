@@ -611,7 +611,6 @@ class Episode:
         before = [body.position for body in robots]
         positions = before + [body.position for body in stopped]
         velocities = [live.velocity for live in lives if live is not None]
-        contacts = [live.contacts for live in lives if live is not None]
         step_time = record.ticks * config.control_period
         for _ in range(config.physics_steps_per_tick):
             advance_agents(dt, positions)
@@ -632,8 +631,10 @@ class Episode:
                 partners = contact_partners(client, body.body_id)
                 if partners:
                     touching[index] = True
-                    contacts[index].record(partners, step_time, x, y,
-                                           (previous, velocities[index]))
+                    live = lives[index]
+                    assert live is not None
+                    live.contacts.record(partners, step_time, x, y,
+                                         (previous, velocities[index]))
                 else:
                     touching[index] = False
                 travelled[index] += hypot(x - x_before, y - y_before)
@@ -837,9 +838,9 @@ class Episode:
                           if blocking else ''))
         elif mission.dwelling and distance <= live.goal_tolerance:
             progress.hold(now)  # dwelling at a station is not being stuck
-        elif progress.stuck(now, *live.robot.position,
-                            # waiting for an agent or another robot in the way
-                            lambda: self._agent_nearby(live)):
+        elif progress.stuck_timeout > 0 and progress.stuck(
+                now, *live.robot.position,
+                lambda: self._agent_nearby(live)):  # an agent or a robot in the way
             self._end(record, Outcome.STUCK,
                       f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
                       f'stopped {self._distance_to_goal(record):.2f} m from it at {now:.2f} s')

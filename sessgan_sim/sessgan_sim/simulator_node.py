@@ -336,16 +336,16 @@ class SimulatorNode(Node):
             return None
 
         def send_goal(index: int, goal, stamp_ns: int, first: bool = False) -> str | None:
-            """Robot ``index``'s waypoint in force on its goal_pose and/or (a single robot)
-            as a NavigateToPose goal (as Nav2's waypoint follower sends each waypoint); the
-            first with its waypoints."""
+            """Robot ``index``'s waypoint in force on its goal_pose and/or as a NavigateToPose
+            goal (as Nav2's waypoint follower sends each waypoint; a single robot's, refused
+            for fleets above); the first with the robot's waypoints (r1, r2, ...: its goal)."""
             topics = stepper.channels[index].topics
-            if settings.goal_via.uses_topic or fleet:
+            if settings.goal_via.uses_topic:
                 if first:
-                    topics.publish_waypoints(
-                        [goal] if fleet else environment.waypoints, stamp_ns, recording)
+                    topics.publish_waypoints(environment.waypoints if index == 0 else [goal],
+                                             stamp_ns, recording)
                 topics.publish_goal(goal, stamp_ns, recording)
-            if settings.goal_via.uses_action and not fleet:
+            if settings.goal_via.uses_action:
                 if not first:
                     self.stack.finish(settings.stack_timeout)
                 return self.stack.send_goal(goal, stamp_ns, settings.stack_timeout)

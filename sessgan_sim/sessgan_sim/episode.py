@@ -33,9 +33,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from time import perf_counter
 from types import TracebackType
 from typing import NamedTuple
@@ -45,27 +44,29 @@ import pybullet as p
 
 from sessgan_core.environment import Environment, Pose2D
 from sessgan_core.errors import SessganCoreError
-from sessgan_core.grid_search import descend, distance_field
-from sessgan_core.route_certificate import CertificateGrid, map_clearance, required_clearances
-from sessgan_core.scenarios import Scenario, get_scenario
-from sessgan_core.validation import require_positive
-from sessgan_sim.agents import AgentConfig, DummyAgents
+from sessgan_core.route_certificate import map_clearance, required_clearances
+from sessgan_core.scenarios import get_scenario
+from sessgan_sim.agents import DummyAgents
+from sessgan_sim.contacts import ContactClassifier
+from sessgan_sim.episode_config import (  # noqa: F401 (also imported from here)
+    MAX_TIME_LIMIT,
+    ROUTE_TIME_FACTOR,
+    EpisodeConfig,
+    check_time_limit,
+)
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import (
-    CONTACT_DEBOUNCE,
-    STANDING_SPEED,
-    ContactKind,
     EpisodeMetrics,
     MetricsRecorder,
     Outcome,
     fleet_metrics,
 )
 from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
+from sessgan_sim.progress import ProgressField, ProgressMonitor, progress_field
 from sessgan_sim.robots import STOP, BodyCommand, FlyerRobot, Robot, create_robot
 from sessgan_sim.sensors import (
     ClearanceSensor,
     Lidar,
-    LidarConfig,
     LidarInfo,
     RangeFinder,
     RangeFinderConfig,
@@ -74,137 +75,13 @@ from sessgan_sim.sensors import (
     contact_partners,
     read_odometry,
 )
-from sessgan_sim.world import ObstacleKind, World, WorldLayout, WorldStyle
+from sessgan_sim.world import ObstacleKind, World, WorldLayout
 
 AGENT_WAIT_DISTANCE = 1.0
 """m between bodies within which a robot waiting for an agent is not counted stuck."""
 
-ROUTE_TIME_FACTOR = 4.0
-"""Default time limits allow driving the certified route at a quarter of the top speed."""
-
 START_OVERLAP_TOLERANCE = 1e-4
 """m: a start footprint penetrating an obstacle deeper than this is invalid."""
-
-MAX_TIME_LIMIT = 3600.0
-"""Sim seconds: the longest time limit a user may ask for (30 x the longest scenario default,
-72 000 ticks at 20 Hz). The wall-clock timeout of an episode grows with it, so a limit like
-1e9 s would leave a stalled worker undetected for ever; limits derived from a route or a
-mission's legs are not bounded by it."""
-
-
-def check_time_limit(value: float, name: str = 'time limit') -> float:
-    """``value`` (sim seconds, 0: the default) as a float, or InvalidConfigError naming
-    ``name`` when it is not a number in [0, MAX_TIME_LIMIT]."""
-    try:
-        limit = float(value)
-    except (TypeError, ValueError) as err:
-        raise InvalidConfigError(f'{name} must be a number of sim seconds, got {value!r}') \
-            from err
-    if not (math.isfinite(limit) and 0.0 <= limit <= MAX_TIME_LIMIT):
-        raise InvalidConfigError(f'{name} must lie in [0, {MAX_TIME_LIMIT:.0f}] sim seconds '
-                                 f'(0: the scenario default), got {value!r}')
-    return limit
-
-
-@dataclass(frozen=True)
-class EpisodeConfig:
-    """Everything an episode needs besides the Environment. None = the scenario's default.
-
-    Units: seconds, metres, hertz.
-    """
-
-    robot: str | None = None
-    """Robot model from the registry (sessgan_sim.robots); None: the scenario's robot."""
-    robot_params: Mapping[str, float] = field(default_factory=dict)
-    """Overrides of the robot model's parameters, e.g. {'max_linear_speed': 0.5}."""
-    control_rate_hz: float = 20.0
-    """Control ticks per sim second: one command per tick."""
-    physics_rate_hz: float = 100.0
-    """Physics steps per sim second, rounded to a whole number of steps per tick. 100 Hz
-    keeps a car at 12 m/s moving 12 cm per step, well inside any barrier's 1 m cell."""
-    time_limit: float | None = None
-    """Sim seconds before the episode ends with outcome timeout. None: the scenario's limit,
-    raised to ROUTE_TIME_FACTOR x the certified route's length / the robot's top speed, so a
-    valid test always leaves time to drive its route."""
-    proximity_distance: float | None = None
-    """Clearance below which time counts as proximity time."""
-    clearance_range: float | None = None
-    """Farthest clearance measured, at least the proximity distance: min_clearance is capped
-    here. None: the proximity distance (the cheapest query)."""
-    lidar: LidarConfig = field(default_factory=LidarConfig)
-    range_finder: RangeFinderConfig = field(default_factory=RangeFinderConfig)
-    """The downward range sensor; only a flying robot has one."""
-    dummy_agents: int | None = None
-    """Number of moving dummy agents."""
-    agents: AgentConfig = field(default_factory=AgentConfig)
-    stuck_timeout: float = 10.0
-    """Sim seconds without progress toward the goal (a new minimum of the geodesic distance
-    on the grid) before the episode ends with outcome stuck; <= 0 disables it."""
-    goal_tolerance: float | None = None
-    """Distance of the robot's centre to the goal that counts as reached; None: one cell of
-    the scenario."""
-    collision_limit: int = 10
-    """Collisions that end the episode (outcome collision_limit); 0 disables it."""
-    seed: int = 0
-    """Seed of every random choice of the episode."""
-    world: WorldStyle = field(default_factory=WorldStyle)
-
-    def validate(self) -> None:
-        """Raise InvalidConfigError naming the first unusable value."""
-        for name in ('control_rate_hz', 'physics_rate_hz'):
-            require_positive(f'episode config: {name}', getattr(self, name), InvalidConfigError)
-        for name in ('time_limit', 'proximity_distance', 'goal_tolerance', 'clearance_range'):
-            if getattr(self, name) is not None:
-                require_positive(f'episode config: {name} (or None)', getattr(self, name),
-                                 InvalidConfigError)
-        if self.physics_rate_hz < self.control_rate_hz:
-            raise InvalidConfigError(
-                f'episode config: physics_rate_hz ({self.physics_rate_hz}) must be at least '
-                f'control_rate_hz ({self.control_rate_hz})')
-        if not math.isfinite(self.stuck_timeout):
-            raise InvalidConfigError(f'episode config: stuck_timeout must be finite, got '
-                                     f'{self.stuck_timeout}')
-        counts = (('collision_limit', self.collision_limit), ('seed', self.seed),
-                  ('dummy_agents', 0 if self.dummy_agents is None else self.dummy_agents))
-        for name, count in counts:
-            if not (isinstance(count, numbers.Integral) and count >= 0):
-                raise InvalidConfigError(f'episode config: {name} must be an integer >= 0, '
-                                         f'got {count!r}')
-        self.lidar.validate()
-        self.range_finder.validate()
-        self.agents.validate()
-        self.world.validate()
-
-    def resolved(self, scenario: Scenario) -> EpisodeConfig:
-        """This config with every None replaced by the scenario's default."""
-        proximity = (self.proximity_distance if self.proximity_distance is not None
-                     else scenario.proximity_distance)
-        return dataclasses.replace(
-            self,
-            robot=self.robot if self.robot is not None else scenario.robot,
-            time_limit=self.time_limit if self.time_limit is not None else scenario.time_limit,
-            proximity_distance=proximity,
-            clearance_range=max(self.clearance_range or proximity, proximity),
-            dummy_agents=(self.dummy_agents if self.dummy_agents is not None
-                          else scenario.dummy_agents),
-            goal_tolerance=(self.goal_tolerance if self.goal_tolerance is not None
-                            else scenario.cell_size),
-        )
-
-    @property
-    def control_period(self) -> float:
-        """Sim seconds per control tick."""
-        return 1.0 / self.control_rate_hz
-
-    @property
-    def physics_steps_per_tick(self) -> int:
-        return max(1, round(self.physics_rate_hz / self.control_rate_hz))
-
-    @property
-    def physics_timestep(self) -> float:
-        """Sim seconds per physics step (the tick divided into whole steps)."""
-        return self.control_period / self.physics_steps_per_tick
-
 
 @dataclass(frozen=True)
 class Observation:
@@ -295,22 +172,6 @@ class _RobotUnderTest:
     """Its simulation (None when the environment could not be built)."""
 
 
-class ProgressField(NamedTuple):
-    """Distance to the goal in certificate-grid steps that the stuck rule measures progress on.
-
-    Exact inside the certified route's space (clearance >= radius + route margin: where a
-    stack with an inflation margin drives, so a detour the route needs counts as progress),
-    extended a few steps into the band around it where a robot cutting a corner or touching
-    a wall may be, but never through a gap the certificate does not use; inf elsewhere. In a
-    map without a certified route it is the distance through any space the footprint fits.
-    """
-
-    grid: CertificateGrid
-    steps: np.ndarray
-    route: list[tuple[int, int]]
-    """The certified route's cells from start to goal ([] without one)."""
-
-
 @dataclass
 class _RobotSimulation:
     """The simulation of an episode whose environment could be built."""
@@ -319,21 +180,15 @@ class _RobotSimulation:
     lidar: Lidar
     clearance: ClearanceSensor
     range_finder: RangeFinder | None
-    progress: ProgressField
-    """The current leg's."""
+    contacts: ContactClassifier
+    progress: ProgressMonitor
+    """The stuck rule, on the current leg's ProgressField."""
     time_limit: float
     proximity_distance: float
     goal_tolerance: float
-    best_progress: float = math.inf
-    last_progress_time: float = 0.0
     next_scan_time: float = 0.0
     velocity: tuple[float, float] = (0.0, 0.0)
     """m/s, map-frame velocity of the robot's centre over the last physics step."""
-    leg_progress: list[ProgressField] = field(default_factory=list)
-    """Every leg's ProgressField, in order (a plain episode's one)."""
-    pushed_by: tuple[str, int] | None = None
-    """('agent', i) or ('robot', j) that last drove into the robot, until pushed_until."""
-    pushed_until: float = -math.inf
 
 
 class Episode:
@@ -465,7 +320,7 @@ class Episode:
         try:
             environment.validate()
             record.waypoints = environment.waypoints
-            scenario_limit = config.time_limit is None
+            given = config
             config = record.config = config.resolved(get_scenario(environment.scenario))
             robot = create_robot(str(config.robot), config.robot_params)
             if isinstance(robot, FlyerRobot) and robot.top >= config.world.wall_height:
@@ -476,20 +331,8 @@ class Episode:
                 raise InvalidConfigError(
                     'a fleet episode needs the analytic lidar caster (lidar caster '
                     f'{config.lidar.caster!r} does not see the other robots)')
-            route_length = max([environment.route_length,
-                                *(member.route_length for member in environment.fleet)])
-            if scenario_limit and route_length > 0:
-                route_time = ROUTE_TIME_FACTOR * route_length / robot.top_speed
-                config = dataclasses.replace(
-                    config, time_limit=max(float(config.time_limit or 0.0), route_time))
-            if scenario_limit and environment.stations:
-                # A mission gets the scenario's limit per leg (at least the route's time, as
-                # above), and time for every dwell.
-                per_leg = get_scenario(environment.scenario).time_limit * environment.legs
-                config = dataclasses.replace(config, time_limit=max(
-                    per_leg, float(config.time_limit or 0.0))
-                    + len(environment.stations) * environment.dwell_time)
-            record.config = config
+            config = record.config = dataclasses.replace(
+                config, time_limit=given.time_limit_for(environment, robot.top_speed))
             robots = [robot, *(create_robot(str(config.robot), config.robot_params)
                                for _ in environment.fleet)]
         except (SessganCoreError, UnknownRobotError) as err:
@@ -534,16 +377,19 @@ class Episode:
                 robot=body, lidar=Lidar(config.lidar, np.random.default_rng(
                     noise_seed if each.index == 0 else fleet_seeds[2 * each.index - 2])),
                 clearance=ClearanceSensor(client, body, layout, clearance_range),
-                range_finder=None, progress=ProgressField(grid, np.zeros(0), []),
+                range_finder=None,
+                contacts=ContactClassifier(each.recorder, self._agents, self._robot_at),
+                progress=ProgressMonitor([
+                    progress_field(grid, leg_start, leg_goal, feasible, body.footprint_radius,
+                                   route_need)
+                    for leg_start, leg_goal in zip((each.start, *waypoints), waypoints)],
+                    config.stuck_timeout),
                 time_limit=float(config.time_limit or 0.0),
                 proximity_distance=float(config.proximity_distance or 0.0),
                 goal_tolerance=float(config.goal_tolerance or 0.0),
                 next_scan_time=record.lidar_info.scan_time)
-            each.live.leg_progress = [
-                self._progress_field(grid, leg_start, leg_goal, feasible, body, route_need)
-                for leg_start, leg_goal in zip((each.start, *waypoints), waypoints)]
-            each.live.progress = each.live.leg_progress[0]
-            keep_clear += [disc for leg_goal, progress in zip(waypoints, each.live.leg_progress)
+            keep_clear += [disc for leg_goal, progress in zip(waypoints,
+                                                              each.live.progress.legs)
                            for disc in self._agent_keep_clear(leg_goal, body, config, progress,
                                                               route_need)]
             if each.index > 0:  # agents start away from every robot, as from r0's start
@@ -563,7 +409,7 @@ class Episode:
                 live.range_finder.attach(live.robot, layout)
             each.mission = MissionTracker(each.waypoints, environment.dwell_time,
                                           live.goal_tolerance)
-            live.best_progress = self._progress_distance(live)
+            live.progress.start_leg(0, *live.robot.position)
             each.scan = live.lidar.scan()
         self._latest = [self._observation(each, scan_updated=True) for each in records]
         return self._latest[0]
@@ -646,8 +492,10 @@ class Episode:
                 partners = contact_partners(client, body.body_id)
                 if partners:
                     touching[index] = True
-                    self._record_contacts(running[index], partners, step_time, x, y,
-                                          (previous, velocities[index]))
+                    live = lives[index]
+                    assert live is not None
+                    live.contacts.record(partners, step_time, x, y,
+                                         (previous, velocities[index]))
                 else:
                     touching[index] = False
                 travelled[index] += hypot(x - x_before, y - y_before)
@@ -709,6 +557,10 @@ class Episode:
         profile.sensors += sensors_done - physics_done
         profile.metrics += finished - sensors_done
         return results
+
+    def driving(self) -> list[int]:
+        """The robots under test that have no outcome yet (r0 is 0)."""
+        return [record.index for record in self._records if record.outcome is None]
 
     def abort(self, outcome: Outcome | str, detail: str = '') -> None:
         """End the running episode from outside (e.g. controller_unresponsive), for every
@@ -832,11 +684,11 @@ class Episode:
                 self._end(record, Outcome.GOAL_REACHED,
                           f'reached the goal within {live.goal_tolerance:.2f} m at {now:.2f} s')
             return
+        progress = live.progress
         if event is MissionEvent.NEXT_LEG:
-            live.progress = live.leg_progress[mission.leg]
-            live.best_progress = self._progress_distance(live)
+            progress.start_leg(mission.leg, *live.robot.position)
         if event is not MissionEvent.NONE:
-            live.last_progress_time = now  # arriving and setting off are progress
+            progress.hold(now)  # arriving and setting off are progress
         if now >= live.time_limit - 1e-9:
             blocking = self._robots_nearby(live)
             self._end(record, Outcome.TIMEOUT,
@@ -846,105 +698,21 @@ class Episode:
                           f'{AGENT_WAIT_DISTANCE:.1f} m (waiting for each other?)'
                           if blocking else ''))
         elif mission.dwelling and distance <= live.goal_tolerance:
-            live.last_progress_time = now  # dwelling at a station is not being stuck
-        elif config.stuck_timeout > 0:
-            progress = self._progress_distance(live)
-            if progress < live.best_progress:
-                live.best_progress = progress
-                live.last_progress_time = now
-            elif self._agent_nearby(live):
-                # Waiting for an agent (or another robot) that blocks the way is not stuck
-                # (the time limit still bounds the wait).
-                live.last_progress_time = now
-            elif now - live.last_progress_time >= config.stuck_timeout - 1e-9:
-                self._end(record, Outcome.STUCK,
-                          f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
-                          f'stopped {self._distance_to_goal(record):.2f} m from it at '
-                          f'{now:.2f} s')
+            progress.hold(now)  # dwelling at a station is not being stuck
+        elif progress.stuck_timeout > 0 and progress.stuck(
+                now, *live.robot.position,
+                lambda: self._agent_nearby(live)):  # an agent or a robot in the way
+            self._end(record, Outcome.STUCK,
+                      f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
+                      f'stopped {self._distance_to_goal(record):.2f} m from it at {now:.2f} s')
 
-    def _record_contacts(self, record: _RobotUnderTest, partners: set[int], time: float,
-                         x: float, y: float,
-                         velocities: tuple[tuple[float, float], ...]) -> None:
-        """Record one physics step's contacts of ``record``'s robot, attributing each (see
-        sessgan_sim.metrics).
-
-        While an agent or another robot under test drives into the robot (and
-        CONTACT_DEBOUNCE after), whatever else the robot touches is its doing too: it was
-        shoved."""
-        live = record.live
-        assert live is not None
-        recorder = record.recorder
-        agents = self._agents
-        touches_static = False
-        for body in partners:
-            agent = agents.index_of(body)
-            other = self._robot_index_of(body) if agent is None else None
-            if agent is None and other is None:
-                touches_static = True
-                continue
-            if agent is not None:
-                partner_x, partner_y = agents.positions[agent, 0], agents.positions[agent, 1]
-            else:
-                partner_x, partner_y = self._records[other].live.robot.position  # type: ignore
-            dx, dy = partner_x - x, partner_y - y
-            distance = math.hypot(dx, dy) or 1e-9
-            # The robot drove into the partner if, just before or during the contact step,
-            # it moved toward it faster than a standing robot would.
-            approach = max((vx * dx + vy * dy) / distance for vx, vy in velocities)
-            pushed = live.pushed_by is not None and time <= live.pushed_until
-            if agent is not None:
-                if approach > STANDING_SPEED and not pushed:
-                    kind = ContactKind.ROBOT_INTO_AGENT
-                else:
-                    kind = ContactKind.AGENT_INTO_ROBOT
-                    live.pushed_by, live.pushed_until = ('agent', agent), time + CONTACT_DEBOUNCE
-                recorder.record_contact(time, agent, kind, x, y)
-                continue
-            assert other is not None
-            if approach > STANDING_SPEED and not pushed:
-                kind = ContactKind.ROBOT_INTO_ROBOT
-            else:
-                kind = ContactKind.ROBOT_HIT_BY_ROBOT
-                live.pushed_by, live.pushed_until = ('robot', other), time + CONTACT_DEBOUNCE
-            recorder.record_contact(time, -1, kind, x, y, other_robot=other)
-        if touches_static:
-            # Shoved into a wall by an agent or a robot: its doing (the event names it).
-            if live.pushed_by is not None and time <= live.pushed_until:
-                source, index = live.pushed_by
-                if source == 'agent':
-                    recorder.record_contact(time, -1, ContactKind.AGENT_INTO_ROBOT, x, y)
-                else:
-                    recorder.record_contact(time, -1, ContactKind.ROBOT_HIT_BY_ROBOT, x, y)
-            else:
-                recorder.record_contact(time, -1, ContactKind.STATIC, x, y)
-
-    def _robot_index_of(self, body_id: int) -> int | None:
-        """Index of the robot under test whose body is ``body_id``; None for any other."""
+    def _robot_at(self, body_id: int) -> tuple[int, tuple[float, float]] | None:
+        """Index and position of the robot under test whose body is ``body_id``; None for any
+        other."""
         for record in self._records:
             if record.live is not None and record.live.robot.body_id == body_id:
-                return record.index
+                return record.index, record.live.robot.position
         return None
-
-    @staticmethod
-    def _progress_field(grid: CertificateGrid, leg_start: Pose2D, leg_goal: Pose2D,
-                        feasible: bool, robot: Robot, route_need: float) -> ProgressField:
-        """The ProgressField of one leg (a plain episode's one leg: start to goal)."""
-        goal = grid.cell_of(leg_goal.x, leg_goal.y)
-        start = grid.cell_of(leg_start.x, leg_start.y)
-        clearance = grid.clearance
-        # Diagonal steps: a diagonal gap the robot passes must not look like a detour.
-        steps = distance_field(clearance >= route_need - 1e-9, goal, diagonal=True)
-        route = descend(steps, start) if feasible else []
-        if not route:
-            return ProgressField(grid, distance_field(
-                clearance >= robot.footprint_radius * 0.75, goal, diagonal=True), [])
-        band = (clearance > 0.0) & ~np.isfinite(steps)
-        for _ in range(int(math.ceil(route_need / grid.cell_size)) + 1):
-            padded = np.pad(steps, 1, constant_values=np.inf)
-            nearest = np.minimum.reduce([padded[:-2, 1:-1], padded[2:, 1:-1],
-                                         padded[1:-1, :-2], padded[1:-1, 2:]]) + 1.0
-            steps = np.where(band, np.minimum(steps, nearest), steps)
-        return ProgressField(grid, steps, route)
 
     @staticmethod
     def _agent_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig,
@@ -993,18 +761,6 @@ class Episode:
                 if gap < AGENT_WAIT_DISTANCE:
                     nearby.append(record.index)
         return nearby
-
-    @staticmethod
-    def _progress_distance(live: _RobotSimulation) -> float:
-        """Distance (m) from the robot to the goal along its ProgressField; inf (never
-        progress) where the field does not reach."""
-        progress = live.progress
-        x, y = live.robot.position
-        row, col = progress.grid.cell_of(x, y)
-        steps = progress.steps
-        if 0 <= row < steps.shape[0] and 0 <= col < steps.shape[1]:
-            return float(steps[row, col]) * progress.grid.cell_size
-        return math.inf
 
     def _distance_to_goal(self, record: _RobotUnderTest) -> float:
         goal = self._goal(record)

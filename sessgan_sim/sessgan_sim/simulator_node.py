@@ -73,7 +73,7 @@ from sessgan_sim.simulator_settings import STRUCTURAL_SETTINGS, SimulatorSetting
 from sessgan_sim.worker.commands import CommandReceiver
 from sessgan_sim.worker.failure_bags import EpisodeFacts, remove_partial_bags, write_failure_bag
 from sessgan_sim.worker.nav2_stack import Nav2Stack
-from sessgan_sim.worker.stepping import EpisodeClock, EpisodeStepper, FleetStepper
+from sessgan_sim.worker.stepping import EpisodeClock, EpisodeStepper, RobotChannel
 from sessgan_sim.worker.topics import LATCHED_QOS, Recording, RobotTopics
 
 
@@ -92,8 +92,9 @@ class SimulatorNode(Node):
         self.topics = RobotTopics(self)
         command_type = TwistStamped if self.settings.use_stamped_cmd_vel else Twist
         self.commands = CommandReceiver(self, command_type)
-        self.stepper = EpisodeStepper(self.topics, self.commands, command_type.__name__)
-        self.fleet_steppers: list[EpisodeStepper] = []
+        self.channel = RobotChannel(self.topics, self.commands, command_type.__name__)
+        """A single robot's topics and command reader, in our namespace."""
+        self.fleet_channels: list[RobotChannel] = []
         """Fleet robots' topics and command readers, in namespaces r0, r1, ... (made when
         a fleet episode first needs them)."""
         self.stack = Nav2Stack(self, self.callback_group, lambda: self.commands.running)
@@ -278,69 +279,14 @@ class SimulatorNode(Node):
                 f'{settings.goal_interface!r} and reset_costmaps serve one robot'),
                 Outcome.HARNESS_ERROR)
         episode = self.episode
-        observation = episode.reset(environment, config)
+        episode.reset(environment, config)
         config = episode.config  # resolved: scenario defaults filled in
         clock = EpisodeClock(self.clock_origin_ns)
-        startup_timeout = settings.controller_startup_timeout
         if episode.done:
             metrics = episode.metrics()
-        elif environment.fleet:
-            metrics = self.run_fleet(episode, environment, clock, settings, recording,
-                                     goal_handle)
-        elif not self.stepper.wait_for_controller(startup_timeout):
-            if self.commands.running:
-                episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                              f'no controller subscribed to scan and published cmd_vel within '
-                              f'{startup_timeout:.1f} s wall time')
-            else:
-                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
-            metrics = episode.metrics()
         else:
-            self.topics.publish_world(environment, episode.robot.ride_height,
-                                      episode.robot.sensor_height, clock.stamp_ns(0.0),
-                                      recording, range_down=episode.robot.flies)
-
-            def prepare_stack() -> str | None:
-                """Costmap resets, then the goal: before time advances."""
-                if settings.reset_costmaps:
-                    failure = self.stack.reset_costmaps(settings.stack_timeout)
-                    if failure:
-                        return failure
-                return send_goal(observation.goal, clock.stamp_ns(0.0), first=True)
-
-            def send_goal(goal, stamp_ns: int, first: bool = False) -> str | None:
-                """The waypoint in force on goal_pose and/or as a NavigateToPose goal (as
-                Nav2's waypoint follower sends each waypoint); the first with waypoints."""
-                if settings.goal_via.uses_topic:
-                    if first:
-                        self.topics.publish_waypoints(environment.waypoints, stamp_ns,
-                                                      recording)
-                    self.topics.publish_goal(goal, stamp_ns, recording)
-                if settings.goal_via.uses_action:
-                    if not first:
-                        self.stack.finish(settings.stack_timeout)
-                    return self.stack.send_goal(goal, stamp_ns, settings.stack_timeout)
-                return None
-
-            def stop_after_navigation() -> tuple[float, float, float] | None:
-                """A stack that ended its NavigateToPose goal no longer drives: stand still
-                (as a base with a command timeout does) instead of waiting for cmd_vel."""
-                return (0.0, 0.0, 0.0) if self.stack.navigation_ended else None
-
-            loop_start = time.monotonic()
-            metrics = self.stepper.run(
-                episode, observation, clock, settings, recording, goal_handle,
-                before_first_step=prepare_stack, command_override=stop_after_navigation,
-                new_goal=send_goal)
-            note = self.stack.finish(settings.stack_timeout)
-            if note:
-                metrics = dataclasses.replace(
-                    metrics, detail=f'{metrics.detail}; {note}' if metrics.detail else note)
-            self.log_timing(environment.id, metrics, episode.profile,
-                            time.monotonic() - loop_start, self.stepper.pace)
-            # The next episode's clock starts one control period after this one's end: a
-            # long-running stack never sees sim time go back (its tf buffer stays valid).
-            self.clock_origin_ns = clock.stamp_ns(episode.time + config.control_period)
+            metrics = self.run_ticks(episode, environment, clock, settings, recording,
+                                     goal_handle)
         message = metrics_msg(environment.id, metrics, time.monotonic() - wall_start)
         if (recording is not None and record_directory is not None
                 and metrics.outcome is not Outcome.CANCELLED and is_controller_failure(metrics)):
@@ -353,47 +299,96 @@ class SimulatorNode(Node):
                 self.get_logger())
         return message
 
-    def run_fleet(self, episode: Episode, environment: Environment, clock: EpisodeClock,
+    def run_ticks(self, episode: Episode, environment: Environment, clock: EpisodeClock,
                   settings: SimulatorSettings, recording: Recording | None, goal_handle):
-        """The ticks of a fleet episode: each robot's topics in its namespace (r0, r1, ...,
-        frames prefixed 'r0/', ...), lockstep waiting for every driving robot's command."""
-        fleet = FleetStepper(self.fleet_steppers_for(episode.robot_count))
+        """The ticks of an episode that started: a single robot's topics in our namespace, a
+        fleet's each in its own (r0, r1, ..., frames prefixed 'r0/', ...)."""
+        fleet = bool(environment.fleet)
+        stepper = EpisodeStepper(self.fleet_channels_for(episode.robot_count) if fleet
+                                 else [self.channel])
         startup_timeout = settings.controller_startup_timeout
-        missing = fleet.wait_for_controllers(startup_timeout)
+        missing = stepper.wait_for_controllers(startup_timeout)
         if missing is not None:
-            if all(stepper.commands.running for stepper in fleet.steppers):
+            if all(channel.commands.running for channel in stepper.channels):
+                scan = stepper.channels[missing].topics.names['scan'] if fleet else 'scan'
                 episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                              f'robot r{missing}: no controller subscribed to '
-                              f'{fleet.steppers[missing].topics.names["scan"]} and published '
-                              f'cmd_vel within {startup_timeout:.1f} s wall time')
+                              f'{stepper.who(missing)}no controller subscribed to {scan} and '
+                              f'published cmd_vel within {startup_timeout:.1f} s wall time')
             else:
                 episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
             return episode.metrics()
-        for stepper, robot in zip(fleet.steppers, episode.robots, strict=True):
-            stepper.topics.publish_world(environment, robot.ride_height, robot.sensor_height,
-                                         clock.stamp_ns(0.0), recording, range_down=robot.flies)
+        start_ns = clock.stamp_ns(0.0)
+        for channel, robot in zip(stepper.channels, episode.robots, strict=True):
+            channel.topics.publish_world(environment, robot.ride_height, robot.sensor_height,
+                                         start_ns, recording, range_down=robot.flies)
+        observations = episode.observations()
+
+        def prepare_stack() -> str | None:
+            """Costmap resets, then the goals: before time advances."""
+            if settings.reset_costmaps:
+                failure = self.stack.reset_costmaps(settings.stack_timeout)
+                if failure:
+                    return failure
+            for index, observation in enumerate(observations):
+                failure = send_goal(index, observation.goal, start_ns, first=True)
+                if failure:
+                    return failure
+            return None
+
+        def send_goal(index: int, goal, stamp_ns: int, first: bool = False) -> str | None:
+            """Robot ``index``'s waypoint in force on its goal_pose and/or as a NavigateToPose
+            goal (as Nav2's waypoint follower sends each waypoint; a single robot's, refused
+            for fleets above); the first with the robot's waypoints (r1, r2, ...: its goal)."""
+            topics = stepper.channels[index].topics
+            if settings.goal_via.uses_topic:
+                if first:
+                    topics.publish_waypoints(environment.waypoints if index == 0 else [goal],
+                                             stamp_ns, recording)
+                topics.publish_goal(goal, stamp_ns, recording)
+            if settings.goal_via.uses_action:
+                if not first:
+                    self.stack.finish(settings.stack_timeout)
+                return self.stack.send_goal(goal, stamp_ns, settings.stack_timeout)
+            return None
+
+        def stop_after_navigation() -> tuple[float, float, float] | None:
+            """A stack that ended its NavigateToPose goal no longer drives: stand still
+            (as a base with a command timeout does) instead of waiting for cmd_vel."""
+            return (0.0, 0.0, 0.0) if self.stack.navigation_ended else None
+
         loop_start = time.monotonic()
-        metrics = fleet.run(episode, episode.observations(), clock, settings, recording,
-                            goal_handle)
-        self.log_timing(environment.id, metrics, episode.profile, time.monotonic() - loop_start)
+        metrics = stepper.run(episode, clock, settings, recording, goal_handle,
+                              before_first_step=prepare_stack,
+                              # the NavigateToPose stack serves a single robot
+                              command_override=None if fleet else stop_after_navigation,
+                              new_goal=send_goal)
+        note = self.stack.finish(settings.stack_timeout)
+        if note:
+            metrics = dataclasses.replace(
+                metrics, detail=f'{metrics.detail}; {note}' if metrics.detail else note)
+        self.log_timing(environment.id, metrics, episode.profile,
+                        time.monotonic() - loop_start,
+                        stepper.paces[0] if len(stepper.paces) == 1 else None)
+        # The next episode's clock starts one control period after this one's end: a
+        # long-running stack never sees sim time go back (its tf buffer stays valid).
         self.clock_origin_ns = clock.stamp_ns(episode.time + episode.config.control_period)
         return metrics
 
-    def fleet_steppers_for(self, robots: int) -> list[EpisodeStepper]:
+    def fleet_channels_for(self, robots: int) -> list[RobotChannel]:
         """The topics and command readers of ``robots`` fleet robots, each on a node of its
         own in namespace r<i> under ours (made once, kept for later episodes)."""
         command_type = self.commands.msg_type
-        while len(self.fleet_steppers) < robots:
-            index = len(self.fleet_steppers)
+        while len(self.fleet_channels) < robots:
+            index = len(self.fleet_channels)
             namespace = f'{self.get_namespace().rstrip("/")}/r{index}'
             # Not the process's remappings: its __ns would move the node back to ours.
             node = rclpy.create_node(f'{self.get_name()}_r{index}', namespace=namespace,
                                      context=self.context, use_global_arguments=False)
-            self.fleet_steppers.append(EpisodeStepper(
+            self.fleet_channels.append(RobotChannel(
                 RobotTopics(node, frame_prefix=f'r{index}/'),
                 CommandReceiver(node, command_type, use_global_arguments=False),
                 command_type.__name__))
-        return self.fleet_steppers[:robots]
+        return self.fleet_channels[:robots]
 
     def clean_record_directory(self, record_directory: Path) -> None:
         """Remove partial bags a killed worker left, once per directory and process."""
@@ -434,8 +429,8 @@ class SimulatorNode(Node):
         """Cut a running episode off (outcome cancelled, its goal aborted) and wait up to
         ``grace`` seconds for it to end; no new episode starts (at exit, ROS still up)."""
         self.commands.stop()
-        for stepper in self.fleet_steppers:
-            stepper.commands.stop()
+        for channel in self.fleet_channels:
+            channel.commands.stop()
         if self.busy.acquire(timeout=grace):
             self.busy.release()
 
@@ -444,9 +439,9 @@ class SimulatorNode(Node):
         idle = self.busy.acquire(timeout=5.0)
         self.episode.close()
         self.commands.destroy()
-        for stepper in self.fleet_steppers:
-            stepper.commands.destroy()
-            stepper.topics.node.destroy_node()
+        for channel in self.fleet_channels:
+            channel.commands.destroy()
+            channel.topics.node.destroy_node()
         if idle:
             self.busy.release()
 

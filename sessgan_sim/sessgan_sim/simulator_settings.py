@@ -3,7 +3,7 @@
 The simulator node declares one ROS parameter per field of :class:`SimulatorSettings` (same
 name, same default, the field's docstring as its description), turns the parameter values into
 settings with :meth:`SimulatorSettings.from_values` (which names the parameter at fault) and
-builds each episode's :class:`~sessgan_sim.episode.EpisodeConfig` with
+builds each episode's :class:`~sessgan_sim.episode_config.EpisodeConfig` with
 :meth:`SimulatorSettings.episode_config`. Failure bags record :meth:`SimulatorSettings.to_dict`
 and the resolved episode config (:func:`episode_config_record`), so ``replay --resimulate``
 rebuilds the same simulator (:func:`resimulation_settings`).
@@ -28,7 +28,7 @@ from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_sim.agents import AGENT_BEHAVIOURS, AgentConfig
 from sessgan_sim.bag_recording import BagStorage, check_record_subdirectory
 from sessgan_sim.command_pace import PaceRule
-from sessgan_sim.episode import EpisodeConfig, check_time_limit
+from sessgan_sim.episode_config import EpisodeConfig, check_time_limit
 from sessgan_sim.errors import BagWriteError, InvalidConfigError, SessganSimError
 from sessgan_sim.robots import create_robot, get_robot_class
 from sessgan_sim.sensors import LidarConfig

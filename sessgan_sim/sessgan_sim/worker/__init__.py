@@ -2,7 +2,7 @@
 
 * ``commands``: reads ``cmd_vel`` straight from a wait set (lockstep speed);
 * ``topics``: the robot-under-test publishers and the recording of what they send;
-* ``stepping``: the lockstep and clocked tick loops of one episode;
+* ``stepping``: the tick loop (lockstep or clocked) of one episode, for a robot or a fleet;
 * ``nav2_stack``: NavigateToPose goals and the per-episode costmap resets of a Nav2 stack;
 * ``failure_bags``: the failure bag of an episode, with every setting it ran with.
 

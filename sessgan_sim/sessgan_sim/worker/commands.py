@@ -17,7 +17,7 @@ class CommandReceiver:
     more than the whole round trip, and the subscription's node is spun by nobody else. The
     reader is best effort: reliability's acknowledgements cost a fifth of a lockstep tick. An
     episode starts only once this reader has matched the controller's writer (a best-effort
-    reader drops what comes before; see EpisodeStepper.wait_for_controller). A command lost on
+    reader drops what comes before; see RobotChannel.wait_for_controller). A command lost on
     one host (none in bench_lockstep_under_load.py) would end the episode
     controller_unresponsive after the timeout, never hang it or shift later commands.
     """

@@ -1,12 +1,13 @@
-"""The tick loops of one episode: lockstep and clocked.
+"""The tick loop of one episode, lockstep or clocked, for one robot under test or a fleet (a
+single robot is a fleet of one).
 
-Lockstep publishes a tick's clock, odom, tf, scan (and the flyer's range_down), waits for the
-controller's cmd_vel and only then advances the simulation by one control period. Clocked
-advances the simulation at ``real_time_factor`` times the wall clock and applies the latest
-command received; a stack whose commands come too late in sim time ends it as overloaded
-(sessgan_sim.command_pace). Either way a silent controller ends the episode as
-controller_unresponsive after a wall-clock timeout, an evaluate client's cancel or a shutdown
-ends it as cancelled, and nothing waits forever.
+Lockstep publishes a tick's clock, odom, tf, scan (and the flyer's range_down) for every robot,
+waits for the cmd_vel of every robot still driving and only then advances the simulation by one
+control period. Clocked advances the simulation at ``real_time_factor`` times the wall clock and
+applies the latest command received from each robot; a robot's stack whose commands come too
+late in sim time ends it as overloaded (sessgan_sim.command_pace). Either way a silent
+controller ends the episode as controller_unresponsive after a wall-clock timeout, an evaluate
+client's cancel or a shutdown ends it as cancelled, and nothing waits forever.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ GOAL_REPUBLISH_PERIOD = 1.0
 command, between unconditional resends of the goal)."""
 SETTLE_PERIOD = 0.5
 """Wall seconds a fleet's controllers that just came up get before the first tick."""
+StepHook = Callable[[], 'str | None']
+"""Runs between ticks; a string it returns ends the episode as controller_unresponsive."""
 FEEDBACK_PERIOD = 0.25
 """Sim seconds between evaluate feedback messages (at least FEEDBACK_WALL_PERIOD apart)."""
 FEEDBACK_WALL_PERIOD = 0.2
@@ -72,18 +75,15 @@ class EpisodeClock:
         return self.origin_ns + int(round(episode_time * 1e9))
 
 
-class EpisodeStepper:
-    """Runs an episode's ticks between the topics and the command reader."""
+class RobotChannel:
+    """One robot under test's topics and command reader (a fleet has one per robot, each in
+    its namespace r0, r1, ...)."""
 
     def __init__(self, topics: RobotTopics, commands: CommandReceiver,
                  command_type_name: str) -> None:
         self.topics = topics
         self.commands = commands
         self.command_msgtype = f'geometry_msgs/msg/{command_type_name}'
-        self.pace: PaceFigures | None = None
-        """The last clocked episode's command pace (None after a lockstep one)."""
-
-    # ---- before the first tick -------------------------------------------------------------
 
     def wait_for_controller(self, timeout: float) -> bool:
         """Wait until a controller reads our scan and publishes cmd_vel, with every endpoint of
@@ -118,140 +118,6 @@ class EpisodeStepper:
             time.sleep(0.01)
         return False
 
-    # ---- the loop ---------------------------------------------------------------------------
-
-    def run(self, episode, observation, clock: EpisodeClock, settings: SimulatorSettings,
-            recording: Recording | None, goal_handle=None,
-            before_first_step: Callable[[], str | None] | None = None,
-            command_override: Callable[[], tuple[float, float, float] | None] | None = None,
-            new_goal: Callable[[object, int], str | None] | None = None):
-        """Step ``episode`` from ``observation`` until it ends; returns its metrics.
-
-        ``before_first_step`` runs once before time advances (costmap resets and the goal);
-        a string it returns ends the episode as controller_unresponsive with that detail.
-        ``command_override`` may replace the received command (a stack that finished its
-        navigation goal is stopped). ``new_goal(goal, stamp_ns)`` sends a mission's next
-        waypoint (the observation's goal changed) before the tick that follows is published;
-        a string it returns ends the episode like ``before_first_step``'s.
-        """
-        lockstep = settings.step_mode is StepMode.LOCKSTEP
-        timeout = settings.controller_timeout
-        startup_timeout = settings.controller_startup_timeout
-        dt = episode.config.control_period
-        feedback = FeedbackSchedule()
-        topics, commands = self.topics, self.commands
-        topics.forget_goal()
-        command = None
-        last_command_wall = time.monotonic()
-        wall_origin = time.monotonic()
-        next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
-        first = True
-        commands.take_all()  # stale answers of an earlier episode
-        pace = PaceMonitor(settings.pace_rule(), dt)  # fed in clocked mode only
-        while not episode.done:
-            if goal_handle is not None and goal_handle.is_cancel_requested:
-                episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
-                break
-            if not commands.running:  # stopping (SIGINT, SIGTERM): end at once
-                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
-                break
-            stamp_ns = clock.stamp_ns(observation.time)
-            # The stack is prepared (resets, goal) before the first tick in lockstep, so the
-            # controller's first answer already knows the goal; after it in clocked mode, so a
-            # stack like Nav2 sees the new pose in tf before it plans.
-            if first and lockstep and not self.prepare(episode, before_first_step):
-                break
-            topics.publish_tick(observation, stamp_ns, recording)
-            if first and not lockstep:
-                if not self.prepare(episode, before_first_step):
-                    break
-                wall_origin = time.monotonic() - observation.time / settings.real_time_factor
-                last_command_wall = time.monotonic()
-            if time.monotonic() >= next_goal_check:
-                topics.republish_goal()  # to a goal_pose reader that joined late
-                next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
-            if lockstep:
-                limit = startup_timeout if first else timeout
-                received = self.wait_for_command(
-                    time.monotonic() + limit,
-                    (lambda: topics.republish_goal(force=True)) if first else None)
-                if received is None:
-                    if not commands.running:
-                        continue  # the loop's head ends it as cancelled
-                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                                  f'no cmd_vel within {limit:.1f} s wall time')
-                    break
-                command = received
-            else:
-                tick_deadline = wall_origin + (observation.time + dt) / settings.real_time_factor
-                while (remaining := tick_deadline - time.monotonic()) > 0:
-                    if not commands.wait(remaining):
-                        break
-                    received_all = commands.take_all()
-                    if received_all:
-                        command = received_all[-1]
-                        last_command_wall = time.monotonic()
-                        pace.command(observation.time)
-                overridden = command_override() if command_override is not None else None
-                limit = startup_timeout if command is None else timeout
-                if overridden is None and time.monotonic() - last_command_wall > limit:
-                    if not commands.running:
-                        continue
-                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                                  f'no cmd_vel within {limit:.1f} s wall time')
-                    break
-                if overridden is not None:
-                    pace.restart_gap()  # a stack told its navigation ended may fall silent
-                overload = pace.overload()
-                if overload:
-                    episode.abort(Outcome.OVERLOADED, self.overload_detail(overload, settings))
-                    break
-            first = False
-            values = rm.twist_values(command) if command is not None else (0.0, 0.0, 0.0)
-            if not lockstep and overridden is not None:
-                values = overridden
-            if recording is not None and command is not None:
-                recording.add(topics.names['cmd_vel'], self.command_msgtype, stamp_ns, command)
-            goal = observation.goal
-            observation = episode.step(values).observation
-            if new_goal is not None and observation.goal != goal and not episode.done:
-                failure = new_goal(observation.goal, clock.stamp_ns(observation.time))
-                if failure:
-                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
-                    break
-                pace.restart_gap()  # a stack may pause between a mission's waypoints
-            if goal_handle is not None and feedback.due(observation.time):
-                self.publish_feedback(goal_handle, episode, observation)
-        if not lockstep:
-            # The final state, so subscribers and bags see where the robot ended. Not in
-            # lockstep: its answer could arrive during the next episode.
-            topics.publish_tick(observation, clock.stamp_ns(observation.time), recording)
-        metrics = episode.metrics()
-        self.pace = None if lockstep else pace.figures
-        if not lockstep and not is_harness_outcome(metrics.outcome):
-            # A result reached while starved (a collision, stuck, even the goal) says how busy
-            # the machine was, not how the stack drives.
-            overload = pace.overload(final=True)
-            if overload:
-                metrics = dataclasses.replace(
-                    metrics, outcome=Outcome.OVERLOADED, success=False,
-                    detail=self.overload_detail(overload, settings) + (
-                        f' (it had ended {metrics.outcome.value})' if metrics.outcome else ''))
-        return metrics
-
-    @staticmethod
-    def overload_detail(overload: str, settings: SimulatorSettings) -> str:
-        return f'{overload}; real_time_factor {settings.real_time_factor:g}'
-
-    @staticmethod
-    def prepare(episode, before_first_step) -> bool:
-        """Run ``before_first_step``; False (the episode ended) when it reports a failure."""
-        failure = before_first_step() if before_first_step is not None else None
-        if failure:
-            episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
-            return False
-        return True
-
     def wait_for_command(self, deadline: float, republish) -> object | None:
         """The next command received before the wall-clock ``deadline``, else None (also at
         shutdown)."""
@@ -269,6 +135,236 @@ class EpisodeStepper:
             if not self.commands.wait(min(deadline, next_republish) - now):
                 return None
 
+
+class EpisodeStepper:
+    """Runs an episode's ticks between its robots' channels (r0 first; one for a single robot).
+
+    Each tick publishes every robot's clock, odom, tf and scan; lockstep then waits for a
+    command from every robot still driving (one that ended, at its goal say, stands still
+    and may fall silent, as Nav2 does after a goal succeeds). In clocked mode each robot's
+    stack is held to the pace rule on its own (the episode ends overloaded when one could not
+    keep pace; a robot that ended at its goal may fall silent).
+    """
+
+    def __init__(self, channels: list[RobotChannel]) -> None:
+        self.channels = channels
+        self.paces: list[PaceFigures] = []
+        """The last clocked episode's command pace per robot ([] after a lockstep one)."""
+
+    def who(self, index: int) -> str:
+        """How a detail names robot ``index``: 'robot r<i>: ' in a fleet, '' otherwise."""
+        return f'robot r{index}: ' if len(self.channels) > 1 else ''
+
+    # ---- before the first tick -------------------------------------------------------------
+
+    def wait_for_controllers(self, timeout: float) -> int | None:
+        """Wait for every robot's controller (RobotChannel.wait_for_controller); the index of
+        the first that did not come within ``timeout`` wall seconds, else None."""
+        deadline = time.monotonic() + timeout
+        started = time.monotonic()
+        for index, channel in enumerate(self.channels):
+            if not channel.wait_for_controller(max(0.0, deadline - time.monotonic())):
+                return index
+        if len(self.channels) > 1 and time.monotonic() - started > 0.05:
+            # Controllers that came up just now: while we waited for one, discovery of
+            # another's odom or clock reader may still have been under way (a tick it misses
+            # is never sent again). Let it settle, then check everyone once more.
+            time.sleep(SETTLE_PERIOD)
+            for index, channel in enumerate(self.channels):
+                if not channel.wait_for_controller(max(0.0, deadline - time.monotonic())):
+                    return index
+        return None
+
+    # ---- the loop ---------------------------------------------------------------------------
+
+    def run(self, episode, clock: EpisodeClock, settings: SimulatorSettings,
+            recording: Recording | None, goal_handle=None,
+            before_first_step: StepHook | None = None,
+            command_override: Callable[[], tuple[float, float, float] | None] | None = None,
+            new_goal: Callable[[int, object, int], str | None] | None = None):
+        """Step ``episode`` from its robots' latest observations until it ends; returns its
+        metrics.
+
+        ``before_first_step`` runs once before time advances (costmap resets and the goals).
+        ``command_override`` may replace every received command (a stack that finished its
+        navigation goal is stopped). ``new_goal(index, goal, stamp_ns)`` sends robot
+        ``index``'s next waypoint of a mission (its observation's goal changed) before the
+        tick that follows is published. A string either returns ends the episode as
+        controller_unresponsive with that detail.
+        """
+        lockstep = settings.step_mode is StepMode.LOCKSTEP
+        timeout = settings.controller_timeout
+        startup_timeout = settings.controller_startup_timeout
+        dt = episode.config.control_period
+        feedback = FeedbackSchedule()
+        channels = self.channels
+        observations = episode.observations()
+        for channel in channels:
+            channel.commands.take_all()  # stale answers of an earlier episode
+            channel.topics.forget_goal()
+        commands: list = [None] * len(channels)
+        heard = [time.monotonic()] * len(channels)
+        # Each robot's stack keeps pace or not on its own (fed in clocked mode only).
+        paces = [PaceMonitor(settings.pace_rule(), dt) for _ in channels]
+        wall_origin = time.monotonic()
+        next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
+        first = True
+        overridden = None
+        while not episode.done:
+            if goal_handle is not None and goal_handle.is_cancel_requested:
+                episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
+                break
+            if not all(channel.commands.running for channel in channels):
+                # stopping (SIGINT, SIGTERM): end at once
+                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
+                break
+            sim_time = observations[0].time
+            stamp_ns = clock.stamp_ns(sim_time)
+            # The stack is prepared (resets, goal) before the first tick in lockstep, so the
+            # controller's first answer already knows the goal; after it in clocked mode, so a
+            # stack like Nav2 sees the new pose in tf before it plans.
+            if first and lockstep and not self.prepare(episode, before_first_step):
+                break
+            for channel, observation in zip(channels, observations):
+                channel.topics.publish_tick(observation, stamp_ns, recording)
+            if first and not lockstep:
+                if not self.prepare(episode, before_first_step):
+                    break
+                wall_origin = time.monotonic() - sim_time / settings.real_time_factor
+                heard = [time.monotonic()] * len(channels)
+            if time.monotonic() >= next_goal_check:
+                for channel in channels:
+                    channel.topics.republish_goal()  # to a goal_pose reader that joined late
+                next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
+            driving = episode.driving()
+            silent = None
+            if lockstep:
+                limit = startup_timeout if first else timeout
+                for index in driving:
+                    channel = channels[index]
+                    received = channel.wait_for_command(
+                        time.monotonic() + limit,
+                        (lambda topics=channel.topics: topics.republish_goal(force=True))
+                        if first else None)
+                    if received is None:
+                        silent = index
+                        break
+                    commands[index] = received
+            else:
+                self.receive(wall_origin + (sim_time + dt) / settings.real_time_factor,
+                             commands, heard, paces, sim_time)
+                overridden = command_override() if command_override is not None else None
+                if overridden is not None:
+                    for pace in paces:
+                        pace.restart_gap()  # a stack told its navigation ended may fall silent
+                now = time.monotonic()
+                for index in driving if overridden is None else ():
+                    limit = startup_timeout if commands[index] is None else timeout
+                    if now - heard[index] > limit:
+                        silent = index
+                        break
+                overloaded = next(((index, detail) for index in driving
+                                   if (detail := paces[index].overload())), None)
+                if silent is None and overloaded is not None:
+                    episode.abort(Outcome.OVERLOADED, self.who(overloaded[0])
+                                  + self.overload_detail(overloaded[1], settings))
+                    break
+            if silent is not None:
+                if all(channel.commands.running for channel in channels):
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
+                                  f'{self.who(silent)}no cmd_vel within {limit:.1f} s wall time')
+                continue  # the loop's head ends a shut-down episode as cancelled
+            first = False
+            values = []
+            for channel, command in zip(channels, commands):
+                values.append(overridden if overridden is not None
+                              else rm.twist_values(command) if command is not None
+                              else (0.0, 0.0, 0.0))
+                if recording is not None and command is not None:
+                    recording.add(channel.topics.names['cmd_vel'], channel.command_msgtype,
+                                  stamp_ns, command)
+            if lockstep:
+                commands = [None] * len(channels)  # each tick waits for fresh ones
+            goals = [observation.goal for observation in observations]
+            observations = [result.observation for result in episode.step_fleet(values)]
+            if new_goal is not None and not episode.done:
+                failure = self.send_new_goals(new_goal, goals, observations, clock, paces)
+                if failure:
+                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
+                    break
+            if goal_handle is not None and feedback.due(observations[0].time):
+                self.publish_feedback(goal_handle, episode, observations[0])
+        if not lockstep:
+            # The final state, so subscribers and bags see where the robots ended. Not in
+            # lockstep: its answer could arrive during the next episode.
+            stamp_ns = clock.stamp_ns(observations[0].time)
+            for channel, observation in zip(channels, observations):
+                channel.topics.publish_tick(observation, stamp_ns, recording)
+        metrics = episode.metrics()
+        self.paces = [] if lockstep else [pace.figures for pace in paces]
+        if not lockstep and not is_harness_outcome(metrics.outcome):
+            # A result reached while starved (a collision, stuck, even the goal) says how busy
+            # the machine was, not how the stack drives.
+            for index, pace in enumerate(paces):
+                overload = pace.overload(final=True)
+                if overload:
+                    return dataclasses.replace(
+                        metrics, outcome=Outcome.OVERLOADED, success=False,
+                        detail=self.who(index) + self.overload_detail(overload, settings) + (
+                            f' (it had ended {metrics.outcome.value})' if metrics.outcome
+                            else ''))
+        return metrics
+
+    def receive(self, deadline: float, commands: list, heard: list[float],
+                paces: list[PaceMonitor], sim_time: float) -> None:
+        """Clocked mode: take every robot's commands until the wall-clock ``deadline`` (the
+        latest of each in ``commands``, when it came in ``heard``), waking as r0's arrive
+        (a single robot's arrival times are exact), the others' taken at the deadline."""
+        channels = self.channels
+        first = channels[0].commands
+        while (remaining := deadline - time.monotonic()) > 0:
+            if not first.wait(remaining):
+                break  # stopping: the loop's head ends the episode
+            self.take(0, commands, heard, paces, sim_time)
+        if len(channels) > 1:
+            time.sleep(max(0.0, deadline - time.monotonic()))
+            for index in range(1, len(channels)):
+                self.take(index, commands, heard, paces, sim_time)
+
+    def take(self, index: int, commands: list, heard: list[float], paces: list[PaceMonitor],
+             sim_time: float) -> None:
+        """Take robot ``index``'s received commands: keep the latest, note when and its pace."""
+        received = self.channels[index].commands.take_all()
+        if received:
+            commands[index], heard[index] = received[-1], time.monotonic()
+            paces[index].command(sim_time)
+
+    @staticmethod
+    def send_new_goals(new_goal, goals: list, observations: list, clock: EpisodeClock,
+                       paces: list[PaceMonitor]) -> str | None:
+        """Send each robot whose goal changed (a mission's next waypoint) its new one; the
+        first failure, else None."""
+        for index, (goal, observation) in enumerate(zip(goals, observations)):
+            if observation.goal != goal:
+                failure = new_goal(index, observation.goal, clock.stamp_ns(observation.time))
+                if failure:
+                    return failure
+                paces[index].restart_gap()  # a stack may pause between a mission's waypoints
+        return None
+
+    @staticmethod
+    def overload_detail(overload: str, settings: SimulatorSettings) -> str:
+        return f'{overload}; real_time_factor {settings.real_time_factor:g}'
+
+    @staticmethod
+    def prepare(episode, before_first_step) -> bool:
+        """Run ``before_first_step``; False (the episode ended) when it reports a failure."""
+        failure = before_first_step() if before_first_step is not None else None
+        if failure:
+            episode.abort(Outcome.CONTROLLER_UNRESPONSIVE, failure)
+            return False
+        return True
+
     @staticmethod
     def publish_feedback(goal_handle, episode, observation) -> None:
         from sessgan_interfaces.action import EvaluateEnvironment
@@ -279,145 +375,3 @@ class EpisodeStepper:
         feedback.collisions = so_far.collisions
         feedback.distance_to_goal = so_far.final_distance_to_goal
         goal_handle.publish_feedback(feedback)
-
-
-class FleetStepper:
-    """Runs a fleet episode's ticks: one EpisodeStepper (topics and command reader in the
-    robot's namespace) per robot under test, r0 first. In clocked mode each robot's stack
-    is held to the pace rule on its own (the episode ends overloaded when one could not keep
-    pace; a robot that ended at its goal may fall silent).
-
-    Each tick publishes every robot's clock, odom, tf and scan; lockstep then waits for a
-    command from every robot still driving (one that ended, at its goal say, stands still
-    and may fall silent, as Nav2 does after a goal succeeds). Goals go out on each robot's
-    goal_pose (and waypoints); a fleet has no NavigateToPose client.
-    """
-
-    def __init__(self, steppers: list[EpisodeStepper]) -> None:
-        self.steppers = steppers
-
-    def wait_for_controllers(self, timeout: float) -> int | None:
-        """Wait for every robot's controller (EpisodeStepper.wait_for_controller); the
-        index of the first that did not come within ``timeout`` wall seconds, else None."""
-        deadline = time.monotonic() + timeout
-        started = time.monotonic()
-        for index, stepper in enumerate(self.steppers):
-            if not stepper.wait_for_controller(max(0.0, deadline - time.monotonic())):
-                return index
-        if time.monotonic() - started > 0.05:
-            # Controllers that came up just now: while we waited for one, discovery of
-            # another's odom or clock reader may still have been under way (a tick it misses
-            # is never sent again). Let it settle, then check everyone once more.
-            time.sleep(SETTLE_PERIOD)
-            for index, stepper in enumerate(self.steppers):
-                if not stepper.wait_for_controller(max(0.0, deadline - time.monotonic())):
-                    return index
-        return None
-
-    def run(self, episode, observations, clock: EpisodeClock, settings: SimulatorSettings,
-            recording: Recording | None, goal_handle=None):
-        """Step the fleet ``episode`` from ``observations`` (a robot each) until it ends;
-        returns its metrics."""
-        lockstep = settings.step_mode is StepMode.LOCKSTEP
-        timeout = settings.controller_timeout
-        dt = episode.config.control_period
-        feedback = FeedbackSchedule()
-        steppers = self.steppers
-        stamp_ns = clock.stamp_ns(0.0)
-        for stepper, observation in zip(steppers, observations, strict=True):
-            stepper.commands.take_all()  # stale answers of an earlier episode
-            stepper.topics.forget_goal()
-            stepper.topics.publish_waypoints([observation.goal], stamp_ns, recording)
-            stepper.topics.publish_goal(observation.goal, stamp_ns, recording)
-        commands: list = [None] * len(steppers)
-        heard = [time.monotonic()] * len(steppers)
-        # Each robot's stack keeps pace or not on its own (fed in clocked mode only).
-        paces = [PaceMonitor(settings.pace_rule(), dt) for _ in steppers]
-        wall_origin = time.monotonic()
-        next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
-        first = True
-        while not episode.done:
-            if goal_handle is not None and goal_handle.is_cancel_requested:
-                episode.abort(Outcome.CANCELLED, 'cancelled by the evaluate client')
-                break
-            if not all(stepper.commands.running for stepper in steppers):
-                episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
-                break
-            stamp_ns = clock.stamp_ns(observations[0].time)
-            for stepper, observation in zip(steppers, observations):
-                stepper.topics.publish_tick(observation, stamp_ns, recording)
-            if time.monotonic() >= next_goal_check:
-                for stepper in steppers:
-                    stepper.topics.republish_goal()  # to a goal_pose reader that joined late
-                next_goal_check = time.monotonic() + GOAL_REPUBLISH_PERIOD
-            driving = [index for index in range(len(steppers))
-                       if episode.robot_metrics(index).outcome is None]
-            limit = settings.controller_startup_timeout if first else timeout
-            silent = None
-            if lockstep:
-                for index in driving:
-                    stepper = steppers[index]
-                    received = stepper.wait_for_command(
-                        time.monotonic() + limit,
-                        (lambda topics=stepper.topics: topics.republish_goal(force=True))
-                        if first else None)
-                    if received is None:
-                        silent = index
-                        break
-                    commands[index] = received
-            else:
-                tick_deadline = (wall_origin
-                                 + (observations[0].time + dt) / settings.real_time_factor)
-                time.sleep(max(0.0, tick_deadline - time.monotonic()))
-                now = time.monotonic()
-                for index, stepper in enumerate(steppers):
-                    received_all = stepper.commands.take_all()
-                    if received_all:
-                        commands[index], heard[index] = received_all[-1], now
-                        paces[index].command(observations[0].time)
-                for index in driving:
-                    limit = (settings.controller_startup_timeout if commands[index] is None
-                             else timeout)
-                    if now - heard[index] > limit:
-                        silent = index
-                        break
-                overloaded = next(((index, detail) for index in driving
-                                   if (detail := paces[index].overload())), None)
-                if silent is None and overloaded is not None:
-                    episode.abort(Outcome.OVERLOADED, f'robot r{overloaded[0]}: '
-                                  + EpisodeStepper.overload_detail(overloaded[1], settings))
-                    break
-            if silent is not None:
-                if all(stepper.commands.running for stepper in steppers):
-                    episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
-                                  f'robot r{silent}: no cmd_vel within {limit:.1f} s wall time')
-                continue  # the loop's head ends a shut-down episode as cancelled
-            first = False
-            values = []
-            for stepper, command in zip(steppers, commands):
-                values.append(rm.twist_values(command) if command is not None
-                              else (0.0, 0.0, 0.0))
-                if recording is not None and command is not None:
-                    recording.add(stepper.topics.names['cmd_vel'], stepper.command_msgtype,
-                                  stamp_ns, command)
-            if lockstep:
-                commands = [None] * len(steppers)  # each tick waits for fresh ones
-            observations = [result.observation for result in episode.step_fleet(values)]
-            if goal_handle is not None and feedback.due(observations[0].time):
-                EpisodeStepper.publish_feedback(goal_handle, episode, observations[0])
-        if not lockstep:
-            stamp_ns = clock.stamp_ns(observations[0].time)
-            for stepper, observation in zip(steppers, observations):
-                stepper.topics.publish_tick(observation, stamp_ns, recording)
-        metrics = episode.metrics()
-        if not lockstep and not is_harness_outcome(metrics.outcome):
-            for index, pace in enumerate(paces):
-                overload = pace.overload(final=True)
-                if overload:  # a result reached while one robot's stack was starved
-                    return dataclasses.replace(
-                        metrics, outcome=Outcome.OVERLOADED, success=False,
-                        detail=f'robot r{index}: '
-                        + EpisodeStepper.overload_detail(overload, settings)
-                        + (f' (it had ended {metrics.outcome.value})' if metrics.outcome
-                           else ''))
-        return metrics

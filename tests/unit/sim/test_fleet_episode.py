@@ -95,17 +95,20 @@ def test_robots_passing_each_other_reach_their_goals_and_the_episode_ends(episod
     fast = BodyCommand(0.5, 0.0, 0.0)
     results = episode.step_fleet([fast, STAND])
     assert not results[0].done and results[0].outcome is None
+    assert episode.driving() == [0, 1]
     for _ in range(400):  # r1 waits; r0 arrives and stands while r1 goes on
         if episode.robot_metrics(0).outcome is not None:
             break
         episode.step_fleet([fast, STAND])
     assert episode.robot_metrics(0).outcome is Outcome.GOAL_REACHED and not episode.done
+    assert episode.driving() == [1]  # the tick loop waits for r1's commands alone
     run(episode, [fast, STAND], limit=20)  # r0 brakes to a stop, whatever it is sent
     parked = episode.robots[0].position
     metrics = run(episode, [fast, fast], limit=600)
     assert episode.robots[0].position == pytest.approx(parked, abs=0.01)
     assert metrics.outcome is Outcome.GOAL_REACHED and metrics.legs_completed == 2
     assert metrics.collisions == 0 and 'r0: goal_reached' in metrics.detail
+    assert episode.driving() == []
 
 
 def test_the_fleets_outcome_is_the_first_failing_robots(episode):

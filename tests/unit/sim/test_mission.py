@@ -114,6 +114,9 @@ def test_a_mission_gets_the_scenario_time_limit_per_leg_and_its_dwells():
         top_speed = episode.robot.top_speed
         assert episode.config.time_limit == pytest.approx(max(
             scenario_limit, ROUTE_TIME_FACTOR * plain.route_length / top_speed))
+        # The rule lives in the config: the episode applies it.
+        assert EpisodeConfig().time_limit_for(plain, top_speed) == episode.config.time_limit
+        assert EpisodeConfig(time_limit=7.0).time_limit_for(plain, top_speed) == 7.0
         episode.reset(mission, EpisodeConfig(dummy_agents=0))
         assert episode.config.time_limit == pytest.approx(max(
             3 * scenario_limit + 2 * 3.0,

@@ -1,0 +1,106 @@
+"""Progress toward the goal and the stuck rule of one robot under test.
+
+An episode ends as stuck when the robot's distance to its goal, measured on a ProgressField of
+the certificate grid, has not reached a new minimum for ``stuck_timeout`` sim seconds, unless it
+waits for something that blocks its way (the episode says what) or dwells at a station.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from sessgan_core.environment import Pose2D
+from sessgan_core.grid_search import descend, distance_field
+from sessgan_core.route_certificate import CertificateGrid
+
+
+class ProgressField(NamedTuple):
+    """Distance to the goal in certificate-grid steps that the stuck rule measures progress on.
+
+    Exact inside the certified route's space (clearance >= radius + route margin: where a
+    stack with an inflation margin drives, so a detour the route needs counts as progress),
+    extended a few steps into the band around it where a robot cutting a corner or touching
+    a wall may be, but never through a gap the certificate does not use; inf elsewhere. In a
+    map without a certified route it is the distance through any space the footprint fits.
+    """
+
+    grid: CertificateGrid
+    steps: np.ndarray
+    route: list[tuple[int, int]]
+    """The certified route's cells from start to goal ([] without one)."""
+
+    def distance(self, x: float, y: float) -> float:
+        """Distance (m) from (``x``, ``y``) to the goal along the field; inf (never progress)
+        where the field does not reach."""
+        row, col = self.grid.cell_of(x, y)
+        steps = self.steps
+        if 0 <= row < steps.shape[0] and 0 <= col < steps.shape[1]:
+            return float(steps[row, col]) * self.grid.cell_size
+        return math.inf
+
+
+def progress_field(grid: CertificateGrid, leg_start: Pose2D, leg_goal: Pose2D, feasible: bool,
+                   footprint_radius: float, route_need: float) -> ProgressField:
+    """The ProgressField of one leg (a plain episode's one leg: start to goal) for a robot of
+    ``footprint_radius`` (m); ``route_need``: the clearance (m) the certified route keeps."""
+    goal = grid.cell_of(leg_goal.x, leg_goal.y)
+    start = grid.cell_of(leg_start.x, leg_start.y)
+    clearance = grid.clearance
+    # Diagonal steps: a diagonal gap the robot passes must not look like a detour.
+    steps = distance_field(clearance >= route_need - 1e-9, goal, diagonal=True)
+    route = descend(steps, start) if feasible else []
+    if not route:
+        return ProgressField(grid, distance_field(
+            clearance >= footprint_radius * 0.75, goal, diagonal=True), [])
+    band = (clearance > 0.0) & ~np.isfinite(steps)
+    for _ in range(int(math.ceil(route_need / grid.cell_size)) + 1):
+        padded = np.pad(steps, 1, constant_values=np.inf)
+        nearest = np.minimum.reduce([padded[:-2, 1:-1], padded[2:, 1:-1],
+                                     padded[1:-1, :-2], padded[1:-1, 2:]]) + 1.0
+        steps = np.where(band, np.minimum(steps, nearest), steps)
+    return ProgressField(grid, steps, route)
+
+
+class ProgressMonitor:
+    """The stuck rule of one robot: the best distance to the current leg's goal so far and
+    when it was reached. ``stuck_timeout`` <= 0 disables the rule."""
+
+    def __init__(self, legs: Sequence[ProgressField], stuck_timeout: float) -> None:
+        self.legs = list(legs)
+        """Every leg's ProgressField, in order (a plain episode's one)."""
+        self.field = self.legs[0]
+        """The current leg's."""
+        self.stuck_timeout = stuck_timeout
+        self.best = math.inf
+        """m, the least distance to the current leg's goal so far."""
+        self.last_progress_time = 0.0
+
+    def start_leg(self, leg: int, x: float, y: float) -> None:
+        """Measure progress on leg ``leg`` from the robot at (``x``, ``y``) m on."""
+        self.field = self.legs[leg]
+        self.best = self.field.distance(x, y)
+
+    def hold(self, now: float) -> None:
+        """Count sim time ``now`` as progress (arriving, setting off, dwelling)."""
+        self.last_progress_time = now
+
+    def stuck(self, now: float, x: float, y: float, waiting: Callable[[], bool]) -> bool:
+        """Whether the robot at (``x``, ``y``) m is stuck at sim time ``now``: no new least
+        distance for stuck_timeout seconds. ``waiting()`` (asked only without progress) says
+        whether something blocks its way; waiting is not being stuck (the time limit still
+        bounds the wait)."""
+        if self.stuck_timeout <= 0:
+            return False
+        distance = self.field.distance(x, y)
+        if distance < self.best:
+            self.best = distance
+            self.last_progress_time = now
+            return False
+        if waiting():
+            self.last_progress_time = now
+            return False
+        return now - self.last_progress_time >= self.stuck_timeout - 1e-9

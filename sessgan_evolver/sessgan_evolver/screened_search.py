@@ -459,6 +459,9 @@ class ScreenedSearch:
 
 ARCHIVE_TRIES = 8
 """Children an archive test draws before it falls back to its parent's own map."""
+ARCHIVE_STREAM = 20
+"""Mixed into each map seed, so an archive's random draws are its own, not those a generator
+or the search makes from the same number."""
 
 
 class ArchiveSource:
@@ -490,7 +493,7 @@ class ArchiveSource:
         search, spec = self.search, self.search.spec
         made = []
         for seed in seeds:
-            rng = np.random.default_rng([int(seed), 20])
+            rng = np.random.default_rng([int(seed), ARCHIVE_STREAM])
             parent = search.parents[int(rng.integers(len(search.parents)))]
             cells, certified = parent.test.cells, None
             for _ in range(ARCHIVE_TRIES):

@@ -64,8 +64,9 @@ def test_a_fleet_robot_whose_stack_stalls_ends_the_clocked_episode_overloaded(
     metrics, _ = evaluate(ros_node, namespace, environment_to_msg(crossing_environment()),
                           time_limit=60.0, timeout=300)
     assert metrics.outcome == 'overloaded', (metrics.outcome, metrics.detail)
-    assert 'r1: overloaded (robot r1: the stack could not keep pace' in metrics.detail, (
-        metrics.detail)
+    # The stalling robot is named (the steady one may be too, on a machine busy starting
+    # both stacks: every robot that could not keep pace is).
+    assert 'robot r1: the stack could not keep pace' in metrics.detail, metrics.detail
 
 
 def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(

@@ -20,7 +20,8 @@ def run(command: list[str], cwd: Path) -> subprocess.CompletedProcess:
 
 
 def test_campaign_in_process_then_fresh_seeds_then_compare(ros_workspace, tmp_path):
-    campaign = run(['campaign', '--in-process', '--generations', '2', '--population', '3',
+    campaign = run(['campaign', '--in-process', '--method', 'sessgan', '--generations', '2',
+                    '--population', '3',
                     '--maps-per-member', '1', '--time-limit', '4', '--seed', '3',
                     '--seed-schedule', 'rotating', '--run', 'tiny', '--runs-root', 'runs',
                     '--bags-root', 'bags'], tmp_path)

@@ -79,17 +79,28 @@ def test_ctrl_c_stops_the_suite_and_reports_what_ran(ros_workspace, tmp_path):
                             record_directory=tmp_path / 'bags') as evaluator:
         bag = evaluator.run_environment(environment, 0).metrics['bag_path']
     assert bag
-    count = 400  # far more than run before the signal (also on a quiet machine)
+    count = 2000  # far more than run in the second before the signal
     suite_file = tmp_path / 'suite.yaml'
     suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
-        {'name': f'n{index:03d}', 'bag': bag} for index in range(count)]}))
+        {'name': f'n{index:04d}', 'bag': bag} for index in range(count)]}))
+    # --retries 1 makes the suite print a note once every scenario is prepared, just before
+    # the first runs: the signal comes a second after it (a fixed wait raced: on a quiet
+    # machine 400 scenarios had all run within 10 s).
     process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
-                                str(suite_file), '--output', 'out', '--record', 'none'],
+                                str(suite_file), '--output', 'out', '--record', 'none',
+                                '--retries', '1'],
                                cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True, start_new_session=True)
-    time.sleep(10.0)
+    assert process.stderr is not None
+    before = []
+    while 'in-process lockstep episodes are exact' not in ''.join(before[-1:]):
+        line = process.stderr.readline()
+        assert line, ''.join(before)[-2000:]  # it ended before running anything
+        before.append(line)
+    time.sleep(1.0)
     os.killpg(process.pid, signal.SIGINT)
     stdout, stderr = process.communicate(timeout=120)
+    stderr = ''.join(before) + stderr
     counts, verdicts = junit_counts(tmp_path / 'out' / 'junit.xml')
     ran = count - int(counts['skipped'])
     assert 0 < int(counts['skipped']) and int(counts['failures']) == ran, counts

@@ -263,11 +263,12 @@ class EpisodeStepper:
                     if now - heard[index] > limit:
                         silent = index
                         break
-                overloaded = next(((index, detail) for index in driving
-                                   if (detail := paces[index].overload())), None)
-                if silent is None and overloaded is not None:
-                    episode.abort(Outcome.OVERLOADED, self.who(overloaded[0])
-                                  + self.overload_detail(overloaded[1], settings))
+                # Every robot whose stack could not keep pace is named, not only the first.
+                overloaded = '; '.join(
+                    self.who(index) + self.overload_detail(detail, settings)
+                    for index in driving if (detail := paces[index].overload()))
+                if silent is None and overloaded:
+                    episode.abort(Outcome.OVERLOADED, overloaded)
                     break
             if silent is not None:
                 if all(channel.commands.running for channel in channels):
@@ -305,14 +306,14 @@ class EpisodeStepper:
         if not lockstep and not is_harness_outcome(metrics.outcome):
             # A result reached while starved (a collision, stuck, even the goal) says how busy
             # the machine was, not how the stack drives.
-            for index, pace in enumerate(paces):
-                overload = pace.overload(final=True)
-                if overload:
-                    return dataclasses.replace(
-                        metrics, outcome=Outcome.OVERLOADED, success=False,
-                        detail=self.who(index) + self.overload_detail(overload, settings) + (
-                            f' (it had ended {metrics.outcome.value})' if metrics.outcome
-                            else ''))
+            overloaded = '; '.join(
+                self.who(index) + self.overload_detail(detail, settings)
+                for index, pace in enumerate(paces) if (detail := pace.overload(final=True)))
+            if overloaded:
+                return dataclasses.replace(
+                    metrics, outcome=Outcome.OVERLOADED, success=False,
+                    detail=overloaded + (f' (it had ended {metrics.outcome.value})'
+                                         if metrics.outcome else ''))
         return metrics
 
     def receive(self, deadline: float, commands: list, heard: list[float],

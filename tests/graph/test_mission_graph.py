@@ -16,7 +16,7 @@ import pytest
 
 from tests.graph.test_reference_navigator_graph import start_navigator
 from tests.graph.test_resimulation import replay_all, resimulate_same
-from tests.graph.test_simulator_graph import evaluate, start_simulator
+from tests.graph.test_simulator_graph import evaluate, evaluate_with_reruns, start_simulator
 
 pytestmark = pytest.mark.graph
 
@@ -129,11 +129,12 @@ def test_a_nav2_stack_gets_each_waypoint_as_a_navigate_to_pose_goal(node_process
     start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
                     'real_time_factor:=3.0', 'goal_interface:=navigate_to_pose')
     stand_in = start_stand_in(node_processes, namespace, '--action')
-    metrics, _ = evaluate(ros_node, namespace, environment_to_msg(environment),
-                          time_limit=60.0)
+    metrics, _, tries = evaluate_with_reruns(ros_node, namespace, environment_to_msg(environment),
+                                          time_limit=60.0)
     assert metrics.outcome == 'goal_reached', metrics.detail
     assert (metrics.legs, metrics.legs_completed) == (2, 2)
     output = stand_in.output()
-    # The station's goal ended (the stack reached it and stood for the dwell), then home's.
-    assert output.count('goal from navigate_to_pose') == 2, output
+    # The station's goal ended (the stack reached it and stood for the dwell), then home's
+    # (an overloaded try sent its station goal at least).
+    assert output.count('goal from navigate_to_pose') >= 2 + (tries - 1), output
     assert 'goal from goal_pose' not in output

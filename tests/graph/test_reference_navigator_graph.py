@@ -14,7 +14,12 @@ from __future__ import annotations
 
 import pytest
 
-from tests.graph.test_simulator_graph import environment_msg, evaluate, start_simulator
+from tests.graph.test_simulator_graph import (
+    environment_msg,
+    evaluate,
+    evaluate_with_reruns,
+    start_simulator,
+)
 
 pytestmark = pytest.mark.graph
 
@@ -29,21 +34,6 @@ def start_navigator(node_processes, namespace: str, robot: str, *parameters: str
     for parameter in parameters:
         command += ['-p', parameter]
     return node_processes.start(command, name=f'reference_navigator{namespace.replace("/", "_")}')
-
-
-def evaluate_with_reruns(ros_node, namespace: str, environment, tries: int = 3):
-    """``evaluate``, with the harness's re-run rule for an overloaded episode (each try at half
-    the pace of the one before: sessgan_evolver.harness, --adaptive-rtf); HarnessFailureError
-    when every try is overloaded. Other outcomes are the test's to judge."""
-    from sessgan_evolver.harness import HarnessRetries
-
-    retries = HarnessRetries(tries, print, adaptive_rtf=True)
-    while True:
-        metrics, _ = evaluate(ros_node, namespace, environment, timeout=600,
-                              real_time_factor_scale=retries.real_time_factor_scale(namespace))
-        if metrics.outcome != 'overloaded':
-            return metrics
-        retries.failed(namespace, environment.id, metrics.outcome, metrics.detail)
 
 
 def example_environment(scenario: str):
@@ -72,7 +62,8 @@ def test_reference_navigator_reaches_the_goal_on_its_timer_in_clocked_mode(
                     'expected_command_period:=0.05')  # the navigator's 20 Hz
     start_navigator(node_processes, namespace, ROBOTS[scenario], 'control_mode:=timer',
                     'control_rate_hz:=20.0')
-    metrics = evaluate_with_reruns(ros_node, namespace, example_environment(scenario))
+    metrics, _, _ = evaluate_with_reruns(ros_node, namespace, example_environment(scenario),
+                                      timeout=600)
     assert metrics.feasible
     assert metrics.outcome == 'goal_reached', (metrics.outcome, metrics.detail)
     assert metrics.fault_collisions == 0, metrics.detail

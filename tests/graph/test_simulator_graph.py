@@ -65,6 +65,27 @@ def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0,
     return result.result().result.metrics, feedback
 
 
+def evaluate_with_reruns(ros_node, namespace: str, environment_msg, tries: int = 3,
+                         **options):
+    """``evaluate`` for a clocked worker, with the harness's re-run rule for an overloaded
+    episode (on a busy machine the stack may not keep pace with sim time: no result, run
+    again at half the pace, as campaigns do with --adaptive-rtf; sessgan_evolver.harness).
+    Returns the metrics and feedback of the first try that was not overloaded and the number of
+    tries;
+    HarnessFailureError when every try is overloaded. Other outcomes are the test's to judge."""
+    from sessgan_evolver.harness import HarnessRetries
+
+    retries = HarnessRetries(tries, print, adaptive_rtf=True)
+    for attempt in range(1, tries + 1):
+        metrics, feedback = evaluate(
+            ros_node, namespace, environment_msg,
+            real_time_factor_scale=retries.real_time_factor_scale(namespace), **options)
+        if metrics.outcome != 'overloaded':
+            return metrics, feedback, attempt
+        retries.failed(namespace, environment_msg.id, metrics.outcome, metrics.detail)
+    raise AssertionError('unreachable: HarnessRetries raises on the last overloaded try')
+
+
 def environment_msg(cells, scenario: str, env_id: str):
     from sessgan_core.ros_conversion import environment_to_msg
     from sessgan_core.valid_tests import make_environment

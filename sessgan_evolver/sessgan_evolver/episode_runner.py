@@ -56,6 +56,7 @@ from sessgan_evolver.errors import EpisodeRunnerError
 from sessgan_sim.episode import Episode, EpisodeConfig, Observation, TickProfile
 from sessgan_sim.errors import EpisodeError
 from sessgan_sim.metrics import ContactEvent
+from sessgan_sim.robots import create_robot
 from sessgan_sim.simulator_settings import SimulatorSettings
 
 
@@ -159,10 +160,11 @@ class EpisodeRunner:
     """Owns one simulator (a pybullet client) and runs episodes one at a time.
 
     ``controller``: a name of sessgan_controllers' registry ('' = the scenario's);
-    ``time_limit``: sim seconds (0 = the settings', else the scenario's); ``settings``: the
-    simulator worker's settings each episode's config is built from (default: the node's
-    defaults; only lockstep makes sense in process); ``clock``: times each run's ``wall_time``
-    and the parts of its ticks (:attr:`profile`), e.g. ``time.thread_time`` for CPU time.
+    ``time_limit``: sim seconds (0 = the settings', else each episode's own as a worker
+    gives it); ``settings``: the simulator worker's settings each episode's config is built
+    from (default: the node's defaults; only lockstep makes sense in process); ``clock``:
+    times each run's ``wall_time`` and the parts of its ticks (:attr:`profile`), e.g.
+    ``time.thread_time`` for CPU time.
     """
 
     def __init__(self, scenario: str, controller: str = '', time_limit: float = 0.0,
@@ -186,10 +188,9 @@ class EpisodeRunner:
         if self.settings.mode != 'lockstep':
             raise EpisodeRunnerError('in-process episodes are lockstep episodes; the settings '
                                      f'ask for {self.settings.mode!r}')
-        self.time_limit = float(time_limit) or float(self.settings.time_limit) \
-            or spec.time_limit
-        self.time_limit_given = bool(float(time_limit) or float(self.settings.time_limit))
-        """False: the scenario's limit, which a mission gets per leg (mission_time_limit)."""
+        self.time_limit = float(time_limit) or float(self.settings.time_limit)
+        """Sim seconds of every episode; 0: each episode's own, by the rule a worker applies
+        (the scenario's, raised for a long route and a mission: EpisodeConfig.time_limit_for)."""
         config = self.episode_config(0)
         config.validate()
         self.robot = str(config.robot)
@@ -229,20 +230,15 @@ class EpisodeRunner:
     def episode_config(self, seed: int, environment: Environment | None = None
                        ) -> EpisodeConfig:
         """The config of an episode with simulator seed ``seed`` (as a worker builds it for an
-        evaluate goal with this runner's time limit), scenario defaults filled in; the time
-        limit of ``environment``'s mission (:meth:`mission_time_limit`) when given."""
-        time_limit = self.mission_time_limit(environment) if environment else self.time_limit
-        return self.settings.episode_config(time_limit=time_limit, seed=int(seed)) \
-            .resolved(get_scenario(self.scenario))
-
-    def mission_time_limit(self, environment: Environment) -> float:
-        """Sim seconds for ``environment``: the runner's time limit; for a mission with the
-        scenario's limit, that limit per leg plus every dwell (as a worker gives it,
-        sessgan_sim.episode)."""
-        if self.time_limit_given or not environment.stations:
-            return self.time_limit
-        return (self.time_limit * environment.legs
-                + len(environment.stations) * environment.dwell_time)
+        evaluate goal with this runner's time limit), scenario defaults filled in; with
+        ``environment``, its time limit as a worker gives it."""
+        config = self.settings.episode_config(time_limit=self.time_limit, seed=int(seed))
+        if environment is not None and config.time_limit is None:
+            top_speed = create_robot(str(config.robot or get_scenario(self.scenario).robot),
+                                     config.robot_params).top_speed
+            config = dataclasses.replace(
+                config, time_limit=config.time_limit_for(environment, top_speed))
+        return config.resolved(get_scenario(self.scenario))
 
     def make_controller(self, environment: Environment) -> Controller:
         """A fresh controller for an episode in ``environment``, set up as its node would be:

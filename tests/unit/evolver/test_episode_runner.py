@@ -120,3 +120,24 @@ def test_as_in_a_campaign_the_controller_gets_the_map_and_its_robot(factory):
         assert runner.robot == 'tricycle' and runner.episode_config(0).robot == 'tricycle'
     with EpisodeRunner('racetrack', 'reference_navigator') as runner:
         assert runner.robot == 'car'
+
+
+def test_in_process_episodes_get_the_time_limit_a_worker_gives():
+    """Without a given limit, an in-process episode lasts as long as the same evaluate goal
+    on a worker: the scenario's limit raised for a long route (it was the bare scenario
+    limit in process, so a slow robot could time out on a long valid route only there)."""
+    from sessgan_sim.episode import Episode
+    from sessgan_sim.simulator_settings import SimulatorSettings
+
+    corridor = np.ones((32, 32), dtype=np.int64)
+    corridor[1:31, 1:5] = 0  # an L-shaped corridor 2 m wide and 30 m long: a route over
+    corridor[27:31, 1:31] = 0  # 15 m needs more than 4 x 15 m / 1 m/s, the scenario's 60 s
+    environment = make_environment(corridor, 'factory', 'long', seed=1)
+    assert environment.feasible and environment.route_length > 15.0
+    with EpisodeRunner('factory') as runner, Episode() as worker:
+        in_process = runner.episode_config(0, environment).time_limit
+        worker.reset(environment, SimulatorSettings().episode_config(seed=0))
+        assert in_process == pytest.approx(worker.config.time_limit)
+        assert in_process > 60.0
+    with EpisodeRunner('factory', time_limit=5.0) as runner:
+        assert runner.episode_config(0, environment).time_limit == 5.0

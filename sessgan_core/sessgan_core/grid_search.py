@@ -143,15 +143,18 @@ def distance_field(free: np.ndarray, source: Cell, diagonal: bool = False) -> np
     steps[source_index] = 0.0
     neighbours = np.array([-stride - 1, -stride, -stride + 1, -1, 1,
                            stride - 1, stride, stride + 1])
+    fresh = np.zeros(unreached.shape, dtype=bool)
     frontier = np.array([source_index])
     step = 0
     while len(frontier):
         step += 1
         grown = (frontier[:, None] + neighbours).reshape(-1)
-        grown = np.unique(grown[unreached[grown]])
-        unreached[grown] = False
-        steps[grown] = step
-        frontier = grown
+        # Each new cell once (a cell next to several of the frontier's is listed by each).
+        fresh[grown[unreached[grown]]] = True
+        frontier = np.flatnonzero(fresh)
+        fresh[frontier] = False
+        unreached[frontier] = False
+        steps[frontier] = step
     return steps.reshape(height + 2, stride)[1:-1, 1:-1].copy()
 
 

@@ -221,8 +221,8 @@ class EpisodeRunner:
 
     @property
     def profile(self) -> TickProfile:
-        """Where the ticks of the last episode spent their time (physics, sensors, metrics;
-        the rest of a run is the controller's and the trace's), in ``clock`` seconds."""
+        """Where the last episode spent its time (reset, physics, sensors, metrics, the
+        controllers' decisions; the rest of a run is the trace's), in ``clock`` seconds."""
         return self._episode.profile if self._episode is not None else TickProfile()
 
     # --- episodes ---------------------------------------------------------------------------
@@ -278,7 +278,9 @@ class EpisodeRunner:
         recorders = ([_TraceRecorder(episode, each, keep_scans, index)
                       for index, each in enumerate(observations)] if trace else [])
         goal_reached = [False] * len(observations)
+        clock = self._clock
         while not episode.done:
+            deciding = clock()
             commands = []
             for index, (controller, each) in enumerate(zip(controllers, observations)):
                 if (each.goal.x, each.goal.y) != (goals[index].x, goals[index].y):
@@ -294,6 +296,7 @@ class EpisodeRunner:
                 command = (STOP if goal_reached[index]
                            else controller.compute_command(scan, state, goals[index]))
                 commands.append((command if command.is_finite() else STOP).values())
+            episode.profile.controller += clock() - deciding
             observations = [result.observation for result in episode.step_fleet(commands)]
             for recorder, each, values in zip(recorders, observations, commands):
                 recorder.add(each, values)

@@ -129,6 +129,12 @@ class TickProfile:
     """Lidar and clearance."""
     metrics: float = 0.0
     """Metric bookkeeping, termination checks and the Observation."""
+    reset: float = 0.0
+    """The episode's reset: world build, progress fields, agents, first scan (not in
+    :attr:`total`)."""
+    controller: float = 0.0
+    """The controllers' decisions, where their runner times them (sessgan_evolver's
+    EpisodeRunner; 0 otherwise; not in :attr:`total`)."""
 
     @property
     def total(self) -> float:
@@ -306,6 +312,13 @@ class Episode:
         simulated does not raise: the episode is done at once with outcome
         invalid_environment (see :attr:`done` and :meth:`metrics`).
         """
+        started = self._clock()
+        try:
+            return self._reset(environment, config)
+        finally:
+            self.profile.reset = self._clock() - started
+
+    def _reset(self, environment: Environment, config: EpisodeConfig | None) -> Observation:
         config = config or EpisodeConfig()
         config.validate()
         self._world.open()

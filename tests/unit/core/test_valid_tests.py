@@ -197,3 +197,41 @@ def test_descend_follows_a_distance_field_to_its_origin():
     assert path[0] == (2, 4) and path[-1] == (0, 0) and len(path) == 7
     assert descend(field, (1, 2)) == []  # a wall
     assert descend(field, (5, 5)) == []  # outside
+
+
+def _eight_connected_steps(mask, source):
+    """Oracle: breadth-first search, one cell at a time, over the 8 neighbours."""
+    from collections import deque
+
+    steps = np.full(mask.shape, np.inf)
+    if not mask[source]:
+        return steps
+    steps[source] = 0.0
+    queue = deque([source])
+    while queue:
+        row, col = queue.popleft()
+        for d_row in (-1, 0, 1):
+            for d_col in (-1, 0, 1):
+                n_row, n_col = row + d_row, col + d_col
+                if (0 <= n_row < mask.shape[0] and 0 <= n_col < mask.shape[1]
+                        and mask[n_row, n_col] and np.isinf(steps[n_row, n_col])):
+                    steps[n_row, n_col] = steps[row, col] + 1.0
+                    queue.append((n_row, n_col))
+    return steps
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_the_diagonal_distance_field_is_breadth_first_search(seed):
+    from sessgan_core.grid_search import distance_field
+
+    rng = np.random.default_rng(seed)
+    shape = (int(rng.integers(1, 30)), int(rng.integers(1, 30)))
+    mask = rng.random(shape) < 0.7
+    for source in [(0, 0), (shape[0] - 1, shape[1] - 1),
+                   (int(rng.integers(shape[0])), int(rng.integers(shape[1])))]:
+        field = distance_field(mask, source, diagonal=True)
+        np.testing.assert_array_equal(field, _eight_connected_steps(mask, source))
+    # Past two blocked corners: one step.
+    checker = np.array([[True, False], [False, True]])
+    assert distance_field(checker, (0, 0), diagonal=True)[1, 1] == 1.0
+    assert np.isinf(distance_field(mask, (-1, 0), diagonal=True)).all()

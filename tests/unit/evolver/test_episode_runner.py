@@ -42,7 +42,8 @@ def test_same_seed_same_episode_and_the_trace_matches_the_metrics(factory):
 
 def test_the_runner_clock_times_the_run_and_the_parts_of_its_ticks(factory):
     # A clock that advances one second a reading: the parts of every tick take one reading
-    # each, so each part's total is the tick count (benchmarks pass time.thread_time).
+    # each, so each part's total is the tick count (benchmarks pass time.thread_time); the
+    # reset is timed between two readings.
     readings = iter(range(1_000_000))
     with EpisodeRunner('factory', time_limit=1.0,
                        clock=lambda: float(next(readings))) as runner:
@@ -50,8 +51,11 @@ def test_the_runner_clock_times_the_run_and_the_parts_of_its_ticks(factory):
         profile = runner.profile
     ticks = run.metrics['ticks']
     assert ticks == profile.ticks == 20
-    assert profile.physics == profile.sensors == profile.metrics == ticks
-    assert run.wall_time == 4 * ticks + 1  # four readings a tick between the runner's two
+    assert profile.physics == profile.sensors == profile.metrics == profile.controller == ticks
+    assert profile.reset == 1
+    # Two readings for the reset, six a tick (controller two, step four), between the
+    # runner's two.
+    assert run.wall_time == 2 + 6 * ticks + 1
 
 
 def test_bad_settings_are_named(factory):

@@ -149,10 +149,10 @@ def test_renamed_options_keep_their_old_spelling_for_a_release(capsys):
     old = evaluate_cli.parse_args(['--seed', '7', '--episodes', '3', '--fault-records', '2',
                                    '--output', 'here'])
     assert vars(old) == vars(new)
-    assert compare_cli.parse_args(['--output', 'here']).output == \
-        compare_cli.parse_args(['--output-dir', 'here']).output
-    assert suite_args(['s.yaml', '--output', 'here']).output == \
-        suite_args(['s.yaml', '--output-dir', 'here']).output
+    assert compare_cli.parse_args(['--output', 'here']).output_dir == \
+        compare_cli.parse_args(['--output-dir', 'here']).output_dir
+    assert suite_args(['s.yaml', '--output', 'here']).output_dir == \
+        suite_args(['s.yaml', '--output-dir', 'here']).output_dir
     with pytest.raises(SystemExit):
         evaluate_cli.parse_args(['--help'])
     shown = capsys.readouterr().out

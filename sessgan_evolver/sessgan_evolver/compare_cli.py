@@ -3,7 +3,7 @@
 Runs SESS-GAN and the baselines (random, grid_ga, cellular_automaton, latent) on one scenario
 and controller, in process (or, with --external, on the simulators and stack already running
 under /w0, /w1, ...), once per search seed; confirms and counts distinct faults,
-evaluates the final generators on fresh seeds and writes <output>/report.md, compare.png,
+evaluates the final generators on fresh seeds and writes <output-dir>/report.md, compare.png,
 failing_maps.png and CSV files (sessgan_evolver.comparison says how everything is counted).
 """
 

@@ -1,14 +1,15 @@
 """`ros2 run sessgan_evolver evaluate`: a generator's failure rate on fresh seeds.
 
-Samples --fresh-episodes maps from each generator given (the shipped checkpoint, a campaign's best
-member or final population, your own checkpoints, the cellular-automaton baseline) with seeds
-no campaign used (--run and --exclude-run name the campaigns; their seeds are read from
+Samples --fresh-episodes maps from each generator given (the shipped checkpoint, a
+campaign's best member or final population, your own checkpoints, the cellular-automaton
+baseline) with seeds no campaign used (--run and --exclude-run name the campaigns under
+--runs-root, --run-dir and --exclude-run-dir give their folders; their seeds are read from
 their metrics and skipped), runs each map once with the built-in controller in this process
 (lockstep; with --external: on the simulators and stack already running under /w0, /w1, ...,
-as ``campaign --external``) and writes <output>/summary.md, summary.csv (one row per generator) and
-episodes.csv (one row per map): valid maps, failure rate, collisions, risk, TPKL to the
-example map, uniqueness, distinct faults. --max-fault-records N keeps the first N confirmed
-distinct faults of each generator as a bag with a picture.
+as ``campaign --external``) and writes <output-dir>/summary.md, summary.csv (one row per
+generator) and episodes.csv (one row per map): valid maps, failure rate, collisions, risk,
+TPKL to the example map, uniqueness, distinct faults. --max-fault-records N keeps the first N
+confirmed distinct faults of each generator as a bag with a picture.
 """
 
 from __future__ import annotations
@@ -65,8 +66,12 @@ class EvaluateConfig:
 
     scenario: str = ''
     """Scenario (default: the --run's, else factory)."""
-    run: tuple[Path, ...] = ()
-    """Campaign run directories (runs/<run>) to evaluate."""
+    run: tuple[str, ...] = ()
+    """Campaign runs to evaluate, by name (<runs-root>/<run>, as campaign --run)."""
+    run_dir: tuple[Path, ...] = ()
+    """Campaign run folders to evaluate, by path."""
+    runs_root: Path = Path('runs')
+    """Folder of the run folders --run and --exclude-run name (campaign's --runs-root)."""
     member: str = 'best'
     """Which of a run's last population: best, final (every member) or a member index."""
     checkpoint: tuple[Path, ...] = ()
@@ -76,8 +81,10 @@ class EvaluateConfig:
     given)."""
     cellular_automaton: bool = False
     """Also evaluate the non-learned cellular-automaton generator."""
-    exclude_run: tuple[Path, ...] = ()
-    """Further run directories whose seeds must not be used."""
+    exclude_run: tuple[str, ...] = ()
+    """Further runs, by name under --runs-root, whose seeds must not be used."""
+    exclude_run_dir: tuple[Path, ...] = ()
+    """Further run folders, by path, whose seeds must not be used."""
     width: int = 0
     """Map width in cells (default 0: the size of the map each generator learned, a
     campaign's own size for --run)."""
@@ -144,11 +151,33 @@ class EvaluateConfig:
         FaultRule(self.coarse_cells, self.context_cells).validate()
         self.fleet(self.mission())
 
+    def run_directories(self) -> tuple[list[Path], list[Path]]:
+        """The folders of the runs to evaluate and of those only excluded (FreshSeedError
+        naming a run that is not there)."""
+        def folders(names: Sequence[str], paths: Sequence[Path], option: str) -> list[Path]:
+            return [run_directory(name, self.runs_root, option) for name in names] + [
+                Path(path) for path in paths]
+        return (folders(self.run, self.run_dir, '--run'),
+                folders(self.exclude_run, self.exclude_run_dir, '--exclude-run'))
+
     def mission(self) -> MissionSpec:
         return MissionSpec(self.mission_stations, self.station_dwell_time).validate()
 
     def fleet(self, mission: MissionSpec) -> FleetSpec:
         return FleetSpec(self.robots).validate(mission.stations)
+
+
+def run_directory(name: str, runs_root: Path, option: str = '--run') -> Path:
+    """The folder of the run ``name`` under ``runs_root``. A path to a run folder is still
+    taken (what ``option`` was before it became a name), with a note naming ``option``-dir."""
+    folder = runs_root / name
+    if folder.is_dir():
+        return folder
+    if Path(name).is_dir():
+        print(f'note: {option} {name}: {option} takes a run name under --runs-root '
+              f'({runs_root}); a run folder goes to {option}-dir', file=sys.stderr)
+        return Path(name)
+    raise FreshSeedError(f'{option} {name}: no run folder {folder} (--runs-root {runs_root})')
 
 
 def parse_args(argv: Sequence[str]) -> EvaluateConfig:
@@ -157,12 +186,14 @@ def parse_args(argv: Sequence[str]) -> EvaluateConfig:
                               __doc__ or '', usage_errors())
 
 
-def build_sources(args: EvaluateConfig, scenario: str) -> list[MapSource]:
-    """The generators to evaluate; the cellular automaton makes maps of the first one's size
-    and is measured against its training map."""
+def build_sources(args: EvaluateConfig, scenario: str,
+                  run_dirs: Sequence[Path] = ()) -> list[MapSource]:
+    """The generators to evaluate (those of the campaign runs in ``run_dirs`` first); the
+    cellular automaton makes maps of the first one's size and is measured against its
+    training map."""
     size = (args.height, args.width) if args.height or args.width else None
     sources: list[PyramidSource] = []
-    for run_dir in args.run:
+    for run_dir in run_dirs:
         sources += campaign_sources(run_dir, args.member, size)
     for checkpoint in args.checkpoint:
         sources.append(PyramidSource(str(checkpoint), scenario, checkpoint, size))
@@ -204,8 +235,9 @@ def evaluate(arguments: list[str]) -> int:
     args = parse_args(arguments)
     torch.set_num_threads(1)
     try:
+        evaluated, excluded = args.run_directories()
         scenario = args.scenario
-        for run_dir in args.run:
+        for run_dir in evaluated:
             run_scenario = str(open_run(run_dir).read_config()['config']['scenario'])
             if scenario and scenario != run_scenario:
                 raise SessganEvolverError(f'run {run_dir} is a {run_scenario} campaign, not '
@@ -216,11 +248,11 @@ def evaluate(arguments: list[str]) -> int:
         check_controller(scenario, args.controller)
         mission = args.mission()
         fleet = args.fleet(mission)
-        runs = list(args.run) + list(args.exclude_run)
+        runs = evaluated + excluded
         map_seeds, sim_seeds = used_seeds(runs)
         plan = fresh_seed_plan(args.evaluation_seed, args.fresh_episodes, map_seeds, sim_seeds)
         check_disjoint(plan, runs)
-        sources = build_sources(args, scenario)
+        sources = build_sources(args, scenario, evaluated)
     except (SessganEvolverError, SessganCoreError, SessganGenError, OSError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2

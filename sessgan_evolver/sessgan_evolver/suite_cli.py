@@ -2,8 +2,8 @@
 
 Re-runs every recorded scenario (a suite file written by ``campaign`` or ``evaluate``, a
 directory of failure bags, or one bag) against the robot under test and writes
-<output>/junit.xml (one testcase per scenario: verdict, detail, metrics as properties, the new
-bag), summary.md and scenarios.csv.
+<output-dir>/junit.xml (one testcase per scenario: verdict, detail, metrics as properties, the
+new bag), summary.md and scenarios.csv.
 
 By default each scenario runs in this process with a built-in controller (the recorded one,
 or --controller) in lockstep: exact, so one result is its verdict. With --external the
@@ -66,8 +66,9 @@ class SuiteConfig:
     external: bool = False
     """Run the episodes on the simulators already running (every discovered evaluate action
     server, e.g. /w0/evaluate), each beside the controller under test."""
-    workers: tuple[str, ...] = ()
-    """--external: only these namespaces (/w0,/w1)."""
+    worker: tuple[str, ...] = field(default=(), metadata=cli(old=['--workers']))
+    """--external: only the simulator workers under these namespaces (/w0,/w1; default: every
+    one discovered)."""
     retries: int = 0
     """--external: re-runs per scenario beyond the first (verdicts: pass, fail, flaky); in
     process episodes are exact and run once."""
@@ -269,8 +270,8 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
     supervisor = ProcessSupervisor(output / 'logs')
     try:
         evaluator = SuiteEvaluator(node, config, Path('suite'), 'external', supervisor, log)
-        if args.workers:
-            evaluator.allowed = {f'{name.rstrip("/")}/evaluate' for name in args.workers}
+        if args.worker:
+            evaluator.allowed = {f'{name.rstrip("/")}/evaluate' for name in args.worker}
         evaluator.wait_for_workers(1, timeout=60.0)
 
         def on_result(job, metrics: dict) -> None:

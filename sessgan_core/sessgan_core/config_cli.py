@@ -1,9 +1,12 @@
 """Command lines from typed config dataclasses (CleanRL style: field docs become --help).
 
 A field ``iterations: int = 0`` followed by a docstring becomes ``--iterations``
-with that docstring as its help; bools become ``--name`` / ``--no-name``; a field that is
-itself a config dataclass contributes its fields as ``--<field>-<name>``. Every command
-(train, report, campaign) builds its options this way.
+with that docstring as its help; bools become ``--name`` / ``--no-name``; a ``Literal`` field
+takes one of its values; a ``tuple[X, ...]`` field takes several values, comma-separated, the
+option repeated, or both; a field that is itself a config dataclass contributes its fields as
+``--<field>-<name>``. :func:`cli` marks a field positional or gives the old spellings it still
+accepts. Every command builds its options this way, so help, defaults, validation (the
+config's ``validate``: :func:`parse_valid_config`) and the usage-error status 2 come from here.
 """
 
 from __future__ import annotations
@@ -14,10 +17,40 @@ import dataclasses
 import inspect
 import textwrap
 import typing
-from collections.abc import Sequence
-from typing import Any, TypeVar
+from collections.abc import Callable, Sequence
+from typing import Any, Literal, TypeVar
 
 ConfigT = TypeVar('ConfigT')
+
+
+def cli(*, old: Sequence[str] = (), positional: bool = False) -> dict[str, Any]:
+    """A config field's ``metadata`` for its option: ``old`` spellings it still accepts
+    (hidden from --help, :func:`add_old_spelling`), or a ``positional`` argument."""
+    return {'old_spellings': tuple(old), 'positional': positional}
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """The description as written; each option's default after its help, unless the help
+    says the default itself."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ''
+        if ('default' in text.lower() or action.default is argparse.SUPPRESS
+                or not action.option_strings or action.default in (None, '', ())):
+            return text
+        return text + ' (default: %(default)s)'
+
+
+class _ListOption(argparse.Action):
+    """Several values: comma-separated, the option repeated, or both; the first use replaces
+    the default."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        current = getattr(namespace, self.dest, None)
+        if current is self.default or current is None:
+            current = ()
+        setattr(namespace, self.dest, (*current, *values))
 
 
 def field_docs(cls: type) -> dict[str, str]:
@@ -27,6 +60,9 @@ def field_docs(cls: type) -> dict[str, str]:
     except (OSError, TypeError):  # no source (frozen install): no help texts
         return {}
     docs: dict[str, str] = {}
+    for base in reversed(cls.__mro__[1:]):  # the fields a config inherits keep their help
+        if dataclasses.is_dataclass(base):
+            docs.update(field_docs(base))
     body = ast.parse(source).body[0]
     if not isinstance(body, ast.ClassDef):
         return docs
@@ -55,15 +91,37 @@ def add_config_arguments(parser: argparse.ArgumentParser, cls: type,
             add_config_arguments(parser, kind, f'{prefix}{field.name}_')
             continue
         name = prefix + field.name
-        option = '--' + name.replace('_', '-')
-        default = _default_of(field)
         help_text = docs.get(field.name, ' ').replace('%', '%%')  # argparse formats help
-        if kind is bool:
-            parser.add_argument(option, dest=name, default=default, help=help_text,
-                                action=argparse.BooleanOptionalAction)
-        else:
-            parser.add_argument(option, dest=name, type=_base_type(kind), default=default,
-                                help=help_text, metavar=field.name.upper())
+        if field.metadata.get('positional'):
+            parser.add_argument(name, type=_base_type(kind), help=help_text,
+                                metavar=field.name.upper())
+            continue
+        option = '--' + name.replace('_', '-')
+        settings = _option_settings(kind, field.name)
+        if settings.get('action') is _ListOption:
+            help_text += ' Several: comma-separated, the option repeated, or both.'
+        parser.add_argument(option, dest=name, default=_default_of(field), help=help_text,
+                            **settings)
+        for old in field.metadata.get('old_spellings', ()):
+            add_old_spelling(parser, old, name, **settings)
+
+
+def _option_settings(kind: Any, name: str) -> dict[str, Any]:
+    """argparse's settings (action, type, choices, metavar) of an option of type ``kind``."""
+    if kind is bool:
+        return {'action': argparse.BooleanOptionalAction}
+    if typing.get_origin(kind) is Literal:
+        return {'choices': typing.get_args(kind)}
+    if typing.get_origin(kind) is tuple:
+        if typing.get_args(kind)[1:] != (Ellipsis,):
+            raise TypeError(f'config field {name!r}: a list option is a tuple[X, ...]')
+        item = _base_type(typing.get_args(kind)[0])
+
+        def items(text: str) -> tuple[Any, ...]:
+            return tuple(item(part.strip()) for part in text.split(',') if part.strip())
+        items.__name__ = getattr(item, '__name__', 'value')  # argparse names it in errors
+        return {'action': _ListOption, 'type': items, 'metavar': name.upper()}
+    return {'type': _base_type(kind), 'metavar': name.upper()}
 
 
 def add_old_spelling(parser: argparse.ArgumentParser, old: str, dest: str,
@@ -92,9 +150,8 @@ def build_parser(
     cls: type, prog: str | None = None, description: str = ''
 ) -> argparse.ArgumentParser:
     """An argparse parser with one option per field of dataclass ``cls``."""
-    parser = argparse.ArgumentParser(
-        prog=prog, description=description,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser = argparse.ArgumentParser(prog=prog, description=description,
+                                     formatter_class=HelpFormatter)
     add_config_arguments(parser, cls)
     return parser
 
@@ -105,6 +162,22 @@ def parse_config(
     """Parse ``argv`` (default: sys.argv[1:]) into an instance of dataclass ``cls``."""
     namespace = build_parser(cls, prog, description).parse_args(argv)
     return config_from_namespace(cls, namespace)
+
+
+def parse_valid_config(
+    cls: type[ConfigT], argv: Sequence[str] | None, prog: str | None = None,
+    description: str = '', errors: tuple[type[Exception], ...] = (ValueError,)
+) -> ConfigT:
+    """:func:`parse_config`, then the config's ``validate()``: a value it refuses with one of
+    ``errors`` is a usage error (the message, exit status 2), like a value argparse refuses."""
+    parser = build_parser(cls, prog, description)
+    config = config_from_namespace(cls, parser.parse_args(argv))
+    validate: Callable[[], Any] = getattr(config, 'validate')
+    try:
+        validate()
+    except errors as err:
+        parser.error(str(err))
+    return config
 
 
 def _default_of(field: dataclasses.Field) -> Any:

@@ -78,11 +78,17 @@ def run_command(body: Callable[[], int], interrupted: str = 'interrupted',
                 stream: Any = None) -> int:
     """Run a command's ``body`` and return its exit status; on SIGINT or SIGTERM print
     ``interrupted`` to ``stream`` (stderr) and return INTERRUPTED_STATUS, without a traceback.
-    ``body`` may catch KeyboardInterrupt itself to clean up or say more (a --resume hint)."""
+    ``body`` may catch KeyboardInterrupt itself to clean up or say more (a --resume hint).
+    argparse's exit (--help: 0, a usage error: 2) is returned as the status too, so a caller of
+    ``main`` gets every outcome as its return value."""
     request = _InterruptOnSignals()
     request.install()
     try:
         return body()
+    except SystemExit as stop:
+        if stop.code is None or isinstance(stop.code, int):
+            return stop.code or 0
+        raise
     except KeyboardInterrupt:
         print(interrupted, file=stream or sys.stderr, flush=True)
         return INTERRUPTED_STATUS

@@ -1,24 +1,13 @@
-"""`colcon test` entry point of this package: its tier of the repository's tests.
+"""`colcon test` entry point of this package: tests/unit/core, as `./sessgan test` runs it
+(tests/repository_tier.py). Skipped where the package is installed without its repository."""
 
-Runs tests/unit/core (marker unit) with the repository's pytest settings, so `colcon test`
-and `./sessgan test` run the same tests; the graph and smoke tiers, ruff and mypy run with
-`./sessgan test`. Skipped where the package is installed without its repository.
-"""
-
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-TESTS = ROOT / 'tests' / 'unit' / 'core'
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'tests'))
+tier = pytest.importorskip(
+    'repository_tier', reason='the package is installed outside its repository')
 
-
-def test_the_unit_tier_of_this_package_passes():
-    if not TESTS.is_dir():
-        pytest.skip(f'{TESTS} not found: the package is installed outside its repository')
-    result = subprocess.run([sys.executable, '-m', 'pytest', str(TESTS), '-m', 'unit', '-q',
-                             '-p', 'no:cacheprovider'], cwd=ROOT, capture_output=True,
-                            text=True, timeout=3600)
-    assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
+test_the_unit_tier_of_this_package_passes = tier.unit_tier_test('core')

@@ -14,10 +14,11 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
-from sessgan_core.config_cli import build_parser, config_from_namespace
+from sessgan_core.config_cli import add_config_arguments, build_parser, config_from_namespace
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
 from sessgan_core.scenarios import get_scenario
@@ -40,25 +41,34 @@ from sessgan_evolver.ros_evaluator import GENERATOR_NAMESPACE, RosEvaluator
 from sessgan_gen.errors import SessganGenError
 
 
+@dataclass
+class RunPlace:
+    """Where a campaign's run goes and whether it resumes: options, not settings (kept in
+    config.json beside them, :func:`invocation_of`)."""
+
+    run: str = ''
+    """Run name (default: <scenario>-seed<seed>)."""
+    runs_root: Path = Path('runs')
+    """Directory of the run directories."""
+    bags_root: Path = Path('bags')
+    """Directory of the failure bag directories."""
+    resume: bool = False
+    """Continue a killed run from its last completed generation."""
+    worker_bags: Literal['keep', 'remove'] = 'keep'
+    """With --external: after a failure bag is copied (verified) into <bags-root>/<run>/, keep
+    the worker's copy or remove it."""
+
+
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     return campaign_parser().parse_args(argv)
 
 
 def campaign_parser() -> argparse.ArgumentParser:
     """The options: one per CampaignConfig field (its nested FitnessConfig as --fitness-...),
-    plus where the run goes and whether it resumes."""
+    plus one per RunPlace field."""
     parser = build_parser(CampaignConfig, prog='ros2 run sessgan_evolver campaign',
                           description=__doc__ or '')
-    parser.add_argument('--run', default='', help='run name (default: <scenario>-seed<seed>)')
-    parser.add_argument('--runs-root', type=Path, default=Path('runs'),
-                        help='directory of the run directories')
-    parser.add_argument('--bags-root', type=Path, default=Path('bags'),
-                        help='directory of the failure bag directories')
-    parser.add_argument('--resume', action='store_true',
-                        help='continue a killed run from its last completed generation')
-    parser.add_argument('--worker-bags', choices=('keep', 'remove'), default='keep',
-                        help='with --external: after a failure bag is copied (verified) into '
-                             "<bags-root>/<run>/, keep the worker's copy or remove it")
+    add_config_arguments(parser, RunPlace)
     # The command's default method is the best measured; a CampaignConfig in code: sessgan.
     parser.set_defaults(method=DEFAULT_METHOD)
     return parser

@@ -3,63 +3,47 @@
 Runs SESS-GAN and the baselines (random, grid_ga, cellular_automaton, latent) on one scenario
 and controller, in process (or, with --external, on the simulators and stack already running
 under /w0, /w1, ...), once per search seed; confirms and counts distinct faults,
-evaluates the final generators on fresh seeds and writes <output>/report.md, compare.png,
+evaluates the final generators on fresh seeds and writes <output-dir>/report.md, compare.png,
 failing_maps.png and CSV files (sessgan_evolver.comparison says how everything is counted).
 """
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import shlex
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import torch
 
-from sessgan_core.config_cli import add_old_spelling, field_docs
+from sessgan_core.config_cli import cli, parse_valid_config
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.ros_spin import INTERRUPTED_STATUS, run_command
 from sessgan_evolver.comparison import CompareConfig, run_comparison
-from sessgan_evolver.errors import CompareError, SessganEvolverError
+from sessgan_evolver.errors import SessganEvolverError, usage_errors
 from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
 from sessgan_gen.errors import SessganGenError
 
 
-def _int_tuple(text: str) -> tuple[int, ...]:
-    return tuple(int(part) for part in text.split(',') if part.strip())
+@dataclass(frozen=True)
+class CompareCommand(CompareConfig):
+    """The ``compare`` command's options: what it compares (CompareConfig) and where the
+    report goes."""
+
+    output_dir: Path | None = field(default=None, metadata=cli(old=['--output']))
+    """Report folder (default: runs/compare-<scenario>-<controller>)."""
+
+    def comparison(self) -> CompareConfig:
+        """The settings of the comparison itself, without where its report goes."""
+        return CompareConfig(**{setting.name: getattr(self, setting.name)
+                                for setting in fields(CompareConfig)})
 
 
-def _str_tuple(text: str) -> tuple[str, ...]:
-    return tuple(part.strip() for part in text.split(',') if part.strip())
-
-
-def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog='ros2 run sessgan_evolver compare',
-                                     description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    docs = field_docs(CompareConfig)
-    defaults = CompareConfig()
-    for field in dataclasses.fields(CompareConfig):
-        flag = '--' + field.name.replace('_', '-')
-        default = getattr(defaults, field.name)
-        if field.name == 'methods':
-            parser.add_argument(flag, type=_str_tuple, default=default,
-                                help=docs.get(field.name, '') + ' Comma-separated.')
-        elif field.name == 'search_seeds':
-            parser.add_argument(flag, type=_int_tuple, default=default,
-                                help=docs.get(field.name, '') + ' Comma-separated.')
-        elif isinstance(default, bool):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
-                                help=docs.get(field.name, ''))
-        else:
-            parser.add_argument(flag, type=type(default), default=default,
-                                help=docs.get(field.name, ''))
-    parser.add_argument('--output-dir', dest='output', type=Path, default=None,
-                        help='report folder (default: runs/compare-<scenario>-<controller>)')
-    add_old_spelling(parser, '--output', 'output', type=Path)
-    return parser.parse_args(argv)
+def parse_args(argv: Sequence[str]) -> CompareCommand:
+    """The validated options; a usage error exits 2 naming the option."""
+    return parse_valid_config(CompareCommand, argv, 'ros2 run sessgan_evolver compare',
+                              __doc__ or '', usage_errors())
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -72,22 +56,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 def compare(arguments: list[str]) -> int:
     args = parse_args(arguments)
     torch.set_num_threads(1)
-    config = CompareConfig(**{field.name: getattr(args, field.name)
-                              for field in dataclasses.fields(CompareConfig)})
-    output = args.output or Path('runs') / f'compare-{config.scenario}-' \
+    config = args.comparison()
+    output = args.output_dir or Path('runs') / f'compare-{config.scenario}-' \
         f'{config.controller or "default"}'
 
     def log(message: str) -> None:
         print(f'[compare] {message}', file=sys.stderr, flush=True)
 
     command = 'ros2 run sessgan_evolver compare ' + shlex.join(arguments)
-    try:  # usage errors (exit 2, nothing written) before the work, failures of it (exit 1)
-        config.validate()
-        if (output / 'report.md').exists():
-            raise CompareError(
-                f'{output} holds a comparison already: choose another --output-dir')
-    except (SessganEvolverError, SessganCoreError, SessganGenError, ValueError) as err:
-        print(f'error: {err}', file=sys.stderr)
+    # Usage errors (exit 2, nothing written) before the work, failures of it (exit 1).
+    if (output / 'report.md').exists():
+        print(f'error: {output} holds a comparison already: choose another --output-dir',
+              file=sys.stderr)
         return 2
     try:
         result = run_comparison(config, output, command, log)

@@ -76,67 +76,68 @@ from sessgan_sim.metrics import navigation_columns
 
 @dataclass(frozen=True)
 class CompareConfig:
-    """What ``compare`` runs; the CLI fills it from its arguments (defaults in brackets)."""
+    """What ``compare`` runs; the CLI fills it from its arguments."""
 
     scenario: str = 'factory'
-    """[factory] Scenario."""
+    """Scenario. (default: factory)"""
     controller: str = ''
-    """[scenario's] Built-in controller under test."""
+    """Built-in controller under test. (default: scenario's)"""
     methods: tuple[str, ...] = METHODS
-    """[all] Methods to compare."""
+    """Methods to compare. (default: all)"""
     search_seeds: tuple[int, ...] = (0, 1, 2)
-    """[0,1,2] One run of each method per seed (at least 3 for a spread)."""
+    """One run of each method per seed (at least 3 for a spread). (default: 0,1,2)"""
     budget: int = 360
-    """[360] Episodes per run (SESS-GAN: whole generations of population x K)."""
+    """Episodes per run (SESS-GAN: whole generations of population x K). (default: 360)"""
     fresh_episodes: int = 30
-    """[30] Fresh seed pairs per final generator."""
+    """Fresh seed pairs per final generator. (default: 30)"""
     repeats: int = 3
-    """[3] Re-runs per distinct fault to confirm it."""
+    """Re-runs per distinct fault to confirm it. (default: 3)"""
     confirm_limit: int = 0
-    """[0: all] Confirm only the first this many distinct faults of each run."""
+    """Confirm only the first this many distinct faults of each run. (default: 0: all)"""
     max_fault_records: int = 3
-    """[3] Confirmed faults per run kept as a bag and a picture (-1: every one; a bag of a
-    60 s factory episode is about 2 MB)."""
+    """Confirmed faults per run kept as a bag and a picture (-1: every one; a bag of a
+    60 s factory episode is about 2 MB). (default: 3)"""
     time_limit: float = 0.0
-    """[scenario's] Episode time limit, sim seconds."""
+    """Episode time limit, sim seconds. (default: scenario's)"""
     evaluation_seed: int = 1000
-    """[1000] Seed of the fresh seed pairs."""
+    """Seed of the fresh seed pairs. (default: 1000)"""
     checkpoint: str = ''
-    """[scenario's shipped] Pre-trained generator (SESS-GAN's start, random's and latent's)."""
+    """Pre-trained generator (SESS-GAN's start, random's and latent's). (default: the
+    scenario's shipped one)"""
     seed_schedule: str = 'per-generation'
-    """[per-generation] SESS-GAN's seed schedule."""
+    """SESS-GAN's seed schedule. (default: per-generation)"""
     population: int = 12
-    """[12] SESS-GAN's members and the GAs' individuals per generation."""
+    """SESS-GAN's members and the GAs' individuals per generation. (default: 12)"""
     maps_per_member: int = 3
-    """[3] SESS-GAN's K."""
+    """SESS-GAN's K. (default: 3)"""
     coarse_cells: int = 4
-    """[4] Fault rule: coarse cell side, map cells."""
+    """Fault rule: coarse cell side, map cells. (default: 4)"""
     context_cells: int = 2
-    """[2] Fault rule: context around the coarse cell, map cells."""
+    """Fault rule: context around the coarse cell, map cells. (default: 2)"""
     mission_stations: int = 0
-    """[0] Pick-up -> place missions: stations drawn before home on every map of every method,
-    each leg certified (0..16); 0: plain start -> goal episodes."""
+    """Pick-up -> place missions: stations drawn before home on every map of every method,
+    each leg certified (0..16); 0: plain start -> goal episodes. (default: 0)"""
     station_dwell_time: float = DEFAULT_DWELL_TIME
-    """[2.0] Sim seconds the robot stands still at each mission station."""
+    """Sim seconds the robot stands still at each mission station. (default: 2.0)"""
     robots: int = 1
-    """[1] Robots under test on every map of every method (a fleet episode: robots r1, r2,
+    """Robots under test on every map of every method (a fleet episode: robots r1, r2,
     ... drawn beside the map's own start and goal, each route certified), 1..8; 1: one
-    robot."""
+    robot. (default: 1)"""
     external: bool = False
-    """[False] Run every episode (and every confirming re-run) on the evaluate action servers
+    """Run every episode (and every confirming re-run) on the evaluate action servers
     already running, e.g. your own stack under /w0, /w1 (as campaign --external), instead of
     in process; --controller then only names it. Their failure bags (in <their
     bags_root>/external/<output folder name>/<method-seed>) must be readable on this
-    machine."""
+    machine. (default: False)"""
     adaptive_rtf: bool = False
-    """[False] With --external, clocked simulators: run an episode that ended overloaded (the
+    """With --external, clocked simulators: run an episode that ended overloaded (the
     stack could not keep pace with sim time) again at half the real-time factor, halved again
-    on each overloaded try (down to 1/16)."""
+    on each overloaded try (down to 1/16). (default: False)"""
     width: int = 0
-    """[0: the generator's] Width of every method's maps in cells (by default the size of
-    the map the generator learned)."""
+    """Width of every method's maps in cells (by default the size of
+    the map the generator learned). (default: 0: the generator's)"""
     height: int = 0
-    """[0: the generator's] Height of every method's maps in cells."""
+    """Height of every method's maps in cells. (default: 0: the generator's)"""
 
     def validate(self) -> None:
         get_scenario(self.scenario)

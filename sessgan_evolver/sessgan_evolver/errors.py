@@ -90,3 +90,12 @@ class SuiteError(SessganEvolverError):
 class BagCollectionError(SessganEvolverError):
     """A failure bag of a remote worker that could not be copied here intact (a transfer that
     failed, a file of another size or digest than episode.json records, an unsafe name)."""
+
+
+def usage_errors() -> tuple[type[Exception], ...]:
+    """What a command's config ``validate`` raises for an option it refuses: a usage error
+    (exit 2). A function: sessgan_gen's errors are imported only when a command asks."""
+    from sessgan_core.errors import SessganCoreError
+    from sessgan_gen.errors import SessganGenError
+
+    return (SessganEvolverError, SessganCoreError, SessganGenError, ValueError)

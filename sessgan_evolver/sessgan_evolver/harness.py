@@ -34,6 +34,19 @@ DEFAULT_HARNESS_TRIES = 3
 MAX_HARNESS_TRIES = 20
 """The most tries a user may ask for (each can take a whole episode timeout)."""
 
+SINGLE_CAUSE_ADVICE: dict[str, tuple[str, str]] = {
+    Outcome.OVERLOADED.value: (
+        'the stack under test could not keep pace with sim time',
+        "Give the machine less other work, lower the simulators' real_time_factor, or pass "
+        '--adaptive-rtf (each re-run at half the pace)'),
+    Outcome.CONTROLLER_UNRESPONSIVE.value: (
+        'the controller under test was silent',
+        'Check that the controller runs and answers every scan (its log), or give the machine '
+        'less other work'),
+}
+"""What stopped an episode whose every try ended with one of these outcomes, and what to do
+about it (the HarnessFailureError's message)."""
+
 
 def check_harness_tries(tries: object) -> int:
     """``tries`` as an int in [1, MAX_HARNESS_TRIES], else HarnessFailureError naming it."""
@@ -88,20 +101,12 @@ class HarnessRetries:
                          f'{self.tries})')
             return
         del self._failures[key]
-        if all(cause == Outcome.OVERLOADED for cause, _ in failures):
+        distinct = {cause for cause, _ in failures}
+        if len(distinct) == 1 and (only := distinct.pop()) in SINGLE_CAUSE_ADVICE:
+            what, advice = SINGLE_CAUSE_ADVICE[only]
             raise HarnessFailureError(
-                f'the stack under test could not keep pace with sim time on every one of '
-                f'{len(failures)} tries of episode {episode} ({Outcome.OVERLOADED.value}; '
-                f'last: {failures[-1][1]}); no result is recorded for it. Give the machine '
-                "less other work, lower the simulators' real_time_factor, or pass "
-                '--adaptive-rtf (each re-run at half the pace)')
-        if all(cause == Outcome.CONTROLLER_UNRESPONSIVE for cause, _ in failures):
-            raise HarnessFailureError(
-                f'the controller under test was silent on every one of {len(failures)} tries '
-                f'of episode {episode} ({Outcome.CONTROLLER_UNRESPONSIVE.value}; last: '
-                f'{failures[-1][1]}); no result is recorded for it. Check that the '
-                'controller runs and answers every scan (its log), or give the machine less '
-                'other work')
+                f'{what} on every one of {len(failures)} tries of episode {episode} '
+                f'({only}; last: {failures[-1][1]}); no result is recorded for it. {advice}')
         causes = '; '.join(f'{cause}: {detail}' for cause, detail in failures)
         raise HarnessFailureError(f'the test harness failed on every one of {len(failures)} '
                                   f'tries of episode {episode}, so it has no result: {causes}')

@@ -21,49 +21,59 @@ refused (exit 2) naming the file, one without digests (older bags) replays with 
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import os
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
+from sessgan_core.config_cli import cli, parse_valid_config
 from sessgan_core.ros_spin import init_rclpy, run_command
 
 EXIT_AS_EXPECTED, EXIT_DIFFERENT, EXIT_ERROR = 0, 1, 2
 
 
-def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='ros2 run sessgan_evolver replay', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('bag', type=Path, help='failure bag directory (bags/<run>/<episode>)')
-    parser.add_argument('--rate', type=float, default=1.0,
-                        help='playback speed factor (replay; default 1.0 = recorded timing)')
-    parser.add_argument('--namespace', default='',
-                        help='replay: namespace to republish under (default /); --resimulate '
-                             '--external: namespace of your controller (default: the recorded '
-                             'one)')
-    parser.add_argument('--loop', action='store_true', help='replay until interrupted')
-    parser.add_argument('--resimulate', action='store_true',
-                        help="run the bag's map again against a live controller and compare")
-    parser.add_argument('--worker', default='',
-                        help='namespace of a running simulator worker to use as it is (e.g. '
-                             '/w0; its settings, not the recorded ones); default: start a '
-                             'simulator with the recorded settings')
-    parser.add_argument('--external', action='store_true',
-                        help='the recorded controller is yours: start only the simulator, '
-                             'under --namespace, where your controller runs')
-    parser.add_argument('--controller', default='',
-                        help='built-in controller to start (default: the recorded one)')
-    parser.add_argument('--expect', choices=('same', 'pass'), default='same',
-                        help='same: the failure must reproduce; pass: it must be gone')
-    parser.add_argument('--timeout', type=float, default=300.0,
-                        help='wall seconds to wait for the re-simulated episode')
-    args = parser.parse_args(argv)
-    if not args.rate > 0:
-        parser.error('--rate must be positive')
-    return args
+@dataclass
+class ReplayConfig:
+    """The ``replay`` command's arguments."""
+
+    bag: Path = field(metadata=cli(positional=True))
+    """Failure bag directory (bags/<run>/<episode>)."""
+    rate: float = 1.0
+    """Playback speed factor (replay; 1.0 = recorded timing)."""
+    namespace: str = ''
+    """Replay: namespace to republish under (default /); --resimulate --external: namespace
+    of your controller (default: the recorded one)."""
+    loop: bool = False
+    """Replay until interrupted."""
+    resimulate: bool = False
+    """Run the bag's map again against a live controller and compare."""
+    worker: str = ''
+    """Namespace of a running simulator worker to use as it is (e.g. /w0; its settings, not
+    the recorded ones); default: start a simulator with the recorded settings."""
+    external: bool = False
+    """The recorded controller is yours: start only the simulator, under --namespace, where
+    your controller runs."""
+    controller: str = ''
+    """Built-in controller to start (default: the recorded one)."""
+    expect: Literal['same', 'pass'] = 'same'
+    """same: the failure must reproduce; pass: it must be gone."""
+    timeout: float = 300.0
+    """Wall seconds to wait for the re-simulated episode."""
+
+    def validate(self) -> None:
+        if not self.rate > 0:
+            raise ValueError(f'--rate must be positive, got {self.rate}')
+
+
+def parse_args(argv: Sequence[str] | None) -> ReplayConfig:
+    """The validated arguments; a usage error exits 2 (EXIT_ERROR) naming the option."""
+    return parse_valid_config(ReplayConfig, argv, 'ros2 run sessgan_evolver replay',
+                              __doc__ or '')
 
 
 def message_class(msgtype: str):
@@ -79,7 +89,7 @@ def republished_topic(topic: str, recorded_namespace: str, namespace: str) -> st
     return namespace.rstrip('/') + topic
 
 
-def replay(args, episode) -> int:
+def replay(args: ReplayConfig, episode) -> int:
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -145,7 +155,7 @@ def bag_environment(bag: Path, episode: dict):
         fleet=fleet_from_json(episode.get('fleet')))
 
 
-def resimulate(args, episode: dict) -> int:
+def resimulate(args: ReplayConfig, episode: dict) -> int:
     import rclpy
     from rclpy.action import ActionClient
 

@@ -258,7 +258,7 @@ class ScreenedSearch:
         """Wall seconds spent screening and learning (never in the robot under test)."""
         self._pending: list[Test] = []
         started = time.perf_counter()
-        reference = self._express([seed_noise_maps(self.pyramid, self._seed(), self.size)
+        reference = self.express([seed_noise_maps(self.pyramid, self._seed(), self.size)
                                    for _ in range(self.config.reference_maps)])
         self.tpkl_limit = float(np.quantile([self._tpkl(cells) for cells in reference],
                                             self.config.tpkl_quantile))
@@ -283,7 +283,8 @@ class ScreenedSearch:
     def _seed(self) -> int:
         return int(self.rng.integers(0, SEED_BOUND))
 
-    def _express(self, noises: Sequence[NoiseMaps]) -> list[np.ndarray]:
+    def express(self, noises: Sequence[NoiseMaps]) -> list[np.ndarray]:
+        """The cleaned token map (height x width cells) the generator makes of each noise."""
         return list(clean_generated_maps(sample_token_maps_from_noise(self.pyramid, noises),
                                          self.spec.name))
 
@@ -296,7 +297,7 @@ class ScreenedSearch:
             seeds = [self._seed() for _ in range(count)]
             noises = [seed_noise_maps(self.pyramid, seed, self.size) for seed in seeds]
             return [Test(noise, cells, seed, seed, self._seed(), 'fresh sample')
-                    for noise, cells, seed in zip(noises, self._express(noises), seeds)]
+                    for noise, cells, seed in zip(noises, self.express(noises), seeds)]
         # A generator whose samples all fail the screen: run the last like random does.
         return self._screen(draw, self.config.fresh_candidates) or draw(1)[0]
 
@@ -320,8 +321,8 @@ class ScreenedSearch:
 
         def draw(count: int) -> list[Test]:
             base = parent.test
-            noises = [self._mutate(parent, operator) for _ in range(count)]
-            maps = self._express(noises) if operator.strength > 0 else [base.cells] * count
+            noises = [self.mutate(parent, operator) for _ in range(count)]
+            maps = self.express(noises) if operator.strength > 0 else [base.cells] * count
             children = []
             for noise, cells in zip(noises, maps):
                 environment_seed = (base.environment_seed if operator.keep_route
@@ -341,8 +342,11 @@ class ScreenedSearch:
             self.operator_records[operator.name].trials += 1
         return test
 
-    def _mutate(self, parent: Parent, operator: Operator,
-                rng: np.random.Generator | None = None) -> NoiseMaps:
+    def mutate(self, parent: Parent, operator: Operator,
+               rng: np.random.Generator | None = None) -> NoiseMaps:
+        """A child of ``parent``'s noise by ``operator`` (its noise itself at strength 0;
+        a local operator changes only the noise around the parent's fault cell), drawn from
+        ``rng`` (default: the search's own stream)."""
         rng = self.rng if rng is None else rng
         noise = parent.test.noise
         if operator.strength == 0:
@@ -497,7 +501,7 @@ class ArchiveSource:
             parent = search.parents[int(rng.integers(len(search.parents)))]
             cells, certified = parent.test.cells, None
             for _ in range(ARCHIVE_TRIES):
-                child = search._express([search._mutate(parent, self.operator, rng)])[0]
+                child = search.express([search.mutate(parent, self.operator, rng)])[0]
                 candidate = certify_route(tokens_to_occupancy(child, spec), spec,
                                           *parent.route)
                 if candidate.feasible:

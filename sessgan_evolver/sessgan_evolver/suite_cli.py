@@ -2,8 +2,8 @@
 
 Re-runs every recorded scenario (a suite file written by ``campaign`` or ``evaluate``, a
 directory of failure bags, or one bag) against the robot under test and writes
-<output>/junit.xml (one testcase per scenario: verdict, detail, metrics as properties, the new
-bag), summary.md and scenarios.csv.
+<output-dir>/junit.xml (one testcase per scenario: verdict, detail, metrics as properties, the
+new bag), summary.md and scenarios.csv.
 
 By default each scenario runs in this process with a built-in controller (the recorded one,
 or --controller) in lockstep: exact, so one result is its verdict. With --external the
@@ -22,17 +22,16 @@ what ran is reported, the rest is marked not_run).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import shlex
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
-from sessgan_core.config_cli import add_old_spelling
+from sessgan_core.config_cli import cli, parse_valid_config
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.progress import ProgressPrinter
 from sessgan_evolver.errors import SessganEvolverError, SuiteError
@@ -52,58 +51,62 @@ from sessgan_evolver.regression_suite import (
 )
 from sessgan_gen.errors import SessganGenError
 
-RECORD_CHOICES = ('all', 'failures', 'none')
+
+@dataclass
+class SuiteConfig:
+    """The ``suite`` command's arguments."""
+
+    source: Path = field(metadata=cli(positional=True))
+    """A suite file (YAML), a directory of failure bags, or one bag."""
+    output_dir: Path | None = field(default=None, metadata=cli(old=['--output']))
+    """Folder for junit.xml, summary.md, scenarios.csv and bags/ (default: runs/suite-<suite
+    name>)."""
+    controller: str = ''
+    """Built-in controller to test (default: each bag's recorded one)."""
+    external: bool = False
+    """Run the episodes on the simulators already running (every discovered evaluate action
+    server, e.g. /w0/evaluate), each beside the controller under test."""
+    worker: tuple[str, ...] = field(default=(), metadata=cli(old=['--workers']))
+    """--external: only the simulator workers under these namespaces (/w0,/w1; default: every
+    one discovered)."""
+    retries: int = 0
+    """--external: re-runs per scenario beyond the first (verdicts: pass, fail, flaky); in
+    process episodes are exact and run once."""
+    harness_tries: int = 3
+    """Harness outcomes in a row before a scenario is a harness error."""
+    adaptive_rtf: bool = False
+    """--external, clocked simulators: run an attempt after one that ended overloaded (the
+    stack could not keep pace with sim time) at half the real-time factor, halved again on
+    each overloaded attempt in a row (down to 1/16)."""
+    record: Literal['all', 'failures', 'none'] = 'failures'
+    """Bags of the re-runs to keep: all, failures or none (--external: the simulators record
+    failures only)."""
+    fail_on_flaky: bool = False
+    """Exit 1 when a scenario is flaky, too."""
+    episode_timeout: float = 0.0
+    """--external: wall seconds per episode before it is retried on another worker (default
+    0: from the time limit and map size)."""
+
+    def validate(self) -> None:
+        if self.retries < 0:
+            raise SuiteError(f'--retries must be >= 0, got {self.retries}')
+        if self.harness_tries < 1:
+            raise SuiteError(f'--harness-tries must be >= 1, got {self.harness_tries}')
+        if self.external and self.record == 'all':
+            raise SuiteError('--record all needs the in-process runner: external simulators '
+                             'record failures only')
+        if self.adaptive_rtf and not self.external:
+            raise SuiteError('--adaptive-rtf needs --external: in process, episodes run in '
+                             'lockstep')
+        if self.controller and self.external:
+            raise SuiteError('--controller picks a built-in controller; with --external the '
+                             'controller is the one running beside each simulator')
 
 
-def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog='ros2 run sessgan_evolver suite', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('source', type=Path,
-                        help='a suite file (YAML), a directory of failure bags, or one bag')
-    parser.add_argument('--output-dir', dest='output', type=Path, default=None,
-                        help='folder for junit.xml, summary.md, scenarios.csv and bags/ '
-                             '(default: runs/suite-<suite name>)')
-    add_old_spelling(parser, '--output', 'output', type=Path)
-    parser.add_argument('--controller', default='',
-                        help="built-in controller to test (default: each bag's recorded one)")
-    parser.add_argument('--external', action='store_true',
-                        help='run the episodes on the simulators already running (every '
-                             'discovered evaluate action server, e.g. /w0/evaluate), each '
-                             'beside the controller under test')
-    parser.add_argument('--workers', default='',
-                        help='--external: only these namespaces, comma-separated (/w0,/w1)')
-    parser.add_argument('--retries', type=int, default=0,
-                        help='--external: re-runs per scenario beyond the first (verdicts: '
-                             'pass, fail, flaky); in process episodes are exact and run once')
-    parser.add_argument('--harness-tries', type=int, default=3,
-                        help='harness outcomes in a row before a scenario is a harness error')
-    parser.add_argument('--adaptive-rtf', action='store_true',
-                        help='--external, clocked simulators: run an attempt after one that '
-                             'ended overloaded (the stack could not keep pace with sim time) at '
-                             'half the real-time factor, halved again on each overloaded '
-                             'attempt in a row (down to 1/16)')
-    parser.add_argument('--record', choices=RECORD_CHOICES, default='failures',
-                        help='bags of the re-runs to keep: all, failures (default) or none '
-                             '(--external: the simulators record failures only)')
-    parser.add_argument('--fail-on-flaky', action='store_true',
-                        help='exit 1 when a scenario is flaky, too')
-    parser.add_argument('--episode-timeout', type=float, default=0.0,
-                        help='--external: wall seconds per episode before it is retried on '
-                             'another worker (default: from the time limit and map size)')
-    args = parser.parse_args(argv)
-    if args.retries < 0:
-        parser.error('--retries must be >= 0')
-    if args.harness_tries < 1:
-        parser.error('--harness-tries must be >= 1')
-    if args.external and args.record == 'all':
-        parser.error('--record all needs the in-process runner: external simulators record '
-                     'failures only')
-    if args.adaptive_rtf and not args.external:
-        parser.error('--adaptive-rtf needs --external: in process, episodes run in lockstep')
-    if args.controller and args.external:
-        parser.error('--controller picks a built-in controller; with --external the '
-                     'controller is the one running beside each simulator')
-    return args
+def parse_args(argv: Sequence[str]) -> SuiteConfig:
+    """The validated arguments; a usage error exits 2 naming the option."""
+    return parse_valid_config(SuiteConfig, argv, 'ros2 run sessgan_evolver suite',
+                              __doc__ or '', (SuiteError,))
 
 
 def safe_name(text: str) -> str:
@@ -214,7 +217,7 @@ def run_in_process(progresses: list[ScenarioProgress], prepared: list[PreparedEn
 # ---- external ----------------------------------------------------------------------------
 
 
-def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
+def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
                  output: Path, report: Callable[[], None]) -> None:
     """Dispatch every scenario's attempts to the running simulators (the campaign's
     RosEvaluator: parallel, a worker that refuses or stalls gets the job taken away), in
@@ -267,9 +270,8 @@ def run_external(progresses: list[ScenarioProgress], args: argparse.Namespace,
     supervisor = ProcessSupervisor(output / 'logs')
     try:
         evaluator = SuiteEvaluator(node, config, Path('suite'), 'external', supervisor, log)
-        if args.workers:
-            evaluator.allowed = {f'{name.strip().rstrip("/")}/evaluate'
-                                 for name in args.workers.split(',') if name.strip()}
+        if args.worker:
+            evaluator.allowed = {f'{name.rstrip("/")}/evaluate' for name in args.worker}
         evaluator.wait_for_workers(1, timeout=60.0)
 
         def on_result(job, metrics: dict) -> None:
@@ -319,7 +321,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         runner.close()
         print(f'error: {err}', file=sys.stderr)
         return EXIT_USAGE
-    output = args.output or Path('runs') / f'suite-{safe_name(suite.name)}'
+    output = args.output_dir or Path('runs') / f'suite-{safe_name(suite.name)}'
     runner.bags_directory = output / 'bags'
     if not args.external and args.retries:
         print('note: in-process lockstep episodes are exact: each scenario runs once '

@@ -34,8 +34,8 @@ class ReportConfig:
     """Maps sampled per scenario."""
     seed: int = 0
     """Base seed of the sampled maps."""
-    scenarios: str = ','.join(REPORT_SCENARIOS)
-    """Comma-separated scenarios (rows and columns of the TPKL matrix)."""
+    scenarios: tuple[str, ...] = REPORT_SCENARIOS
+    """Scenarios (rows and columns of the TPKL matrix)."""
     factory_checkpoint: str = ''
     """Factory generator checkpoint; empty: the shipped one."""
     racetrack_checkpoint: str = ''
@@ -59,7 +59,7 @@ def check_options(config: ReportConfig) -> list[str]:
                                  ('--threads', config.threads, 0)):
         if value < least:
             raise SessganGenError(f'{option} must be >= {least}, got {value}')
-    scenarios = [name.strip() for name in config.scenarios.split(',') if name.strip()]
+    scenarios = list(config.scenarios)
     if not scenarios:
         raise SessganGenError('--scenarios names no scenario')
     for name in scenarios:

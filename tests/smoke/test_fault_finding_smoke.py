@@ -37,7 +37,7 @@ def test_campaign_in_process_then_fresh_seeds_then_compare(ros_workspace, tmp_pa
     assert suite.returncode == 1, suite.stdout + suite.stderr[-3000:]
     assert f'{len(bags)} scenarios: {len(bags)} fail' in suite.stdout
 
-    run(['evaluate', '--run', 'runs/tiny', '--member', 'final', '--shipped', '--fresh-episodes',
+    run(['evaluate', '--run', 'tiny', '--member', 'final', '--shipped', '--fresh-episodes',
          '2', '--time-limit', '4', '--output-dir', 'fresh'], tmp_path)
     with open(tmp_path / 'fresh' / 'summary.csv') as handle:
         generators = [row['generator'] for row in csv.DictReader(handle)]

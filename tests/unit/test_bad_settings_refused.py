@@ -3,6 +3,8 @@ message naming the option, no run or output directory."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from sessgan_evolver import campaign_cli, compare_cli, evaluate_cli
@@ -149,12 +151,48 @@ def test_renamed_options_keep_their_old_spelling_for_a_release(capsys):
     old = evaluate_cli.parse_args(['--seed', '7', '--episodes', '3', '--fault-records', '2',
                                    '--output', 'here'])
     assert vars(old) == vars(new)
-    assert compare_cli.parse_args(['--output', 'here']).output == \
-        compare_cli.parse_args(['--output-dir', 'here']).output
-    assert suite_args(['s.yaml', '--output', 'here']).output == \
-        suite_args(['s.yaml', '--output-dir', 'here']).output
+    assert compare_cli.parse_args(['--output', 'here']).output_dir == \
+        compare_cli.parse_args(['--output-dir', 'here']).output_dir
+    assert suite_args(['s.yaml', '--output', 'here']).output_dir == \
+        suite_args(['s.yaml', '--output-dir', 'here']).output_dir
     with pytest.raises(SystemExit):
         evaluate_cli.parse_args(['--help'])
     shown = capsys.readouterr().out
     assert '--output-dir' in shown and '--fault-records' not in shown.replace(
         '--max-fault-records', '')
+
+
+def test_evaluate_takes_a_run_name_under_runs_root_and_a_run_folder_as_run_dir(
+        tmp_path, capsys, monkeypatch):
+    runs = tmp_path / 'runs'
+    (runs / 'tiny').mkdir(parents=True)
+    config = evaluate_cli.parse_args(['--run', 'tiny', '--runs-root', str(runs), '--run-dir',
+                                      str(runs / 'tiny'), '--exclude-run', 'tiny'])
+    assert config.run_directories() == ([runs / 'tiny'] * 2, [runs / 'tiny'])
+    # A run folder given to --run (its meaning before --run became a name) is still taken.
+    monkeypatch.chdir(tmp_path)
+    config = evaluate_cli.parse_args(['--run', 'runs/tiny', '--runs-root', 'elsewhere'])
+    assert config.run_directories() == ([Path('runs/tiny')], [])
+    assert '--run-dir' in capsys.readouterr().err
+    status = evaluate_cli.main(['--run', 'missing', '--runs-root', str(runs),
+                                '--output-dir', str(tmp_path / 'out')])
+    err = capsys.readouterr().err
+    assert status == 2 and f'no run folder {runs / "missing"}' in err, err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_list_options_take_commas_or_repeats_in_every_command():
+    from sessgan_core.config_cli import parse_config
+    from sessgan_evolver.suite_cli import parse_args as suite_args
+
+    assert suite_args(['s.yaml', '--worker', '/w0,/w1']).worker == ('/w0', '/w1')
+    assert suite_args(['s.yaml', '--worker', '/w0', '--worker', '/w1']).worker == ('/w0', '/w1')
+    assert suite_args(['s.yaml', '--workers', '/w0,/w1']).worker == ('/w0', '/w1')  # old name
+    for arguments in (['--scenarios', 'factory,drone'],
+                      ['--scenarios', 'factory', '--scenarios', 'drone']):
+        assert parse_config(report_cli.ReportConfig, arguments).scenarios == ('factory', 'drone')
+    assert compare_cli.parse_args(['--methods', 'random', '--methods', 'latent',
+                                   '--search-seeds', '4,5']).comparison().methods == (
+                                       'random', 'latent')
+    assert evaluate_cli.parse_args(['--checkpoint', 'a.pt,b.pt']).checkpoint == (
+        Path('a.pt'), Path('b.pt'))

@@ -72,6 +72,10 @@ def load_training_map(config: TrainConfig, log: TextIO | None = None) -> Trainin
         print(f'train: imported {config.map_yaml}: {imported.summary()}', file=log)
         for warning in imported.warnings():
             print(f'train: WARNING: {warning}', file=log)
+        if origin[2] != 0.0:
+            print(f'train: WARNING: the map origin is rotated (yaw {origin[2]} rad): the '
+                  'learned map keeps it, but the generated maps and failure bags are placed '
+                  'at its position unrotated (the simulator takes axis-aligned maps)', file=log)
     elif config.map_file:
         loaded = token_map.read_token_map(config.map_file)
         source = str(Path(config.map_file).resolve())
@@ -255,7 +259,8 @@ def train(config: TrainConfig, training_map: TrainingMap | None = None) -> int:
         printer.update(done, f'total ETA {format_duration(eta.estimate(scale, done))}')
 
     def checkpoint(pyramid, state: TrainingState) -> None:
-        metadata = training_metadata(scenario, config, pyramid, state, source, cells)
+        metadata = training_metadata(scenario, config, pyramid, state, source, cells,
+                                     origin)
         save_checkpoint(output, pyramid, metadata, state.to_dict())
         result = state.scale_results[-1]
         print(f'train: scale {state.trained_scales}/{len(shapes)} done in '

@@ -518,15 +518,19 @@ def training_metadata(
     state: TrainingState,
     map_source: str,
     cells: np.ndarray | None = None,
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> dict[str, Any]:
     """The JSON metadata of a (possibly partial) training checkpoint; ``cells``, the map
-    learned, is stored as ``training_map`` (the reference of every TPKL figure)."""
+    learned, is stored as ``training_map`` (the reference of every TPKL figure), ``origin``
+    (x m, y m, yaw rad of its cell (0, 0) corner in the original map's frame) as
+    ``map_origin``: the generated maps are placed there, so they overlay the original."""
     stored = {} if cells is None else {'training_map': training_map_rows(cells, scenario.tokens)}
     return {
         'scenario': scenario.name,
         'tokens': list(scenario.tokens),
         'map_source': map_source,
         'map_shape': list(pyramid.size),
+        'map_origin': [float(value) for value in origin],
         **stored,
         'seed': config.seed,
         'training_config': config_dict(config),

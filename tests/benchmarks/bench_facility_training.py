@@ -71,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--crop-size', type=int, default=TrainConfig.crop_size,
                         help='TrainConfig.crop_size (0: no crops)')
     parser.add_argument('--threads', type=int, default=1, help='torch threads')
+    parser.add_argument('--seed', type=int, default=TrainConfig.seed,
+                        help='training seed (TrainConfig.seed); another seed measures the spread')
     parser.add_argument('--samples', type=int, default=20, help='maps sampled per generator')
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -82,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         cells = facility_map(side)
         config = resolve_config(TrainConfig(scenario='factory', iterations=args.iterations,
                                             crop_size=args.crop_size, threads=args.threads,
-                                            progress=False))
+                                            seed=args.seed, progress=False))
         seed_everything(config.seed)
         trainer = Trainer(cells, FACTORY, config)
         started, cpu_started = time.perf_counter(), time.process_time()
@@ -94,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         # On a busy machine CPU seconds (one thread) are what a quiet core would take.
         print(f'{side}x{side}: trained in {seconds:.0f} s wall, {cpu:.0f} s CPU '
               f'({config.iterations} it/scale, crop '
-              f'{config.crop_size}, {args.threads} thread(s); {scales}); '
+              f'{config.crop_size}, seed {config.seed}, {args.threads} thread(s); {scales}); '
               f'{figures(trainer.pyramid, cells, args.samples)}', flush=True)
     return 0
 

@@ -20,6 +20,7 @@ from sessgan_evolver.campaign_cli import main as campaign_main
 from sessgan_gen import train_cli
 from sessgan_gen.checkpoint import load_checkpoint, save_checkpoint, training_map
 from sessgan_gen.export_cli import main as export_main
+from tests.unit.core.nav2_map_loading import nav2_load_map
 from tests.unit.gen.test_facility_import import slam_map
 
 pytestmark = pytest.mark.smoke
@@ -161,6 +162,10 @@ def test_generated_maps_and_failure_bags_sit_at_the_original_maps_origin(tmp_pat
     exported = read_map_server(tmp_path / 'failing.yaml')
     assert exported.origin == pytest.approx(learned)
     assert np.array_equal(exported.occupancy, environment.occupancy)
+    # ... and loads so in map_server (its loading rules, transcribed: Nav2 is not installed).
+    served = nav2_load_map(tmp_path / 'failing.yaml')
+    assert np.array_equal(served.data, environment.occupancy)
+    assert served.origin == pytest.approx(learned) and served.resolution == 0.5
 
 
 def test_a_method_campaign_places_its_maps_and_measures_tpkl_at_the_checkpoints_map(

@@ -63,7 +63,12 @@ from sessgan_evolver.search_methods import (
     SearchMethod,
     make_baseline,
 )
-from sessgan_gen.checkpoint import checkpoint_metadata, map_origin, training_map
+from sessgan_gen.checkpoint import (
+    checkpoint_metadata,
+    incomplete_warning,
+    map_origin,
+    training_map,
+)
 from sessgan_gen.environment_metrics import (
     tile_pattern_kl,
     tile_pattern_kl_per_k,
@@ -112,6 +117,9 @@ class MethodCampaign:
             self.origin = map_origin(metadata)
         except SessganGenError as err:
             raise CampaignError(f'checkpoint {config.checkpoint}: {err}') from err
+        if config.checkpoint and (warning := incomplete_warning(
+                metadata, f'checkpoint {config.checkpoint}')):
+            log(f'WARNING: {warning}')
         self.store = RunStore(runs_root, run_name)
         self.bags_dir = Path(bags_root).resolve() / run_name
         self.log = log

@@ -119,6 +119,15 @@ def test_an_incomplete_checkpoint_is_warned_about(walled, tmp_path, capsys):
     assert export_main(['--generate', '--checkpoint', str(partial), '--output',
                         str(tmp_path / 'p.yaml')]) == 0
     assert 'stopped after scale 1 of 2' in capsys.readouterr().err
+    # The campaign's default method (screened) warns too.
+    from sessgan_evolver.campaign import CampaignConfig
+    from sessgan_evolver.method_campaign import MethodCampaign
+
+    said: list[str] = []
+    MethodCampaign(CampaignConfig(scenario='factory', method='screened',
+                                  checkpoint=str(partial)), 'partial', tmp_path / 'runs',
+                   tmp_path / 'bags', log=said.append)
+    assert any('stopped after scale 1 of 2' in line for line in said), said
     argv = ['--in-process', '--scenario', 'factory', '--checkpoint', str(partial),
             '--method', 'sessgan', '--generations', '1', '--population', '2',
             '--maps-per-member', '1', '--time-limit', '1', '--run', 'partial',

@@ -37,6 +37,7 @@ from sessgan_core.scenarios import get_scenario
 from sessgan_core.valid_tests import make_environment
 from sessgan_evolver import __version__
 from sessgan_evolver.campaign import (
+    FEW_VALID_TESTS,
     SESSGAN_METHOD,
     CampaignConfig,
     CampaignResult,
@@ -269,6 +270,12 @@ class MethodCampaign:
                 f'cheap work {cheap_total / max(elapsed, 1e-9):.0%} of the wall time, '
                 f'elapsed {format_duration(elapsed)}, ETA '
                 f'{format_duration(per_episode * (budget - tally.episodes))}')
+            if tally.episodes - len(cut) == first_episode and \
+                    summary['feasible_fraction'] < FEW_VALID_TESTS:
+                self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '
+                         f'batch {batch} are valid tests (hold a route): episodes on the '
+                         'others find no fault. Check the map the generator learned (mostly '
+                         'wall? passages too narrow for the robot?)')
             last_maps = [np.asarray(p.cells) for p in cut]
             batch += 1
         report_path = self.write_report(batch - 1, last_maps)

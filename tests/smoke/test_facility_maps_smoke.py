@@ -96,16 +96,18 @@ def test_a_generator_of_no_valid_test_is_warned_about(walled, tmp_path, capsys):
     assert 'WARNING: only 0% of the maps this generator makes hold a route' in log.getvalue()
 
 
+@pytest.mark.parametrize('method, first', [('sessgan', 'generation 0'),
+                                           ('screened', 'batch 0')])
 def test_a_campaign_without_a_valid_test_exits_1_and_names_no_bag_folder(walled, tmp_path,
-                                                                         capsys):
+                                                                         capsys, method, first):
     argv = ['--in-process', '--scenario', 'factory', '--checkpoint', str(walled),
-            '--method', 'sessgan', '--generations', '1', '--population', '2',
+            '--method', method, '--generations', '1', '--population', '2',
             '--maps-per-member', '1', '--time-limit', '1', '--run', 'walled',
             '--runs-root', str(tmp_path / 'runs'),
             '--bags-root', str(tmp_path / 'bags')]
     assert campaign_main(argv) == 1
     captured = capsys.readouterr()
-    assert 'WARNING: only 0% of the maps of generation 0 are valid tests' in captured.err
+    assert f'WARNING: only 0% of the maps of {first} are valid tests' in captured.err
     assert 'no map of this campaign was a valid test' in captured.err
     assert 'failure bags: none' in captured.out and str(tmp_path / 'bags') not in captured.out
     report = (tmp_path / 'runs' / 'walled' / 'report' / 'report.md').read_text()

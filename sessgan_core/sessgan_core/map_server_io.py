@@ -574,8 +574,9 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     x, y, yaw = loaded.origin
     # The origin is the pose of the corner of pixel (0, 0): move it along the map's own axes.
     dx, dy = left * loaded.resolution, top * loaded.resolution
-    origin = (x + dx * math.cos(yaw) - dy * math.sin(yaw),
-              y + dx * math.sin(yaw) + dy * math.cos(yaw), yaw)
+    # Rounded to a nanometre, so the YAML says -1.6, not -1.5999999999999996.
+    origin = (round(x + dx * math.cos(yaw) - dy * math.sin(yaw), 9),
+              round(y + dx * math.sin(yaw) + dy * math.cos(yaw), 9), yaw)
     free = float(np.mean(tokens_to_occupancy(cells, spec) == FREE))
     known = float(np.mean(cropped != UNKNOWN))
     return FacilityImport(TokenMap(scenario=spec.name, cells=cells), origin,

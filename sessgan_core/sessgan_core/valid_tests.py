@@ -236,11 +236,15 @@ def most_open_cell(cells: np.ndarray, scenario: ScenarioLike) -> Cell:
 def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str,
                      seed: int = 0, generation: int = -1, member: int = -1,
                      mission: MissionSpec | None = None,
-                     fleet: FleetSpec | None = None) -> Environment:
+                     fleet: FleetSpec | None = None,
+                     origin: tuple[float, float] = (0.0, 0.0)) -> Environment:
     """Build the Environment of a token map: occupancy, start, goal and route certificate.
 
-    Resolution is the scenario's cell size (metres per cell) and the origin (0, 0), so cell
-    (row, col) spans x in [col*res, (col+1)*res). Start and goal are drawn from ``seed`` by
+    Resolution is the scenario's cell size (metres per cell) and ``origin`` the map-frame
+    position of cell (0, 0)'s corner, so cell (row, col) spans x in [origin_x + col*res,
+    origin_x + (col+1)*res); every pose is in that frame (a facility generator's maps sit at
+    its training map's origin, sessgan_gen.checkpoint.map_origin). Start and goal are drawn
+    from ``seed`` by
     :func:`sessgan_core.route_certificate.place_start_goal`; ``feasible`` (a valid test) is
     True when they exist, with ``route_length`` and ``route_min_clearance`` (the bottleneck
     clearance) in metres. Otherwise start and goal both sit at :func:`most_open_cell`, yaw 0,
@@ -265,7 +269,8 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
     array = check_cells(cells, spec)
     occupancy = tokens_to_occupancy(array, spec)
     resolution = spec.cell_size
-    drawn = place_mission(occupancy, resolution, (0.0, 0.0), spec, seed, mission)
+    origin = (float(origin[0]), float(origin[1]))
+    drawn = place_mission(occupancy, resolution, origin, spec, seed, mission)
     placement = drawn.placement
     extra: dict = {'start_clearance': placement.start_clearance,
                    'goal_clearance': placement.goal_clearance,
@@ -273,7 +278,8 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
     stations: tuple[Pose2D, ...] = ()
     if drawn.start is None or drawn.goal is None:
         row, col = most_open_cell(array, spec)
-        start = goal = Pose2D((col + 0.5) * resolution, (row + 0.5) * resolution, 0.0)
+        start = goal = Pose2D(origin[0] + (col + 0.5) * resolution,
+                              origin[1] + (row + 0.5) * resolution, 0.0)
         feasible, length, bottleneck = False, 0.0, 0.0
     else:
         start, goal = Pose2D(*drawn.start), Pose2D(*drawn.goal)
@@ -295,7 +301,7 @@ def make_environment(cells: np.ndarray, scenario_name: ScenarioLike, env_id: str
             bottleneck = min(route.bottleneck_clearance for route in placed.routes)
     return Environment(
         id=env_id, scenario=spec.name, occupancy=occupancy, resolution=resolution,
-        start=start, goal=goal, origin=(0.0, 0.0), seed=seed, generation=generation,
+        start=start, goal=goal, origin=origin, seed=seed, generation=generation,
         member=member, feasible=feasible, route_length=length,
         route_min_clearance=bottleneck, extra=extra, stations=stations,
         dwell_time=float(mission.dwell_time) if stations else 0.0, fleet=robots)

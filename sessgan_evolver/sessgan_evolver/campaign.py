@@ -55,7 +55,11 @@ from sessgan_gen.checkpoint import (
     load_checkpoint,
     training_map,
 )
-from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
+from sessgan_gen.environment_metrics import (
+    tile_pattern_kl,
+    tile_pattern_kl_per_k,
+    uniqueness_of_fitting_sizes,
+)
 from sessgan_gen.environment_sampler import resolve_sample_size
 from sessgan_gen.errors import SamplingRequestError
 from sessgan_sim.bag_recording import BagStorage
@@ -597,8 +601,7 @@ class Campaign:
             tpkl_table[f'member {member}'] = {**{f'k={k}': v for k, v in per_k.items()},
                                               'mean': float(np.mean(list(per_k.values())))}
         pooled = [m for maps in last_population for m in maps]
-        if pooled:
-            unique = uniqueness(pooled)
+        if pooled and (unique := uniqueness_of_fitting_sizes(pooled)):
             uniqueness_table['last population'] = {
                 **{f'{s}x{s}': v for s, v in unique.items()},
                 'mean': float(np.mean(list(unique.values())))}

@@ -34,10 +34,10 @@ import numpy as np
 from sessgan_core.environment import Environment
 from sessgan_core.progress import ProgressPrinter, format_duration
 from sessgan_core.scenarios import get_scenario
-from sessgan_core.token_map import load_example_map
 from sessgan_core.valid_tests import make_environment
 from sessgan_evolver import __version__
 from sessgan_evolver.campaign import (
+    FEW_VALID_TESTS,
     SESSGAN_METHOD,
     CampaignConfig,
     CampaignResult,
@@ -64,7 +64,18 @@ from sessgan_evolver.search_methods import (
     SearchMethod,
     make_baseline,
 )
-from sessgan_gen.environment_metrics import tile_pattern_kl, tile_pattern_kl_per_k, uniqueness
+from sessgan_gen.checkpoint import (
+    checkpoint_metadata,
+    incomplete_warning,
+    map_origin,
+    training_map,
+)
+from sessgan_gen.environment_metrics import (
+    tile_pattern_kl,
+    tile_pattern_kl_per_k,
+    uniqueness_of_fitting_sizes,
+)
+from sessgan_gen.errors import SessganGenError
 
 SAMPLE_MAPS_PER_BATCH = 4
 """Maps of each batch kept for the report's figure."""
@@ -98,8 +109,18 @@ class MethodCampaign:
         self.config = config
         self.invocation = dict(invocation or {})
         self.scenario = get_scenario(config.scenario)
-        self.example = load_example_map(self.scenario.name).cells
         self.method = method_of(config)
+        # The maps' TPKL reference and origin are the generator's training map's (the
+        # shipped checkpoint's, the example map at (0, 0), for a method that needs none).
+        try:
+            metadata = checkpoint_metadata(self.scenario.name, config.checkpoint or None)
+            self.example = training_map(metadata)
+            self.origin = map_origin(metadata)
+        except SessganGenError as err:
+            raise CampaignError(f'checkpoint {config.checkpoint}: {err}') from err
+        if config.checkpoint and (warning := incomplete_warning(
+                metadata, f'checkpoint {config.checkpoint}')):
+            log(f'WARNING: {warning}')
         self.store = RunStore(runs_root, run_name)
         self.bags_dir = Path(bags_root).resolve() / run_name
         self.log = log
@@ -109,7 +130,7 @@ class MethodCampaign:
         return make_environment(proposal.cells, self.scenario, environment_id,
                                 seed=proposal.resolved_environment_seed, generation=batch,
                                 member=member, mission=self.config.mission(),
-                                fleet=self.config.fleet())
+                                fleet=self.config.fleet(), origin=self.origin)
 
     # -- resume ---------------------------------------------------------------------------
 
@@ -249,6 +270,12 @@ class MethodCampaign:
                 f'cheap work {cheap_total / max(elapsed, 1e-9):.0%} of the wall time, '
                 f'elapsed {format_duration(elapsed)}, ETA '
                 f'{format_duration(per_episode * (budget - tally.episodes))}')
+            if tally.episodes - len(cut) == first_episode and \
+                    summary['feasible_fraction'] < FEW_VALID_TESTS:
+                self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '
+                         f'batch {batch} are valid tests (hold a route): episodes on the '
+                         'others find no fault. Check the map the generator learned (mostly '
+                         'wall? passages too narrow for the robot?)')
             last_maps = [np.asarray(p.cells) for p in cut]
             batch += 1
         report_path = self.write_report(batch - 1, last_maps)
@@ -279,15 +306,19 @@ class MethodCampaign:
             per_k = tile_pattern_kl_per_k(self.example, [cells])
             tpkl_table[f'map {index}'] = {**{f'k={k}': v for k, v in per_k.items()},
                                           'mean': float(np.mean(list(per_k.values())))}
-        if last_maps:
-            unique = uniqueness(list(last_maps))
+        if last_maps and (unique := uniqueness_of_fitting_sizes(list(last_maps))):
             uniqueness_table['last batch'] = {**{f'{s}x{s}': v for s, v in unique.items()},
                                               'mean': float(np.mean(list(unique.values())))}
         notes = [f'Method `{self.config.method}` (sessgan_evolver.search_methods): each '
                  "'generation' is one batch the method asked for; the maps of the last batch "
-                 'are in the TPKL and uniqueness tables.',
-                 f'Failure bags: `{self.bags_dir}` (replay one with '
-                 '`ros2 run sessgan_evolver replay <bag>`, re-simulate with `--resimulate`).']
+                 'are in the TPKL and uniqueness tables.']
+        # Only point to the bag folder when a failure was recorded into it.
+        notes.append(f'Failure bags: `{self.bags_dir}` (replay one with '
+                     '`ros2 run sessgan_evolver replay <bag>`, re-simulate with '
+                     '`--resimulate`).'
+                     if self.bags_dir.is_dir() and any(self.bags_dir.iterdir()) else
+                     'No failure bag was written (no failure was found, or failures were not '
+                     'recorded).')
         return write_report(self.store.run_dir, maps_by_batch, tpkl_table, uniqueness_table,
                             title=f'{self.config.method} campaign {self.store.run_name} '
                                   f'({self.config.scenario})',

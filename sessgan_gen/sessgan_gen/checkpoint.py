@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -99,13 +100,19 @@ def training_map(metadata: Mapping[str, Any]) -> np.ndarray:
         'back; train it again with this version to store the map in it')
 
 
-def checkpoint_training_map(scenario: str, checkpoint: str | Path | bytes | None = None
-                            ) -> np.ndarray:
-    """:func:`training_map` of ``checkpoint`` (a path or bytes; None or empty: the scenario's
-    shipped one), checked to be a checkpoint of ``scenario``."""
+def checkpoint_metadata(scenario: str, checkpoint: str | Path | bytes | None = None
+                        ) -> Mapping[str, Any]:
+    """The metadata of ``checkpoint`` (a path or bytes; None or empty: the scenario's shipped
+    one), checked to be a checkpoint of ``scenario``."""
     payload = read_checkpoint(checkpoint or default_checkpoint_path(scenario))
     _check_scenario(payload['label'], payload['metadata'], scenario)
-    return training_map(payload['metadata'])
+    return payload['metadata']
+
+
+def checkpoint_training_map(scenario: str, checkpoint: str | Path | bytes | None = None
+                            ) -> np.ndarray:
+    """:func:`training_map` of :func:`checkpoint_metadata`."""
+    return training_map(checkpoint_metadata(scenario, checkpoint))
 
 
 def incomplete_warning(metadata: Mapping[str, Any], label: str = 'the checkpoint') -> str:
@@ -124,6 +131,25 @@ def map_size(metadata: Mapping[str, Any]) -> tuple[int, int]:
     serves by default."""
     shape = metadata.get('map_shape') or metadata['scale_shapes'][-1]
     return int(shape[0]), int(shape[1])
+
+
+def map_origin(metadata: Mapping[str, Any]) -> tuple[float, float]:
+    """Map-frame position (x, y) in metres of the corner of cell (0, 0) of every map the
+    checkpoint's generator serves: its training map's origin (``map_origin``, that of the
+    map_server map it imported, moved to the cropped region), so generated maps, their
+    OccupancyGrid and failure bags overlay the original map in RViz; (0, 0) for a checkpoint
+    that stores none (token maps, the shipped ones). A rotated origin keeps only its position:
+    the simulator and OccupancyGrid consumers take axis-aligned maps. CheckpointError when
+    the field is malformed."""
+    value = metadata.get('map_origin')
+    if value is None:
+        return (0.0, 0.0)
+    if (not isinstance(value, (list, tuple)) or len(value) not in (2, 3)
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for v in value)):
+        raise CheckpointError(f'checkpoint map_origin must be [x, y, yaw] of finite numbers, '
+                              f'got {value!r}')
+    return (float(value[0]), float(value[1]))
 
 
 def _payload(

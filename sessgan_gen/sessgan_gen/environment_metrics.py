@@ -267,6 +267,17 @@ def uniqueness(generated: Sequence[np.ndarray],
     return {int(side): result[int(side)] for side in sizes}
 
 
+def uniqueness_of_fitting_sizes(generated: Sequence[np.ndarray],
+                                sizes: Sequence[int] = DEFAULT_UNIQUENESS_SIZES
+                                ) -> dict[int, float]:
+    """:func:`uniqueness` for the ``sizes`` that fit in at least one generated map: a small
+    facility's maps (8 cells a side may be learned) hold no 16 x 16 patch, and a campaign's
+    report must not fail on them. Empty when none fits."""
+    largest = max((min(np.shape(cells)) for cells in generated), default=0)
+    fitting = [side for side in sizes if side <= largest]
+    return uniqueness(generated, fitting) if fitting else {}
+
+
 def uniqueness_report(generated: Sequence[np.ndarray],
                       sizes: Sequence[int] = DEFAULT_UNIQUENESS_SIZES) -> UniquenessReport:
     """:func:`uniqueness` per size plus the mean over sizes (the paper's Table 1)."""

@@ -21,6 +21,7 @@ from sessgan_gen.checkpoint import (
     check_checkpoint_file,
     default_checkpoint_path,
     load_checkpoint,
+    map_origin,
     map_size,
 )
 from sessgan_gen.errors import CheckpointError, SamplingRequestError
@@ -103,6 +104,7 @@ class EnvironmentSampler:
         ``post_process``: apply the scenario's ``track_cleanup`` (sessgan_gen.track_cleanup)
         to every map, when it has one (the race track); False gives the generator's raw maps.
         ``fleet``: robots under test on each map (sessgan_core.fleet); None: one.
+        Every map sits at the checkpoint's training map origin (its ``map_origin``).
         """
         mission = (mission or MissionSpec()).validate()
         fleet = (fleet or FleetSpec()).validate(mission.stations)
@@ -117,6 +119,7 @@ class EnvironmentSampler:
             raise SamplingRequestError('the checkpoint names no scenario: give one')
         spec = get_scenario(scenario_name)
         height, width = resolve_sample_size(pyramid, metadata, size, scenario_name)
+        origin = map_origin(metadata)
         if len(seeds) * height * width > self.max_cells_per_request:
             raise SamplingRequestError(
                 f'{len(seeds)} maps of {height}x{width} are {len(seeds) * height * width:,} '
@@ -128,7 +131,7 @@ class EnvironmentSampler:
         return [
             make_environment(cells, spec, environment_id(spec.name, generation, member, int(seed)),
                              seed=int(seed), generation=generation, member=member,
-                             mission=mission, fleet=fleet)
+                             mission=mission, fleet=fleet, origin=origin)
             for cells, seed in zip(maps, seeds)
         ]
 

@@ -72,6 +72,10 @@ def load_training_map(config: TrainConfig, log: TextIO | None = None) -> Trainin
         print(f'train: imported {config.map_yaml}: {imported.summary()}', file=log)
         for warning in imported.warnings():
             print(f'train: WARNING: {warning}', file=log)
+        if origin[2] != 0.0:
+            print(f'train: WARNING: the map origin is rotated (yaw {origin[2]} rad): the '
+                  'learned map keeps it, but the generated maps and failure bags are placed '
+                  'at its position unrotated (the simulator takes axis-aligned maps)', file=log)
     elif config.map_file:
         loaded = token_map.read_token_map(config.map_file)
         source = str(Path(config.map_file).resolve())
@@ -233,18 +237,20 @@ def train(config: TrainConfig, training_map: TrainingMap | None = None) -> int:
     print(f'train: {scenario.name} map {source} {shapes[-1][0]}x{shapes[-1][1]}, '
           f'{len(shapes)} scales {[f"{h}x{w}" for h, w in shapes]}, '
           f'{config.iterations} iterations per scale, {config.channels} channels, '
-          f'device {trainer.device}, seed {config.seed}', file=log)
+          + (f'crops of {trainer.crop_size}x{trainer.crop_size} at larger scales, '
+             if trainer.crop_size else '')
+          + f'device {trainer.device}, seed {config.seed}', file=log)
     if trainer.finished:
         print(f'train: {output} is already complete', file=log)
         return 0
     if state is not None:
         print(f'train: resuming after scale {state.trained_scales}/{len(shapes)}', file=log)
     if warning := long_training_warning(shapes[trainer.state.trained_scales:],
-                                        config.iterations, config.channels, config.crop_size):
+                                        config.iterations, config.channels, trainer.crop_size):
         print(f'train: WARNING: {warning}', file=log)
 
     printer = ProgressPrinter(log) if config.progress else None
-    eta = TotalEta(shapes, config.iterations, config.channels, config.crop_size)
+    eta = TotalEta(shapes, config.iterations, config.channels, trainer.crop_size)
 
     def progress(scale: int, num_scales: int, done: int, total: int) -> None:
         if printer is None:
@@ -255,7 +261,8 @@ def train(config: TrainConfig, training_map: TrainingMap | None = None) -> int:
         printer.update(done, f'total ETA {format_duration(eta.estimate(scale, done))}')
 
     def checkpoint(pyramid, state: TrainingState) -> None:
-        metadata = training_metadata(scenario, config, pyramid, state, source, cells)
+        metadata = training_metadata(scenario, config, pyramid, state, source, cells,
+                                     origin)
         save_checkpoint(output, pyramid, metadata, state.to_dict())
         result = state.scale_results[-1]
         print(f'train: scale {state.trained_scales}/{len(shapes)} done in '

@@ -7,7 +7,8 @@ Not a test (pytest does not collect it); run it and read the figures::
 
 The maps are the factory example map tiled 1x1, 2x2 and 4x4 (no third-party map). Each is
 trained with the factory's default configuration (``train --scenario factory --map-file``:
-1,000 iterations a scale, 32 channels, crops of ``TrainConfig.crop_size``), then sampled at
+1,000 iterations a scale, 32 channels, crops of ``TrainConfig.crop_size`` where the whole map
+would train longer than ``TrainConfig.crop_budget``), then sampled at
 its own size; printed per size: training seconds (and per scale), TPKL of the samples to the
 map they learned, 8x8/16x16 uniqueness, and the share of samples that are valid tests (a
 certified route for the factory robot). The shipped 32x32 factory generator's figures on
@@ -70,7 +71,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="iterations per scale (0: the factory's default)")
     parser.add_argument('--crop-size', type=int, default=TrainConfig.crop_size,
                         help='TrainConfig.crop_size (0: no crops)')
+    parser.add_argument('--crop-budget', type=float, default=TrainConfig.crop_budget,
+                        help='TrainConfig.crop_budget (0: crop whatever --crop-size allows)')
     parser.add_argument('--threads', type=int, default=1, help='torch threads')
+    parser.add_argument('--device', default='cpu',
+                        help='torch device of the training (cpu: the figures the issue asks for)')
+    parser.add_argument('--seed', type=int, default=TrainConfig.seed,
+                        help='training seed (TrainConfig.seed); another seed measures the spread')
     parser.add_argument('--samples', type=int, default=20, help='maps sampled per generator')
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -81,7 +88,9 @@ def main(argv: list[str] | None = None) -> int:
     for side in args.sizes:
         cells = facility_map(side)
         config = resolve_config(TrainConfig(scenario='factory', iterations=args.iterations,
-                                            crop_size=args.crop_size, threads=args.threads,
+                                            crop_size=args.crop_size,
+                                            crop_budget=args.crop_budget, threads=args.threads,
+                                            seed=args.seed, device=args.device,
                                             progress=False))
         seed_everything(config.seed)
         trainer = Trainer(cells, FACTORY, config)
@@ -94,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         # On a busy machine CPU seconds (one thread) are what a quiet core would take.
         print(f'{side}x{side}: trained in {seconds:.0f} s wall, {cpu:.0f} s CPU '
               f'({config.iterations} it/scale, crop '
-              f'{config.crop_size}, {args.threads} thread(s); {scales}); '
+              f'{trainer.crop_size}, seed {config.seed}, {args.threads} thread(s); {scales}); '
               f'{figures(trainer.pyramid, cells, args.samples)}', flush=True)
     return 0
 

@@ -107,6 +107,7 @@ def test_a_facility_generator_serves_the_facilitys_size(node_processes, ros_node
     from nav_msgs.msg import OccupancyGrid
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+    from sessgan_gen.checkpoint import load_checkpoint, save_checkpoint
     from sessgan_interfaces.srv import GenerateEnvironments
     from tests.unit.gen.facility_checkpoint import (
         FACILITY_HEIGHT,
@@ -115,6 +116,9 @@ def test_a_facility_generator_serves_the_facilitys_size(node_processes, ros_node
     )
 
     checkpoint, _ = train_facility_checkpoint(tmp_path)
+    # A facility map's origin (a SLAM map's, moved to its known region) travels with it.
+    pyramid, metadata = load_checkpoint(checkpoint)
+    save_checkpoint(checkpoint, pyramid, {**metadata, 'map_origin': [-7.5, 2.25, 0.0]})
     generator = start_generator(node_processes, '/gen_e', f'checkpoint:={checkpoint}',
                                 'seed:=2')
     generator.wait_for_output(r'published environment factory-s2', timeout=60)
@@ -124,6 +128,8 @@ def test_a_facility_generator_serves_the_facilitys_size(node_processes, ros_node
     ros_node.create_subscription(OccupancyGrid, '/gen_e/environment', received.append, qos)
     assert spin_until(ros_node, lambda: received, timeout=20), 'no map received'
     assert (received[0].info.width, received[0].info.height) == (FACILITY_WIDTH, FACILITY_HEIGHT)
+    origin = received[0].info.origin.position
+    assert (origin.x, origin.y) == (-7.5, 2.25)
 
     client = ros_node.create_client(GenerateEnvironments, '/gen_e/generate_environments')
     weights = list(checkpoint.read_bytes())
@@ -132,6 +138,7 @@ def test_a_facility_generator_serves_the_facilitys_size(node_processes, ros_node
     assert served.success, served.message
     grid = served.environments[0].map.info
     assert (grid.width, grid.height) == (FACILITY_WIDTH, FACILITY_HEIGHT)
+    assert (grid.origin.position.x, grid.origin.position.y) == (-7.5, 2.25)
     asked = call_service(ros_node, client, GenerateEnvironments.Request(
         scenario='factory', seeds=[1], weights=weights, width=36, height=24))
     assert asked.success, asked.message

@@ -20,6 +20,7 @@ from sessgan_evolver.campaign_cli import main as campaign_main
 from sessgan_gen import train_cli
 from sessgan_gen.checkpoint import load_checkpoint, save_checkpoint, training_map
 from sessgan_gen.export_cli import main as export_main
+from tests.unit.core.nav2_map_loading import nav2_load_map
 from tests.unit.gen.test_facility_import import slam_map
 
 pytestmark = pytest.mark.smoke
@@ -95,16 +96,18 @@ def test_a_generator_of_no_valid_test_is_warned_about(walled, tmp_path, capsys):
     assert 'WARNING: only 0% of the maps this generator makes hold a route' in log.getvalue()
 
 
+@pytest.mark.parametrize('method, first', [('sessgan', 'generation 0'),
+                                           ('screened', 'batch 0')])
 def test_a_campaign_without_a_valid_test_exits_1_and_names_no_bag_folder(walled, tmp_path,
-                                                                         capsys):
+                                                                         capsys, method, first):
     argv = ['--in-process', '--scenario', 'factory', '--checkpoint', str(walled),
-            '--method', 'sessgan', '--generations', '1', '--population', '2',
+            '--method', method, '--generations', '1', '--population', '2',
             '--maps-per-member', '1', '--time-limit', '1', '--run', 'walled',
             '--runs-root', str(tmp_path / 'runs'),
             '--bags-root', str(tmp_path / 'bags')]
     assert campaign_main(argv) == 1
     captured = capsys.readouterr()
-    assert 'WARNING: only 0% of the maps of generation 0 are valid tests' in captured.err
+    assert f'WARNING: only 0% of the maps of {first} are valid tests' in captured.err
     assert 'no map of this campaign was a valid test' in captured.err
     assert 'failure bags: none' in captured.out and str(tmp_path / 'bags') not in captured.out
     report = (tmp_path / 'runs' / 'walled' / 'report' / 'report.md').read_text()
@@ -118,6 +121,15 @@ def test_an_incomplete_checkpoint_is_warned_about(walled, tmp_path, capsys):
     assert export_main(['--generate', '--checkpoint', str(partial), '--output',
                         str(tmp_path / 'p.yaml')]) == 0
     assert 'stopped after scale 1 of 2' in capsys.readouterr().err
+    # The campaign's default method (screened) warns too.
+    from sessgan_evolver.campaign import CampaignConfig
+    from sessgan_evolver.method_campaign import MethodCampaign
+
+    said: list[str] = []
+    MethodCampaign(CampaignConfig(scenario='factory', method='screened',
+                                  checkpoint=str(partial)), 'partial', tmp_path / 'runs',
+                   tmp_path / 'bags', log=said.append)
+    assert any('stopped after scale 1 of 2' in line for line in said), said
     argv = ['--in-process', '--scenario', 'factory', '--checkpoint', str(partial),
             '--method', 'sessgan', '--generations', '1', '--population', '2',
             '--maps-per-member', '1', '--time-limit', '1', '--run', 'partial',
@@ -126,3 +138,71 @@ def test_an_incomplete_checkpoint_is_warned_about(walled, tmp_path, capsys):
     campaign_main(argv)
     assert 'stopped after scale 1 of 2' in capsys.readouterr().err
     assert json.loads(partial.with_suffix('.json').read_text())['complete'] is False
+
+
+def test_generated_maps_and_failure_bags_sit_at_the_original_maps_origin(tmp_path):
+    """Checkpoint -> generated map -> OccupancyGrid -> failure bag -> export --bag: every map
+    keeps the learned map's origin, so each overlays the original SLAM map in RViz."""
+    from sessgan_core.ros_conversion import environment_to_msg, occupancy_from_grid_msg
+    from sessgan_evolver.fault_picture import scene_from_bag
+    from sessgan_evolver.in_process import InProcessEvaluator
+    from sessgan_gen.environment_sampler import EnvironmentSampler
+
+    path = slam_map(tmp_path, origin=(-5.0, -3.0, 0.0))
+    output = tmp_path / 'slam.pt'
+    assert train_cli.main(['--map-yaml', str(path), '--output', str(output), *TINY]) == 0
+    learned = read_map_server(tmp_path / 'slam.map.yaml').origin
+    assert learned == pytest.approx((-1.5, 0.5, 0.0))
+    _, metadata = load_checkpoint(output)
+    assert metadata['map_origin'] == pytest.approx(list(learned))
+
+    assert export_main(['--generate', '--checkpoint', str(output), '--seed', '3',
+                        '--output', str(tmp_path / 'generated.yaml')]) == 0
+    assert read_map_server(tmp_path / 'generated.yaml').origin == pytest.approx(learned)
+
+    environment = EnvironmentSampler().sample([3], output)[0]
+    environment.validate()  # start and goal lie on the map at its origin
+    assert environment.origin == pytest.approx(learned[:2])
+    _, _, grid_origin = occupancy_from_grid_msg(environment_to_msg(environment).map)
+    assert grid_origin == pytest.approx(learned[:2])
+    with InProcessEvaluator('factory', time_limit=1.0) as evaluator:
+        run = evaluator.runner.run(environment, 1, trace=True, keep_scans=True)
+        bag = evaluator.write_bag(tmp_path / 'bags' / environment.id, environment, 1, run)
+    assert scene_from_bag(bag).origin == pytest.approx(learned[:2])
+    assert export_main(['--bag', str(bag), '--output', str(tmp_path / 'failing.yaml')]) == 0
+    exported = read_map_server(tmp_path / 'failing.yaml')
+    assert exported.origin == pytest.approx(learned)
+    assert np.array_equal(exported.occupancy, environment.occupancy)
+    # ... and loads so in map_server (its loading rules, transcribed: Nav2 is not installed).
+    served = nav2_load_map(tmp_path / 'failing.yaml')
+    assert np.array_equal(served.data, environment.occupancy)
+    assert served.origin == pytest.approx(learned) and served.resolution == 0.5
+
+
+def test_a_method_campaign_places_its_maps_and_measures_tpkl_at_the_checkpoints_map(
+        tmp_path):
+    from sessgan_evolver.campaign import CampaignConfig
+    from sessgan_evolver.method_campaign import MethodCampaign
+    from sessgan_evolver.search_methods import Proposal
+
+    path = slam_map(tmp_path, origin=(-5.0, -3.0, 0.0))
+    output = tmp_path / 'slam.pt'
+    assert train_cli.main(['--map-yaml', str(path), '--output', str(output), *TINY]) == 0
+    _, metadata = load_checkpoint(output)
+    campaign = MethodCampaign(CampaignConfig(scenario='factory', method='screened',
+                                             checkpoint=str(output), time_limit=1.0),
+                              'screened', tmp_path / 'runs', tmp_path / 'bags')
+    assert np.array_equal(campaign.example, training_map(metadata))
+    cells = training_map(metadata)
+    environment = campaign.environment_of(Proposal(cells, 1, 1, 'test'), 'e0', 0, 0)
+    assert environment.origin == pytest.approx((-1.5, 0.5))
+    environment.validate()
+    # The whole campaign on these small (12 x 16) maps; its report names no bag folder
+    # while none was written.
+    assert campaign_main(['--in-process', '--scenario', 'factory', '--checkpoint', str(output),
+                          '--method', 'screened', '--budget', '2', '--time-limit', '1',
+                          '--no-record-failures', '--run', 'small',
+                          '--runs-root', str(tmp_path / 'runs'),
+                          '--bags-root', str(tmp_path / 'bags')]) == 0
+    report = (tmp_path / 'runs' / 'small' / 'report' / 'report.md').read_text()
+    assert 'No failure bag was written' in report and str(tmp_path / 'bags') not in report

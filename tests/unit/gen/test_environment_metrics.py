@@ -135,3 +135,14 @@ def test_invalid_input_is_rejected():
         uniqueness([np.full((9, 9), -1)], sizes=(8,))
     with pytest.raises(ValueError, match='smaller than the 4x4 tile'):
         tile_pattern_kl(np.zeros((3, 3), dtype=np.int64), [np.zeros((5, 5), dtype=np.int64)])
+
+
+def test_uniqueness_of_fitting_sizes_skips_patches_larger_than_every_map():
+    from sessgan_gen.environment_metrics import uniqueness_of_fitting_sizes
+
+    small = [np.eye(12, 16, dtype=np.int64), np.zeros((10, 9), dtype=np.int64)]
+    assert list(uniqueness_of_fitting_sizes(small)) == [8]
+    assert uniqueness_of_fitting_sizes(small)[8] == pytest.approx(uniqueness(small, [8])[8])
+    assert uniqueness_of_fitting_sizes([np.zeros((6, 6), dtype=np.int64)]) == {}
+    with pytest.raises(ValueError, match='smaller than the 16x16'):
+        uniqueness(small)

@@ -48,6 +48,9 @@ def test_a_slam_map_is_cropped_to_its_known_region(tmp_path):
     # OccupancyGrid rows count from the bottom: the room starts 240 - 50 - 120 = 70 rows up.
     assert imported.known_box == (70, 190, 70, 230)
     assert imported.origin == pytest.approx((-5.0 + 70 * 0.05, -3.0 + 70 * 0.05, 0.0))
+    # The YAML says the decimal: -2.3 + 70 * 0.05 alone is 1.2000000000000002.
+    moved = import_facility_map(slam_map(tmp_path, origin=(-2.3, -2.3, 0.0)), 'factory')
+    assert moved.origin == (1.2, 1.2, 0.0)
     assert 'cropped to its known region of 160x120 px' in imported.summary()
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -182,7 +184,7 @@ def test_crop_training_runs_repeats_and_costs_less_per_update():
     cells[10:30:6, 5:35] = 1
 
     def trained(crop_size: int) -> Trainer:
-        config = tiny_config(crop_size=crop_size)
+        config = tiny_config(crop_size=crop_size, crop_budget=0.0)  # crop even a quick run
         seed_everything(config.seed)
         trainer = Trainer(cells, FACTORY, config)
         trainer.run()
@@ -200,3 +202,32 @@ def test_crop_training_runs_repeats_and_costs_less_per_update():
         shapes, 100, 32, 0)
     with pytest.raises(ValueError, match='crop_size'):
         validate_config(tiny_config(crop_size=4))
+
+
+def test_only_a_map_too_slow_to_train_whole_trains_on_crops():
+    """Crops cost realism (64x64: TPKL 1.15 cropped, 1.04 whole): a map whose whole training
+    fits crop_budget trains whole; a larger one on crops, with the cost model's saving."""
+    from sessgan_gen.training import (
+        estimated_training_seconds,
+        resolve_config,
+        training_crop_size,
+    )
+
+    config = resolve_config(TrainConfig(scenario='factory', progress=False))
+    assert (config.crop_size, config.crop_budget) == (48, 600.0)
+    for side, crop in ((32, 0), (48, 0), (64, 0), (96, 48), (128, 48)):
+        cells = np.zeros((side, side), dtype=np.int64)
+        trainer = Trainer(cells, FACTORY, config)
+        assert trainer.crop_size == crop, side
+        shapes = trainer.pyramid.scale_shapes
+        whole = estimated_training_seconds(shapes, config.iterations, config.channels)
+        assert (whole <= config.crop_budget) == (crop == 0)
+        if crop:
+            assert estimated_training_seconds(shapes, config.iterations, config.channels,
+                                              crop) <= config.crop_budget
+    shapes = [(16, 16), (32, 32), (64, 64)]
+    forced = dataclasses.replace(config, crop_budget=0.0)
+    assert training_crop_size(shapes, forced) == 48
+    assert training_crop_size(shapes, dataclasses.replace(forced, crop_size=0)) == 0
+    with pytest.raises(ValueError, match='crop_budget'):
+        validate_config(tiny_config(crop_budget=-1.0))

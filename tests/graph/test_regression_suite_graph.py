@@ -95,11 +95,10 @@ def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error
 
 def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, room_bag,
                                                             tmp_path):
-    import time
-
     import yaml
 
-    start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
+    simulator = start_simulator(node_processes, '/w0', 'dummy_agents:=0',
+                                f'bags_root:={tmp_path / "sim"}')
     start_external(node_processes, '/w0')
     count = 400  # far more than run before the signal (40 ran in 12 s on a quiet machine)
     suite_file = tmp_path / 'suite.yaml'
@@ -109,7 +108,10 @@ def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, roo
                                 str(suite_file), '--external', '--output', str(tmp_path / 'out')],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
-    time.sleep(15.0)
+    # Signalled once three episodes have ended (the suite runs one at a time on its one
+    # worker, so it has the first results), not after a fixed wait: mid-suite on any machine.
+    simulator.wait_for_output(r'(\]: episode \S+: \w+ after [\s\S]*){3}', timeout=300)
+    assert process.poll() is None, 'the suite ended before it could be interrupted'
     os.killpg(process.pid, signal.SIGINT)
     stdout, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stdout + stderr[-3000:]  # every one that ran passed

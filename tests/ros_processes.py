@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from sessgan_evolver.process_supervisor import die_with_parent
+from sessgan_evolver.process_supervisor import die_with_parent, restore_sigint
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -76,7 +76,7 @@ class NodeProcesses:
             process = subprocess.Popen(
                 command, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                 env={**self.env, **(env or {})}, cwd=cwd or REPO_ROOT, start_new_session=True,
-                preexec_fn=die_with_parent)
+                preexec_fn=prepare_child)
         finally:
             log_file.close()
         node_process = NodeProcess(name, command, process, log_path)
@@ -93,6 +93,13 @@ class NodeProcesses:
             except subprocess.TimeoutExpired:
                 _signal_group(node_process.process, signal.SIGKILL)
                 node_process.process.wait(timeout=5)
+
+
+def prepare_child() -> None:
+    """As the campaign's supervisor prepares its children: stopped with their parent, and
+    stopped by SIGINT even when this test run was started in the background."""
+    die_with_parent()
+    restore_sigint()
 
 
 def _signal_group(process: subprocess.Popen, sig: int) -> None:

@@ -89,6 +89,7 @@ class ProcessSupervisor:
 
         def prepare_child() -> None:
             die_with_parent()
+            restore_sigint()
             if core is not None and hasattr(os, 'sched_setaffinity'):
                 os.sched_setaffinity(0, {core})
             if batch and hasattr(os, 'SCHED_BATCH'):
@@ -263,6 +264,17 @@ def die_with_parent() -> None:
         libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass  # not Linux: Ctrl-C and normal exits still stop every child
+
+
+def restore_sigint() -> None:
+    """In a child (preexec): SIGINT at its default disposition, since a stop asks with SIGINT.
+
+    A parent started in the background by a non-interactive shell (`cmd &`, some CI runners)
+    has SIGINT ignored and hands that on: a child signalled before it installs a handler of its
+    own (rclpy's, at init; a plain Python never does then) sat out the whole grace until
+    SIGKILL.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _signal_group(pid: int, sig: int) -> None:

@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 
 from tests.graph.test_simulator_graph import (
-    EXTERNAL_CONTROLLER,
     environment_msg,
     evaluate_with_reruns,
     room,
+    start_external,
     start_simulator,
 )
 from tests.ros_processes import spin_until
@@ -127,8 +127,7 @@ def test_free_mode_runs_an_episode_for_every_map(node_processes, ros_node, tmp_p
     simulator = start_simulator(node_processes, '/free', 'free_mode:=true', 'seed:=40',
                                 'dummy_agents:=0', f'bags_root:={tmp_path}',
                                 'record_directory:=bags')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
-                          '__ns:=/free', '-p', 'use_sim_time:=true'], name='external')
+    start_external(node_processes, '/free')
     publisher = ros_node.create_publisher(
         OccupancyGrid, '/free/environment',
         QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,

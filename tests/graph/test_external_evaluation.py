@@ -9,14 +9,14 @@ import csv
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from tests.graph.test_simulator_graph import start_external
+
 pytestmark = pytest.mark.graph
 
-EXTERNAL_CONTROLLER = Path(__file__).with_name('external_controller.py')
 SHORT = ['--scenario', 'factory', '--time-limit', '15']
 
 
@@ -28,8 +28,7 @@ def external_stack(node_processes, tmp_path):
                                       '-r', '__ns:=/w0', '-p',
                                       f'bags_root:={tmp_path / "worker_bags"}'],
                                      name='simulator')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
-                          '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'], name='external')
+    start_external(node_processes, '/w0', '--blind')
     simulator.wait_for_output('simulator ready', timeout=120.0)
     return node_processes
 

@@ -5,22 +5,18 @@ from __future__ import annotations
 
 import csv
 import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.graph
+from tests.graph.test_simulator_graph import start_external
 
-EXTERNAL_CONTROLLER = Path(__file__).with_name('external_controller.py')
+pytestmark = pytest.mark.graph
 
 
 def test_an_episode_its_controller_missed_is_rerun_not_recorded(node_processes, tmp_path):
     node_processes.start(['ros2', 'run', 'sessgan_sim', 'simulator', '--ros-args', '-r',
                           '__ns:=/w0', '-p', 'dummy_agents:=0'], name='simulator_w0')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--mute-first-scan',
-                          '--ros-args', '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'],
-                         name='mute_first_scan')
+    start_external(node_processes, '/w0', '--mute-first-scan')
     result = subprocess.run(
         ['ros2', 'run', 'sessgan_evolver', 'campaign', '--external', '--scenario', 'factory',
          '--method', 'sessgan', '--generations', '1', '--population', '1',

@@ -9,15 +9,14 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 
 import pytest
 
 from tests.graph.test_simulator_graph import (
-    EXTERNAL_CONTROLLER,
     environment_msg,
     room,
+    start_external,
     start_simulator,
 )
 from tests.ros_processes import spin_until
@@ -89,8 +88,7 @@ def start_blind_robot(node_processes, namespace: str, bags_root):
     drives straight into the wall: a controller failure in a valid test once it hits."""
     simulator = start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
                                 f'bags_root:={bags_root}')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
-                          '-r', f'__ns:={namespace}', '-p', 'use_sim_time:=true'], name='blind')
+    start_external(node_processes, namespace, '--blind')
     return simulator
 
 

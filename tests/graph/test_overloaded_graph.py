@@ -13,25 +13,25 @@ from __future__ import annotations
 
 import csv
 import subprocess
-import sys
 
 import pytest
 
+from tests.graph.test_regression_suite_graph import junit_case, suite
 from tests.graph.test_simulator_graph import (
-    EXTERNAL_CONTROLLER,
     environment_msg,
     evaluate,
     room,
+    start_external,
     start_simulator,
 )
 
 pytestmark = pytest.mark.graph
 
 
-def start_stalling_controller(node_processes, namespace: str):
-    return node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--stall',
-                                 '--ros-args', '-r', f'__ns:={namespace}', '-p',
-                                 'use_sim_time:=true'], name=f'stall{namespace.replace("/", "_")}')
+def start_clocked_worker(node_processes, bags_root) -> None:
+    """A simulator under /w0 at 4x real time, for the clocked suites below."""
+    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'mode:=clocked',
+                    'real_time_factor:=4.0', f'bags_root:={bags_root}')
 
 
 def test_a_stalling_stack_in_clocked_mode_ends_overloaded_not_as_a_failure(
@@ -39,7 +39,7 @@ def test_a_stalling_stack_in_clocked_mode_ends_overloaded_not_as_a_failure(
     namespace = '/overload'
     start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0',
                     'dummy_agents:=0', f'bags_root:={tmp_path}')
-    start_stalling_controller(node_processes, namespace)
+    start_external(node_processes, namespace, '--stall')
     metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'room'),
                           time_limit=60.0, record_directory='stalled')
     assert metrics.outcome == 'overloaded', (metrics.outcome, metrics.detail)
@@ -58,9 +58,8 @@ def test_a_fleet_robot_whose_stack_stalls_ends_the_clocked_episode_overloaded(
     namespace = '/overload_fleet'
     start_simulator(node_processes, namespace, 'mode:=clocked', 'real_time_factor:=4.0',
                     'dummy_agents:=0')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
-                          f'__ns:={namespace}/r0', '-p', 'use_sim_time:=true'], name='steady_r0')
-    start_stalling_controller(node_processes, f'{namespace}/r1')
+    start_external(node_processes, f'{namespace}/r0')
+    start_external(node_processes, f'{namespace}/r1', '--stall')
     metrics, _ = evaluate(ros_node, namespace, environment_to_msg(crossing_environment()),
                           time_limit=60.0, timeout=300)
     assert metrics.outcome == 'overloaded', (metrics.outcome, metrics.detail)
@@ -75,7 +74,7 @@ def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(
                           '__ns:=/w0', '-p', 'dummy_agents:=0', '-p', 'mode:=clocked',
                           '-p', 'real_time_factor:=4.0', '-p', f'bags_root:={tmp_path}'],
                          name='simulator_w0')
-    start_stalling_controller(node_processes, '/w0')
+    start_external(node_processes, '/w0', '--stall')
     result = subprocess.run(
         ['ros2', 'run', 'sessgan_evolver', 'campaign', '--external', '--scenario', 'factory',
          '--method', 'sessgan', '--generations', '1', '--population', '1',
@@ -95,15 +94,12 @@ def test_a_campaign_reruns_an_overloaded_episode_slower_and_never_records_it(
         assert int(next(csv.DictReader(handle))['harness_reruns']) >= 1
 
 
-def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_processes, tmp_path):
-    from tests.graph.test_regression_suite_graph import junit_case, room_bag, suite
+def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_processes, room_bag,
+                                                                         tmp_path):
+    start_clocked_worker(node_processes, tmp_path / 'sim')
+    start_external(node_processes, '/w0', '--stall')
 
-    bag = room_bag(tmp_path / 'recorded')
-    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'mode:=clocked',
-                    'real_time_factor:=4.0', f'bags_root:={tmp_path / "sim"}')
-    start_stalling_controller(node_processes, '/w0')
-
-    starved = suite(str(bag), '--external', '--harness-tries', '2', '--output',
+    starved = suite(str(room_bag), '--external', '--harness-tries', '2', '--output',
                     str(tmp_path / 'starved'))
     assert starved.returncode == 3, starved.stdout + starved.stderr[-3000:]  # no result
     counts, props = junit_case(tmp_path / 'starved' / 'junit.xml')
@@ -112,7 +108,7 @@ def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_pr
         'harness:overloaded harness:overloaded'), props
     assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))
 
-    slowed = suite(str(bag), '--external', '--harness-tries', '5', '--adaptive-rtf',
+    slowed = suite(str(room_bag), '--external', '--harness-tries', '5', '--adaptive-rtf',
                    '--output', str(tmp_path / 'slowed'))
     assert slowed.returncode == 0, slowed.stdout + slowed.stderr[-3000:]
     counts, props = junit_case(tmp_path / 'slowed' / 'junit.xml')
@@ -122,21 +118,16 @@ def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_pr
     assert outcomes[-1] == 'pass:goal_reached', props
 
 
-def test_a_clocked_suite_with_an_injected_start_up_delay_is_flaky(node_processes, tmp_path):
+def test_a_clocked_suite_with_an_injected_start_up_delay_is_flaky(node_processes, room_bag,
+                                                                  tmp_path):
     """Clocked re-runs depend on timing: a stack that, in every other episode, sends its first
     command 5 s wall late (20 sim s at 4x; no gap is measured before a first command) stands
     still past the stuck timeout (10 sim s) there and reaches the goal otherwise: a pass and a
     fail, a flaky verdict (not a failure), every attempt a result."""
-    from tests.graph.test_regression_suite_graph import junit_case, room_bag, suite
-
-    bag = room_bag(tmp_path / 'recorded')
-    start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'mode:=clocked',
-                    'real_time_factor:=4.0', f'bags_root:={tmp_path / "sim"}')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--late-start-alternate',
-                          '--ros-args', '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'],
-                         name='late_start')
-    flaky = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'flaky'),
-                  '--record', 'none')
+    start_clocked_worker(node_processes, tmp_path / 'sim')
+    start_external(node_processes, '/w0', '--late-start-alternate')
+    flaky = suite(str(room_bag), '--external', '--retries', '1', '--output',
+                  str(tmp_path / 'flaky'), '--record', 'none')
     assert flaky.returncode == 0, flaky.stdout + flaky.stderr[-3000:]  # flaky is no failure
     counts, props = junit_case(tmp_path / 'flaky' / 'junit.xml')
     assert (counts['failures'], counts['errors']) == ('0', '0')

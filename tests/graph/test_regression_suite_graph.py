@@ -14,28 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.graph.test_simulator_graph import EXTERNAL_CONTROLLER, room, start_simulator
+from tests.graph.test_simulator_graph import start_external, start_simulator
 
 pytestmark = pytest.mark.graph
-
-
-def room_bag(directory: Path) -> Path:
-    """A bag of an empty room (no agents), recorded in process."""
-    from sessgan_core.valid_tests import make_environment
-    from sessgan_evolver.in_process import InProcessEvaluator
-    from sessgan_sim.simulator_settings import SimulatorSettings
-
-    environment = make_environment(room(), 'factory', 'room')
-    with InProcessEvaluator('factory', 'nearness_diagram', time_limit=60.0,
-                            settings=SimulatorSettings(dummy_agents=0)) as evaluator:
-        run = evaluator.runner.run(environment, 1, trace=True, keep_scans=True)
-        return evaluator.write_bag(directory / 'room', environment, 1, run, 'test')
-
-
-def start_external(node_processes, *behaviour: str):
-    return node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), *behaviour,
-                                 '--ros-args', '-r', '__ns:=/w0', '-p', 'use_sim_time:=true'],
-                                name='external' + ''.join(behaviour))
 
 
 def suite(*options: str) -> subprocess.CompletedProcess:
@@ -52,12 +33,12 @@ def junit_case(junit: Path) -> tuple[dict[str, str], dict[str, str]]:
                                         for p in case.iter('property')}
 
 
-def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, tmp_path):
-    bag = room_bag(tmp_path / 'recorded')
+def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, room_bag,
+                                                                tmp_path):
     start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
-    blind = start_external(node_processes, '--blind')
+    blind = start_external(node_processes, '/w0', '--blind')
 
-    failed = suite(str(bag), '--external', '--retries', '1', '--output',
+    failed = suite(str(room_bag), '--external', '--retries', '1', '--output',
                    str(tmp_path / 'blind'))
     assert failed.returncode == 1, failed.stdout + failed.stderr[-3000:]
     counts, props = junit_case(tmp_path / 'blind' / 'junit.xml')
@@ -69,8 +50,9 @@ def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, 
 
     os.killpg(blind.process.pid, signal.SIGINT)
     blind.process.wait(timeout=15)
-    start_external(node_processes)
-    fixed = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'fixed'))
+    start_external(node_processes, '/w0')
+    fixed = suite(str(room_bag), '--external', '--retries', '1', '--output',
+                  str(tmp_path / 'fixed'))
     assert fixed.returncode == 0, fixed.stdout + fixed.stderr[-3000:]
     counts, props = junit_case(tmp_path / 'fixed' / 'junit.xml')
     assert (counts['tests'], counts['failures']) == ('1', '0')
@@ -82,13 +64,12 @@ def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, 
 
 
 def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error(
-        node_processes, tmp_path):
-    bag = room_bag(tmp_path / 'recorded')
+        node_processes, room_bag, tmp_path):
     start_simulator(node_processes, '/w0', 'dummy_agents:=0', 'controller_timeout:=1.0',
                     f'bags_root:={tmp_path / "sim"}')
-    alternating = start_external(node_processes, '--alternate')
-    flaky = suite(str(bag), '--external', '--retries', '1', '--output', str(tmp_path / 'flaky'),
-                  '--record', 'none')
+    alternating = start_external(node_processes, '/w0', '--alternate')
+    flaky = suite(str(room_bag), '--external', '--retries', '1', '--output',
+                  str(tmp_path / 'flaky'), '--record', 'none')
     assert flaky.returncode == 0, flaky.stdout + flaky.stderr[-3000:]  # flaky is no failure
     counts, props = junit_case(tmp_path / 'flaky' / 'junit.xml')
     assert (counts['failures'], counts['errors']) == ('0', '0')
@@ -101,8 +82,8 @@ def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error
 
     os.killpg(alternating.process.pid, signal.SIGINT)
     alternating.process.wait(timeout=15)
-    start_external(node_processes, '--silent')
-    silent = suite(str(bag), '--external', '--harness-tries', '2', '--output',
+    start_external(node_processes, '/w0', '--silent')
+    silent = suite(str(room_bag), '--external', '--harness-tries', '2', '--output',
                    str(tmp_path / 'silent'))
     assert silent.returncode == 3, silent.stdout + silent.stderr[-3000:]
     counts, props = junit_case(tmp_path / 'silent' / 'junit.xml')
@@ -112,23 +93,25 @@ def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error
     assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))
 
 
-def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, tmp_path):
-    import time
-
+def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, room_bag,
+                                                            tmp_path):
     import yaml
 
-    bag = room_bag(tmp_path / 'recorded')
-    start_simulator(node_processes, '/w0', 'dummy_agents:=0', f'bags_root:={tmp_path / "sim"}')
-    start_external(node_processes)
+    simulator = start_simulator(node_processes, '/w0', 'dummy_agents:=0',
+                                f'bags_root:={tmp_path / "sim"}')
+    start_external(node_processes, '/w0')
     count = 400  # far more than run before the signal (40 ran in 12 s on a quiet machine)
     suite_file = tmp_path / 'suite.yaml'
     suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
-        {'name': f'n{index:03d}', 'bag': str(bag)} for index in range(count)]}))
+        {'name': f'n{index:03d}', 'bag': str(room_bag)} for index in range(count)]}))
     process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
                                 str(suite_file), '--external', '--output', str(tmp_path / 'out')],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
-    time.sleep(15.0)
+    # Signalled once three episodes have ended (the suite runs one at a time on its one
+    # worker, so it has the first results), not after a fixed wait: mid-suite on any machine.
+    simulator.wait_for_output(r'(\]: episode \S+: \w+ after [\s\S]*){3}', timeout=300)
+    assert process.poll() is None, 'the suite ended before it could be interrupted'
     os.killpg(process.pid, signal.SIGINT)
     stdout, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stdout + stderr[-3000:]  # every one that ran passed

@@ -6,16 +6,15 @@ from __future__ import annotations
 import json
 import re
 import subprocess
-import sys
 
 import pytest
 
 from tests.graph.test_simulator_graph import (
-    EXTERNAL_CONTROLLER,
     environment_msg,
     evaluate,
     room,
     start_controller,
+    start_external,
     start_simulator,
 )
 
@@ -105,8 +104,7 @@ def test_failure_with_an_external_controller_resimulates_with_one_flag(node_proc
     # An external controller under /ext_rs: it drives blind into the wall.
     simulator = start_simulator(node_processes, '/ext_rs', *NON_DEFAULT,
                                 f'bags_root:={tmp_path}')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
-                          '-r', '__ns:=/ext_rs', '-p', 'use_sim_time:=true'], name='blind')
+    start_external(node_processes, '/ext_rs', '--blind')
     metrics, _ = evaluate(ros_node, '/ext_rs', environment_msg(room(), 'factory', 'wall'),
                           time_limit=20.0, record_directory='bags')
     assert metrics.fault_collisions > 0 and metrics.bag_path, metrics.detail

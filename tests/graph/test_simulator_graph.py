@@ -42,6 +42,15 @@ def start_controller(node_processes, namespace: str, name: str, *parameters: str
          '-p', 'use_sim_time:=true', *settings], name=f'{name}{namespace.replace("/", "_")}')
 
 
+def start_external(node_processes, namespace: str, *behaviour: str, name: str = ''):
+    """tests/graph/external_controller.py under ``namespace`` on sim time; ``behaviour``: its
+    flags ('--blind', '--stall', ...; none: it drives to the goal)."""
+    return node_processes.start(
+        [sys.executable, str(EXTERNAL_CONTROLLER), *behaviour, '--ros-args', '-r',
+         f'__ns:={namespace}', '-p', 'use_sim_time:=true'],
+        name=name or 'external' + ''.join(behaviour) + namespace.replace('/', '_'))
+
+
 def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0, seed: int = 1,
              timeout: float = 120.0, record_directory: str = '',
              real_time_factor_scale: float = 0.0):
@@ -95,8 +104,7 @@ def environment_msg(cells, scenario: str, env_id: str):
 
 def test_external_controller_drives_robot_to_goal(node_processes, ros_node):
     start_simulator(node_processes, '/ext', 'dummy_agents:=0')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--ros-args', '-r',
-                          '__ns:=/ext', '-p', 'use_sim_time:=true'], name='external')
+    start_external(node_processes, '/ext')
     metrics, feedback = evaluate(ros_node, '/ext', environment_msg(room(), 'factory', 'room'),
                                  time_limit=60.0)
     assert metrics.outcome == 'goal_reached', metrics.detail
@@ -206,8 +214,7 @@ def test_a_client_cannot_write_or_delete_outside_the_bags_root(node_processes, r
 
     before = snapshot()
     start_simulator(node_processes, '/rooted', 'dummy_agents:=0', f'bags_root:={root}')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
-                          '-r', '__ns:=/rooted', '-p', 'use_sim_time:=true'], name='blind')
+    start_external(node_processes, '/rooted', '--blind')
     for unsafe in (str(outside), '../outside', 'run/../../outside', str(root / 'run')):
         metrics, _ = evaluate(ros_node, '/rooted', environment_msg(room(), 'factory', 'room'),
                               record_directory=unsafe, time_limit=20.0, timeout=30)
@@ -250,8 +257,7 @@ def test_a_failure_in_a_valid_test_leaves_a_complete_bag(node_processes, ros_nod
     from sessgan_evolver.bag_reading import read_episode_bag
 
     start_simulator(node_processes, '/blind', 'dummy_agents:=0', f'bags_root:={tmp_path}')
-    node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--blind', '--ros-args',
-                          '-r', '__ns:=/blind', '-p', 'use_sim_time:=true'], name='blind')
+    start_external(node_processes, '/blind', '--blind')
     metrics, _ = evaluate(ros_node, '/blind', environment_msg(room(), 'factory', 'room'),
                           record_directory='bags', time_limit=20.0)
     assert metrics.feasible

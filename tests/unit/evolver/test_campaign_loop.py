@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import pytest
 import torch
 
 from sessgan_controllers.controller_interface import Goal, observed
 from sessgan_controllers.registry import get_controller
-from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError
+from sessgan_evolver.campaign import Campaign, CampaignConfig, CampaignError, CampaignResult
 from sessgan_evolver.campaign_cli import (
     campaign_parser,
     config_from_args,
@@ -84,23 +85,31 @@ def rows(run_dir) -> list[dict]:
         return list(csv.DictReader(handle))
 
 
-def test_campaign_runs_and_reports(checkpoint, tmp_path):
-    campaign = Campaign(config(checkpoint), 'straight', tmp_path / 'runs', tmp_path / 'bags',
+@pytest.fixture(scope='module')
+def straight(checkpoint, tmp_path_factory) -> tuple[Path, CampaignResult]:
+    """The runs root and result of an uninterrupted campaign (config()), run once for the
+    tests that read it."""
+    root = tmp_path_factory.mktemp('straight')
+    campaign = Campaign(config(checkpoint), 'straight', root / 'runs', root / 'bags',
                         log=lambda _: None)
-    result = campaign.run(InProcessEvaluator())
+    return root, campaign.run(InProcessEvaluator())
+
+
+def test_campaign_runs_and_reports(checkpoint, straight):
+    root, result = straight
     assert [row['generation'] for row in result.generations] == [0, 1, 2]
     assert len(rows(result.run_dir)) == 3 * 3 * 2
     assert result.report_path.exists()
     assert (result.run_dir / 'report' / 'generation_metrics.png').stat().st_size > 0
-    # The same run name is not silently reused.
+    # The same run name is not silently reused (refused before an episode runs).
     with pytest.raises(CampaignError, match='--resume'):
-        Campaign(config(checkpoint), 'straight', tmp_path / 'runs', tmp_path / 'bags',
+        Campaign(config(checkpoint), 'straight', root / 'runs', root / 'bags',
                  log=lambda _: None).run(InProcessEvaluator())
 
 
-def test_resume_after_interruption_gives_the_uninterrupted_results(checkpoint, tmp_path):
-    straight = Campaign(config(checkpoint), 'straight', tmp_path / 'runs', tmp_path / 'bags',
-                        log=lambda _: None).run(InProcessEvaluator())
+def test_resume_after_interruption_gives_the_uninterrupted_results(checkpoint, straight,
+                                                                    tmp_path):
+    _, uninterrupted = straight
     with pytest.raises(Interrupted):
         Campaign(config(checkpoint), 'killed', tmp_path / 'runs', tmp_path / 'bags',
                  log=lambda _: None).run(InProcessEvaluator(interrupt_at_generation=2))
@@ -110,8 +119,8 @@ def test_resume_after_interruption_gives_the_uninterrupted_results(checkpoint, t
     def comparable(run_dir):
         return [{k: v for k, v in row.items() if k != 'environment_id'} for row in rows(run_dir)]
 
-    assert comparable(resumed.run_dir) == comparable(straight.run_dir)
-    assert resumed.generations == straight.generations
+    assert comparable(resumed.run_dir) == comparable(uninterrupted.run_dir)
+    assert resumed.generations == uninterrupted.generations
 
 
 def test_episode_timeout_grows_with_the_map_and_the_time_limit():

@@ -91,3 +91,19 @@ def test_a_pair_that_keeps_dying_is_quarantined(tmp_path):
         assert not pool.restart(pair)
         assert pool.pairs == {} and pool.quarantined == {'/w0': pair}
         assert controller.process.poll() is not None and supervisor.children == []
+
+
+def test_a_child_is_stopped_by_sigint_even_where_its_parent_ignores_it(tmp_path):
+    """A campaign started in the background by a non-interactive shell (`cmd &`) has SIGINT
+    ignored; its children are stopped by SIGINT at once all the same, not by SIGKILL after
+    the grace (a plain Python child would otherwise never install its handler)."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with ProcessSupervisor(tmp_path) as supervisor:
+            child = supervisor.start('sleeper', SLEEPER)
+            started = time.monotonic()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert child.process.returncode == -signal.SIGINT  # not -SIGKILL
+    assert time.monotonic() - started < 4.0  # well within the 5 s grace
+

@@ -54,12 +54,18 @@ def test_which_seeds_each_schedule_uses():
         config(maps_per_member=3, seed_pool=2).validate()
 
 
-def test_rotating_elites_are_selected_on_all_their_evaluations(tmp_path):
-    campaign = Campaign(config(), 'rotating', tmp_path / 'runs', tmp_path / 'bags',
-                        log=lambda _: None)
+@pytest.fixture(scope='module')
+def straight(tmp_path_factory) -> Campaign:
+    """An uninterrupted rotating campaign (config()), run once for the tests that read it."""
+    root = tmp_path_factory.mktemp('straight')
+    campaign = Campaign(config(), 'straight', root / 'runs', root / 'bags', log=lambda _: None)
     with InProcessEvaluator('factory', time_limit=2.0) as evaluator:
         campaign.run(evaluator)
-    store = campaign.store
+    return campaign
+
+
+def test_rotating_elites_are_selected_on_all_their_evaluations(straight):
+    store = straight.store
     rows = store.read_rows('member')
     history: dict[str, list[float]] = {}
     repeated = 0
@@ -76,11 +82,7 @@ def test_rotating_elites_are_selected_on_all_their_evaluations(tmp_path):
     assert repeated >= 3  # the elite of every generation after the first
 
 
-def test_a_resumed_rotating_campaign_gives_the_uninterrupted_results(tmp_path):
-    straight = Campaign(config(), 'straight', tmp_path / 'runs', tmp_path / 'bags',
-                        log=lambda _: None)
-    with InProcessEvaluator('factory', time_limit=2.0) as evaluator:
-        straight.run(evaluator)
+def test_a_resumed_rotating_campaign_gives_the_uninterrupted_results(straight, tmp_path):
     with pytest.raises(Interrupted):
         Campaign(config(), 'killed', tmp_path / 'runs', tmp_path / 'bags',
                  log=lambda _: None).run(InterruptedEvaluator(3))

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -126,6 +126,22 @@ class Environment:
     fleet: tuple[FleetRobot, ...] = ()
     """More robots under test in the same world, each with its own start and goal (a fleet
     episode); () for one robot under test (sessgan_core.fleet)."""
+
+    def moved_to(self, origin: tuple[float, float]) -> Environment:
+        """This environment with its map at ``origin``: every pose moves with the map (the
+        same test in another map frame, e.g. a facility generator's training map's)."""
+        dx, dy = float(origin[0]) - self.origin[0], float(origin[1]) - self.origin[1]
+        if dx == 0.0 and dy == 0.0:
+            return self
+
+        def moved(pose: Pose2D) -> Pose2D:
+            return Pose2D(pose.x + dx, pose.y + dy, pose.yaw)
+
+        return replace(
+            self, origin=(float(origin[0]), float(origin[1])), start=moved(self.start),
+            goal=moved(self.goal), stations=tuple(moved(pose) for pose in self.stations),
+            fleet=tuple(replace(robot, start=moved(robot.start), goal=moved(robot.goal))
+                        for robot in self.fleet))
 
     @property
     def waypoints(self) -> tuple[Pose2D, ...]:

@@ -54,3 +54,19 @@ def test_the_checkpoint_origin_defaults_to_zero_and_is_checked():
     for bad in ([1.0], [1.0, float('nan'), 0.0], 'here', [True, 0.0]):
         with pytest.raises(CheckpointError, match='map_origin'):
             map_origin({'map_origin': bad})
+
+
+@pytest.mark.parametrize('mission, fleet', [(None, None), (MissionSpec(stations=2), None),
+                                            (None, FleetSpec(robots=2))])
+def test_moving_an_environment_is_drawing_it_at_the_new_origin(mission, fleet):
+    cells = load_example_map('factory').cells
+    home = make_environment(cells, 'factory', 'e', seed=5, mission=mission, fleet=fleet)
+    there = make_environment(cells, 'factory', 'e', seed=5, mission=mission, fleet=fleet,
+                             origin=(12.25, -40.5))
+    moved = home.moved_to((12.25, -40.5))
+    assert moved.origin == there.origin
+    assert [moved.start, moved.goal, *moved.stations] == [there.start, there.goal,
+                                                         *there.stations]
+    assert moved.fleet == there.fleet
+    assert moved.moved_to((0.0, 0.0)).start == pytest.approx(home.start)
+    assert home.moved_to(home.origin) is home

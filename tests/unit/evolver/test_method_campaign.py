@@ -285,3 +285,32 @@ def test_a_fault_label_names_its_key_on_its_map():
         key_from_label(key.label, moved, rule)
     with pytest.raises(FaultError, match='not a fault label'):
         key_from_label('stuck', occupancy, rule)
+
+
+def test_a_campaign_runs_the_start_and_goal_the_method_certified(tmp_path, monkeypatch):
+    """A screened child keeps its failing parent's start and goal: the campaign must run
+    that Environment, not draw a new start and goal from the seed (it did, so the default
+    campaign's children were not the tests the search screened), at the generator's origin."""
+    from sessgan_core.token_map import load_example_map
+    from sessgan_core.valid_tests import make_environment
+    from sessgan_evolver.search_methods import Proposal
+
+    cells = load_example_map('factory').cells
+    own = make_environment(cells, 'factory', 'own', seed=7)
+    drawn = make_environment(cells, 'factory', 'drawn', seed=3)
+    assert own.feasible and (own.start, own.goal) != (drawn.start, drawn.goal)
+    campaign = MethodCampaign(method_config(), 'run', tmp_path / 'runs', tmp_path / 'bags',
+                              log=lambda _: None)
+    proposal = Proposal(cells, sim_seed=1, map_seed=3, environment=own)
+    for origin in ((0.0, 0.0), (-4.5, -1.6)):
+        monkeypatch.setattr(campaign, 'origin', origin)
+        episode = campaign.environment_of(proposal, 'b0000-e00000', 0, 0)
+        assert (episode.id, episode.generation, episode.member) == ('b0000-e00000', 0, 0)
+        assert episode.origin == origin
+        assert (episode.start.x - own.start.x, episode.start.y - own.start.y,
+                episode.goal.x - own.goal.x, episode.goal.y - own.goal.y) == \
+            pytest.approx((origin[0], origin[1], origin[0], origin[1]))
+    # Without the method's own Environment, the start and goal come from the seed.
+    episode = campaign.environment_of(Proposal(cells, sim_seed=1, map_seed=3), 'e', 0, 0)
+    assert (episode.start.x, episode.start.y) == \
+        pytest.approx((drawn.start.x - 4.5, drawn.start.y - 1.6))

@@ -67,7 +67,7 @@ from sessgan_evolver.screened_search import ArchiveSource, ScreenedSearch
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
 from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
-from sessgan_gen.checkpoint import checkpoint_training_map
+from sessgan_gen.checkpoint import checkpoint_metadata, checkpoint_training_map, map_origin
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
@@ -331,11 +331,12 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
         else:
             searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
                                      config.ga_config(), config.map_size())
-            run_search(searcher, evaluator, config.budget, label)
+            origin = map_origin(checkpoint_metadata(config.scenario, config.checkpoint or None))
+            run_search(searcher, evaluator, config.budget, label, origin)
             cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))
             source, source_key = _final_source(config, method)
             if isinstance(searcher, ScreenedSearch) and searcher.parents:
-                source = ArchiveSource(searcher, f'screened archive ({label})')
+                source = ArchiveSource(searcher, f'screened archive ({label})', origin)
                 source_key = f'screened:{label}'
         search_wall = time.perf_counter() - episode_log.started
         search_cpu = time.process_time() - episode_log.cpu_started
@@ -382,8 +383,8 @@ def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None,
     if method in ('random', 'latent', 'screened'):
         return base, 'pyramid:base'
     if method == 'cellular_automaton':
-        return (AutomatonSource(config.scenario, reference=base.reference, size=base.size),
-                'cellular_automaton')
+        return (AutomatonSource(config.scenario, reference=base.reference, size=base.size,
+                                origin=base.origin), 'cellular_automaton')
     return None, ''
 
 

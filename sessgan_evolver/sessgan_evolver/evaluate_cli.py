@@ -205,7 +205,7 @@ def build_sources(args: EvaluateConfig, scenario: str,
     every: list[MapSource] = list(sources)
     if args.cellular_automaton:
         every.append(AutomatonSource(scenario, reference=sources[0].reference,
-                                     size=sources[0].size))
+                                     size=sources[0].size, origin=sources[0].origin))
     return every
 
 

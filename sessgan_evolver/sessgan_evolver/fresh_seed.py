@@ -45,6 +45,7 @@ from sessgan_gen.checkpoint import (
     checkpoint_bytes,
     default_checkpoint_path,
     load_checkpoint,
+    map_origin,
     training_map,
 )
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
@@ -61,6 +62,9 @@ class MapSource(Protocol):
     label: str
     reference: np.ndarray
     """The token map its TPKL is measured against: the map the generator learned."""
+    origin: tuple[float, float]
+    """Map-frame position of its maps' cell (0, 0): the generator's training map's
+    (sessgan_gen.checkpoint.map_origin), so episodes and bags overlay that map."""
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         """Token maps (len(seeds), height, width), map i from seeds[i] alone."""
@@ -74,6 +78,7 @@ class EnvironmentSource(Protocol):
 
     label: str
     reference: np.ndarray
+    origin: tuple[float, float]
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray: ...
 
@@ -93,6 +98,7 @@ class PyramidSource:
         source = checkpoint or default_checkpoint_path(scenario)
         self.pyramid, self.metadata = load_checkpoint(source, scenario=scenario)
         self.reference = training_map(self.metadata)
+        self.origin = map_origin(self.metadata)
         try:
             self.size = resolve_sample_size(self.pyramid, self.metadata, size, scenario)
         except SamplingRequestError as err:
@@ -115,6 +121,7 @@ class PopulationSource:
         self.label = label
         self.members = list(members)
         self.reference = self.members[0].reference
+        self.origin = self.members[0].origin
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         count = len(self.members)
@@ -129,14 +136,16 @@ class AutomatonSource:
 
     def __init__(self, scenario: str, label: str = 'cellular automaton',
                  reference: np.ndarray | None = None,
-                 size: tuple[int, int] | None = None) -> None:
+                 size: tuple[int, int] | None = None,
+                 origin: tuple[float, float] = (0.0, 0.0)) -> None:
         """``reference``: the map its TPKL is measured against (default: the scenario's
-        example map); give the training map of the generators it is compared with, and
-        their map ``size`` (height, width; default the scenario's)."""
+        example map); give the training map of the generators it is compared with, their
+        map ``size`` (height, width; default the scenario's) and map ``origin``."""
         self.label = label
         self.generator = CellularAutomatonGenerator(scenario, size=size)
         self.reference = (load_example_map(scenario).cells if reference is None
                           else np.asarray(reference))
+        self.origin = origin
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         return self.generator.maps([int(s) for s in seeds])
@@ -322,13 +331,15 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
             tests = source.environments(map_seeds)
             maps = [cells for cells, _ in tests]
             environments = [replace(environment, id=f'fresh-{index:04d}-s{map_seed}')
+                            .moved_to(source.origin)
                             for index, (map_seed, (_, environment))
                             in enumerate(zip(map_seeds, tests))]
         else:
             maps = list(source.maps(map_seeds))
             environments = [make_environment(cells, evaluator.scenario,
                                              f'fresh-{index:04d}-s{map_seed}', seed=map_seed,
-                                             mission=evaluator.mission, fleet=evaluator.fleet)
+                                             mission=evaluator.mission, fleet=evaluator.fleet,
+                                             origin=source.origin)
                             for index, (map_seed, cells) in enumerate(zip(map_seeds, maps))]
         for index, ((_, sim_seed), environment) in enumerate(zip(plan.pairs, environments)):
             evaluator.run_environment(environment, sim_seed, source.label)

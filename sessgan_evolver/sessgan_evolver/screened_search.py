@@ -479,12 +479,16 @@ class ArchiveSource:
     is the parent's own map. The simulator seed is the evaluation's (fresh), so an archived
     failure shows again only where it is a property of the test, not of one agent draw."""
 
-    def __init__(self, search: ScreenedSearch, label: str) -> None:
+    def __init__(self, search: ScreenedSearch, label: str,
+                 origin: tuple[float, float] = (0.0, 0.0)) -> None:
+        """``origin``: where its maps sit in the map frame (the generator's training map's
+        origin); the search itself works at (0, 0)."""
         if not search.parents:
             raise SearchMethodError('the screened search has no archive: it found no fault')
         self.search = search
         self.label = label
         self.reference = search.example
+        self.origin = origin
         records = search.operator_records
         self.operator = search.operators[max(
             records, key=lambda name: (1 + records[name].successes) / (2 + records[name].trials))]

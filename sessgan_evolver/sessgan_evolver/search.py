@@ -74,10 +74,11 @@ class EpisodeLog:
 
 
 def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
-               run_label: str = '') -> int:
+               run_label: str = '', origin: tuple[float, float] = (0.0, 0.0)) -> int:
     """Ask, run and tell until ``budget`` episodes have run (a last batch that would
     overrun is cut short and not told). Returns the episodes run. Each proposal is run on
-    its own Environment when it has one, else on make_environment's for its seeds."""
+    its own Environment when it has one, else on make_environment's for its seeds, with
+    the map at ``origin`` (the generator's training map's)."""
     if budget < 1:
         raise SearchError(f'the episode budget must be >= 1, got {budget}')
     label = run_label or method.name
@@ -94,12 +95,13 @@ def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
         for proposal in batch:
             environment_id = f'{label}-e{done:05d}'
             if proposal.environment is not None and plain:
-                environment = dataclasses.replace(proposal.environment, id=environment_id)
+                environment = dataclasses.replace(proposal.environment, id=environment_id) \
+                    .moved_to(origin)
             else:
                 environment = make_environment(
                     proposal.cells, evaluator.scenario, environment_id,
                     seed=proposal.resolved_environment_seed, mission=evaluator.mission,
-                    fleet=evaluator.fleet)
+                    fleet=evaluator.fleet, origin=origin)
             run = evaluator.run_environment(environment, proposal.sim_seed, proposal.origin)
             results.append(Evaluated(proposal, environment, run.metrics, run.trace))
             done += 1

@@ -94,3 +94,29 @@ def test_a_population_samples_its_members_in_turn(run_dir):
     assert population.maps([]).shape == (0, 32, 32)
     with pytest.raises(FreshSeedError):
         PopulationSource('none', [])
+
+
+def test_fresh_maps_sit_at_the_generators_origin_and_run_the_same_episodes(run_dir):
+    """A facility generator's maps sit at its training map's origin (evaluate and compare
+    ran them at (0, 0)); moving the map frame changes no metric (beyond rounding: the
+    physics works in map-frame coordinates)."""
+    plan = fresh_seed_plan(5, 2, *used_seeds([run_dir]))
+    seen = []
+    with InProcessEvaluator('factory', time_limit=2.0, simulate_invalid=False) as evaluator:
+        home = evaluate_source(PyramidSource('home', 'factory'), plan, evaluator)
+        moved_source = PyramidSource('moved', 'factory')
+        moved_source.origin = (-4.5, 7.25)
+        run_environment = evaluator.run_environment
+
+        def recording_run(environment, *rest):
+            seen.append(environment)
+            return run_environment(environment, *rest)
+
+        evaluator.run_environment = recording_run
+        moved = evaluate_source(moved_source, plan, evaluator)
+    assert [environment.origin for environment in seen] == [(-4.5, 7.25)] * 2
+    for before, after in zip(episode_rows(home), episode_rows(moved), strict=True):
+        assert (before['outcome'], before['collisions']) == (after['outcome'],
+                                                             after['collisions'])
+        for name in ('risk_score', 'path_length', 'min_clearance'):
+            assert after[name] == pytest.approx(before[name], rel=1e-9, abs=1e-12)

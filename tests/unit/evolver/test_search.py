@@ -94,3 +94,24 @@ def test_a_search_draws_the_evaluators_fleet_and_runs_a_methods_own_environment(
         assert record.environment.id == f'screened-e0000{record.index}'
         assert record.environment.start == proposal.environment.start
         assert (record.environment.occupancy == proposal.environment.occupancy).all()
+
+
+def test_a_search_runs_its_maps_at_the_generators_origin():
+    from sessgan_evolver.screened_search import ScreenedConfig, ScreenedSearch
+    from sessgan_evolver.search_methods import RandomSampling
+
+    origin = (-4.5, 7.25)
+    for method in (RandomSampling('factory', 0, batch=2),
+                   ScreenedSearch('factory', 1, config=ScreenedConfig(batch=2,
+                                                                      reference_maps=2))):
+        log = EpisodeLog()
+        with InProcessEvaluator('factory', time_limit=0.5, simulate_invalid=False,
+                                observer=log) as evaluator:
+            proposals = method.ask()
+            method.ask = lambda: proposals  # type: ignore[method-assign]
+            run_search(method, evaluator, budget=2, origin=origin)
+        assert [record.environment.origin for record in log.records] == [origin] * 2
+        for proposal, record in zip(proposals, log.records):
+            if proposal.environment is not None:  # its own start, in the moved frame
+                assert record.environment.start.x == \
+                    pytest.approx(proposal.environment.start.x + origin[0])

@@ -39,6 +39,11 @@ def test_every_pose_moves_with_the_origin(mission, fleet):
     moved.validate()
     # The certificate checked at the origin agrees with the one drawn there.
     assert certify_environment(moved) is not None
+    # Moving a drawn environment there is drawing it there.
+    shifted = home.moved_to((12.25, -40.5))
+    assert (shifted.origin, shifted.start, shifted.goal, shifted.stations, shifted.fleet) == \
+        (moved.origin, moved.start, moved.goal, moved.stations, moved.fleet)
+    assert home.moved_to(home.origin) is home
 
 
 def test_an_infeasible_map_puts_its_start_on_the_map_at_the_origin():
@@ -55,18 +60,3 @@ def test_the_checkpoint_origin_defaults_to_zero_and_is_checked():
         with pytest.raises(CheckpointError, match='map_origin'):
             map_origin({'map_origin': bad})
 
-
-@pytest.mark.parametrize('mission, fleet', [(None, None), (MissionSpec(stations=2), None),
-                                            (None, FleetSpec(robots=2))])
-def test_moving_an_environment_is_drawing_it_at_the_new_origin(mission, fleet):
-    cells = load_example_map('factory').cells
-    home = make_environment(cells, 'factory', 'e', seed=5, mission=mission, fleet=fleet)
-    there = make_environment(cells, 'factory', 'e', seed=5, mission=mission, fleet=fleet,
-                             origin=(12.25, -40.5))
-    moved = home.moved_to((12.25, -40.5))
-    assert moved.origin == there.origin
-    assert [moved.start, moved.goal, *moved.stations] == [there.start, there.goal,
-                                                         *there.stations]
-    assert moved.fleet == there.fleet
-    assert moved.moved_to((0.0, 0.0)).start == pytest.approx(home.start)
-    assert home.moved_to(home.origin) is home

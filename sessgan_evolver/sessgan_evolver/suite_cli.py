@@ -34,6 +34,7 @@ from typing import Any, Literal
 from sessgan_core.config_cli import cli, parse_valid_config
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.progress import ProgressPrinter
+from sessgan_core.ros_spin import init_rclpy, run_command
 from sessgan_evolver.errors import SessganEvolverError, SuiteError
 from sessgan_evolver.regression_suite import (
     EXIT_HARNESS,
@@ -223,7 +224,6 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
     RosEvaluator: parallel, a worker that refuses or stalls gets the job taken away), in
     rounds until every scenario has its verdict."""
     import rclpy
-    from rclpy.executors import ExternalShutdownException
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
     from sessgan_evolver.harness import real_time_factor_scale as slower_pace
@@ -265,7 +265,7 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
     def log(message: str) -> None:
         print(f'[suite] {message}', file=sys.stderr, flush=True)
 
-    rclpy.init(args=['--ros-args'])
+    init_rclpy(['--ros-args'])  # no rclpy signal handlers: SIGINT is main's (run_command)
     node = rclpy.create_node('sessgan_suite')
     supervisor = ProcessSupervisor(output / 'logs')
     try:
@@ -289,8 +289,6 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
             if not jobs:
                 return
             evaluator.evaluate(jobs, on_result)
-    except ExternalShutdownException:
-        raise KeyboardInterrupt from None  # rclpy's SIGINT handler shut the context down
     finally:
         supervisor.stop_all()
         node.destroy_node()
@@ -302,6 +300,14 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
 
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
+    # SIGINT and SIGTERM raise KeyboardInterrupt wherever the suite stands (run_command),
+    # also when it was started with SIGINT ignored (in the background): running, it stops and
+    # reports what ran; preparing, it stops without a traceback. With rclpy's own handlers
+    # the context was shut down under the running suite, which ended with an RCLError.
+    return run_command(lambda: run_suite(arguments))
+
+
+def run_suite(arguments: list[str]) -> int:
     args = parse_args(arguments)
     runner = InProcessRunner(args.record, Path())
     try:

@@ -202,6 +202,7 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
     (CampaignConfig.adaptive_rtf)."""
     import rclpy
 
+    from sessgan_core.ros_spin import init_rclpy
     from sessgan_evolver.process_supervisor import ProcessSupervisor
     from sessgan_evolver.ros_evaluator import RosEvaluator
 
@@ -214,7 +215,9 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
     config.validate()
     record_directory = check_record_subdirectory(record_directory)
     label = controller or 'external'
-    rclpy.init(args=['--ros-args'])
+    # No rclpy signal handlers: SIGINT is the command's (run_command), so the context stays up
+    # for the clean-up instead of being shut down under a running evaluation.
+    init_rclpy(['--ros-args'])
     node = rclpy.create_node('sessgan_evolver_external')
     try:
         # No process is started: the supervisor only gives the evaluator its log folder.

@@ -104,10 +104,15 @@ def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, roo
     suite_file = tmp_path / 'suite.yaml'
     suite_file.write_text(yaml.safe_dump({'name': 'long', 'scenarios': [
         {'name': f'n{index:03d}', 'bag': str(room_bag)} for index in range(count)]}))
+    # Started with SIGINT ignored, as a background job (`cmd &`, some CI runners) starts its
+    # children: the suite must stop on the signal all the same (with rclpy's own handlers it
+    # ended with an RCLError from the context they shut down). The smoke test's suite gets
+    # SIGINT at its default, as in a terminal.
     process = subprocess.Popen([sys.executable, '-m', 'sessgan_evolver.suite_cli',
                                 str(suite_file), '--external', '--output', str(tmp_path / 'out')],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
+                               start_new_session=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     # Signalled once three episodes have ended (the suite runs one at a time on its one
     # worker, so it has the first results), not after a fixed wait: mid-suite on any machine.
     simulator.wait_for_output(r'(\]: episode \S+: \w+ after [\s\S]*){3}', timeout=300)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +34,6 @@ import numpy as np
 from sessgan_core.environment import Environment
 from sessgan_core.progress import ProgressPrinter, format_duration
 from sessgan_core.scenarios import get_scenario
-from sessgan_core.valid_tests import make_environment
 from sessgan_evolver import __version__
 from sessgan_evolver.campaign import (
     FEW_VALID_TESTS,
@@ -128,17 +126,9 @@ class MethodCampaign:
 
     def environment_of(self, proposal: Proposal, environment_id: str, batch: int,
                        member: int) -> Environment:
-        """The episode's Environment: the method's own for a plain episode when it built one
-        (a screened child keeps its parent's start and goal), else drawn from the seeds; at
-        the generator's map origin either way."""
-        mission, fleet = self.config.mission(), self.config.fleet()
-        if proposal.environment is not None and mission.stations == 0 and fleet.robots == 1:
-            return replace(proposal.environment, id=environment_id, generation=batch,
-                           member=member).moved_to(self.origin)
-        return make_environment(proposal.cells, self.scenario, environment_id,
-                                seed=proposal.resolved_environment_seed, generation=batch,
-                                member=member, mission=mission, fleet=fleet,
-                                origin=self.origin)
+        return proposal.test_environment(self.scenario.name, environment_id,
+                                         self.config.mission(), self.config.fleet(),
+                                         self.origin, batch, member)
 
     # -- resume ---------------------------------------------------------------------------
 

@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 from sessgan_core.environment import Environment
-from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.campaign import Campaign, CampaignConfig
 from sessgan_evolver.episode_runner import EpisodeRun
 from sessgan_evolver.errors import SearchError
@@ -77,14 +76,11 @@ def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
                run_label: str = '', origin: tuple[float, float] = (0.0, 0.0)) -> int:
     """Ask, run and tell until ``budget`` episodes have run (a last batch that would
     overrun is cut short and not told). Returns the episodes run. Each proposal is run on
-    its own Environment when it has one, else on make_environment's for its seeds, with
-    the map at ``origin`` (the generator's training map's)."""
+    the Environment :meth:`Proposal.test_environment` gives, with the map at ``origin`` (the
+    generator's training map's)."""
     if budget < 1:
         raise SearchError(f'the episode budget must be >= 1, got {budget}')
     label = run_label or method.name
-    # A method's own Environment is a plain episode's; missions and fleets are drawn from
-    # the seeds as for every method.
-    plain = evaluator.mission.stations == 0 and evaluator.fleet.robots == 1
     done = 0
     while done < budget:
         proposals = method.ask()
@@ -94,14 +90,8 @@ def run_search(method: SearchMethod, evaluator: InProcessEvaluator, budget: int,
         results = []
         for proposal in batch:
             environment_id = f'{label}-e{done:05d}'
-            if proposal.environment is not None and plain:
-                environment = dataclasses.replace(proposal.environment, id=environment_id) \
-                    .moved_to(origin)
-            else:
-                environment = make_environment(
-                    proposal.cells, evaluator.scenario, environment_id,
-                    seed=proposal.resolved_environment_seed, mission=evaluator.mission,
-                    fleet=evaluator.fleet, origin=origin)
+            environment = proposal.test_environment(evaluator.scenario, environment_id,
+                                                    evaluator.mission, evaluator.fleet, origin)
             run = evaluator.run_environment(environment, proposal.sim_seed, proposal.origin)
             results.append(Evaluated(proposal, environment, run.metrics, run.trace))
             done += 1

@@ -30,13 +30,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
 from sessgan_core.environment import Environment
+from sessgan_core.fleet import FleetSpec
+from sessgan_core.missions import MissionSpec
 from sessgan_core.scenarios import get_scenario
+from sessgan_core.valid_tests import make_environment
 from sessgan_evolver.cellular_automaton import (
     CellularAutomatonConfig,
     CellularAutomatonGenerator,
@@ -93,6 +96,19 @@ class Proposal:
         if self.environment_seed is not None:
             return int(self.environment_seed)
         return max(int(self.map_seed), 0)
+
+    def test_environment(self, scenario: str, environment_id: str, mission: MissionSpec,
+                         fleet: FleetSpec, origin: tuple[float, float] = (0.0, 0.0),
+                         generation: int = -1, member: int = -1) -> Environment:
+        """The Environment this proposal runs as, with its map at ``origin``: the method's own
+        for a plain episode (a screened child keeps its parent's start and goal), else drawn
+        from the seeds (missions and fleets are drawn so for every method)."""
+        if self.environment is not None and mission.stations == 0 and fleet.robots == 1:
+            return replace(self.environment, id=environment_id, generation=generation,
+                           member=member).moved_to(origin)
+        return make_environment(self.cells, scenario, environment_id,
+                                seed=self.resolved_environment_seed, generation=generation,
+                                member=member, mission=mission, fleet=fleet, origin=origin)
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,8 @@
 
 Pure Python on a flat bytearray with a one-cell blocked border: no bounds checks, and
 faster than numpy for the few thousand cells of a map (numpy's per-call overhead dominates
-a frontier search whose depth is the map's geodesic diameter). Moves are 4-connected.
+a frontier search whose depth is the map's geodesic diameter). Region labelling, which
+visits every cell, is vectorised over row runs instead. Moves are 4-connected.
 """
 
 from __future__ import annotations
@@ -89,27 +90,56 @@ def walk_back(grid: FlatGrid, dist: list[int], goal: int) -> list[int]:
     return path
 
 
-def label_regions(grid: FlatGrid) -> tuple[list[int], list[list[int]], list[int]]:
-    """Label every free cell of a flat grid.
+class FlatRegions(NamedTuple):
+    """The 4-connected regions of a :class:`FlatGrid`."""
 
-    Returns (labels, visit order per region, distance from each region's first cell);
-    labels are -1 outside free space.
+    labels: np.ndarray
+    """int32 per flat index: the region of each open cell, -1 elsewhere; regions numbered
+    in flat (row-major) order of their first cell."""
+    sizes: np.ndarray
+    """int64 number of cells of each region."""
+
+
+def label_regions(grid: FlatGrid) -> FlatRegions:
+    """Label every open cell of a flat grid with its 4-connected region.
+
+    Vectorised over runs (maximal stretches of open cells along a row; the blocked border
+    keeps a run inside its row): two runs in neighbouring rows that share a column are
+    joined, and the runs' union-find settles in a few numpy passes, where a breadth-first
+    flood visiting every cell in Python cost 10 ms a 128 x 128 race track.
     """
-    size = len(grid.open_cells)
-    dist = [-1] * size
-    labels = [-1] * size
-    orders: list[list[int]] = []
-    open_cells = grid.open_cells
-    index = open_cells.find(1)
-    while index >= 0:
-        if dist[index] < 0:
-            order = bfs(grid, index, dist)
-            label = len(orders)
-            for member in order:
-                labels[member] = label
-            orders.append(order)
-        index = open_cells.find(1, index + 1)
-    return labels, orders, dist
+    open_cells = np.frombuffer(grid.open_cells, dtype=np.uint8).astype(bool)
+    labels = np.full(len(open_cells), -1, dtype=np.int32)
+    edges = np.diff(open_cells.astype(np.int8), prepend=np.int8(0), append=np.int8(0))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)  # exclusive
+    if not len(starts):
+        return FlatRegions(labels, np.zeros(0, dtype=np.int64))
+    # Runs of the row above that overlap each run form a contiguous range [first, last).
+    first = np.searchsorted(ends, starts - grid.stride, side='right')
+    last = np.searchsorted(starts, ends - grid.stride, side='left')
+    counts = np.maximum(last - first, 0)
+    lower = np.repeat(np.arange(len(starts)), counts)
+    offsets = np.arange(len(lower)) - np.repeat(np.cumsum(counts) - counts, counts)
+    upper = np.repeat(first, counts) + offsets
+    root = np.arange(len(starts))
+    while True:  # hook each joined pair's larger root under the smaller, then compress
+        a, b = root[upper], root[lower]
+        if np.array_equal(a, b):
+            break
+        low = np.minimum(a, b)
+        np.minimum.at(root, a, low)
+        np.minimum.at(root, b, low)
+        while True:
+            jumped = root[root]
+            if np.array_equal(jumped, root):
+                break
+            root = jumped
+    # Each region's root is its first run, so numbering roots in order is row-major order.
+    _, region = np.unique(root, return_inverse=True)
+    lengths = ends - starts
+    labels[open_cells] = np.repeat(region, lengths)
+    return FlatRegions(labels, np.bincount(region, weights=lengths).astype(np.int64))
 
 
 def distance_field(free: np.ndarray, source: Cell, diagonal: bool = False) -> np.ndarray:

@@ -188,7 +188,8 @@ def min_route_steps(shape: tuple[int, int], subdivision: int) -> int:
     return max(2, int(0.5 * min(shape[0], shape[1]))) * subdivision
 
 
-def track_length_steps(flat: FlatGrid, region: list[int], candidates: np.ndarray) -> int:
+def track_length_steps(flat: FlatGrid, region: np.ndarray | list[int],
+                       candidates: np.ndarray) -> int:
     """The track's length in grid steps: the longest shortest route between two
     ``candidates`` (flat indices) of one 4-connected ``region`` (its flat indices), by a
     double sweep: the candidate farthest from the region's first cell, then the candidate
@@ -198,7 +199,7 @@ def track_length_steps(flat: FlatGrid, region: list[int], candidates: np.ndarray
     if not len(inside):
         return 0
     dist = [-1] * len(flat.open_cells)
-    bfs(flat, region[0], dist)
+    bfs(flat, int(region[0]), dist)
     end = int(inside[int(np.argmax(np.asarray(dist)[inside]))])
     dist = [-1] * len(flat.open_cells)
     bfs(flat, end, dist)
@@ -302,14 +303,12 @@ def place_start_goal(occupancy: np.ndarray, resolution: float, origin: tuple[flo
     if not placeable.any():
         return Placement(None, None, None, 0.0, 0.0, Rejection.NO_CLEAR_CELL)
     flat = flat_grid(routable)
-    labels, orders, _ = label_regions(flat)
+    labels, region_sizes = label_regions(flat)
     min_steps = min_route_steps(np.asarray(occupancy).shape, grid.subdivision)
     rows, cols = np.nonzero(placeable)
     candidates = (rows + 1) * flat.stride + cols + 1
-    candidate_labels = np.asarray(labels)[candidates]
     # Only regions large enough to hold a route of min_steps can give a valid pair.
-    region_sizes = np.array([len(order) for order in orders])
-    starts = candidates[region_sizes[candidate_labels] > min_steps]
+    starts = candidates[region_sizes[labels[candidates]] > min_steps]
     rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(0x5E55,)))
     track_lengths: dict[int, int] = {}
     for _ in range(START_TRIES if len(starts) else 0):
@@ -320,9 +319,10 @@ def place_start_goal(occupancy: np.ndarray, resolution: float, origin: tuple[flo
         farthest_steps = int(steps.max())
         need = max(min_steps, 0.5 * farthest_steps)
         if spec.goal_track_fraction > 0:
-            region = labels[start]
+            region = int(labels[start])
             if region not in track_lengths:
-                track_lengths[region] = track_length_steps(flat, orders[region], candidates)
+                track_lengths[region] = track_length_steps(
+                    flat, np.flatnonzero(labels == region), candidates)
             need = max(need, spec.goal_track_fraction * track_lengths[region])
         goals = candidates[steps >= need]
         if not len(goals):

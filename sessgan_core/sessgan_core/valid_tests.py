@@ -128,10 +128,9 @@ def footprint_free_mask(cells: np.ndarray, scenario: ScenarioLike) -> np.ndarray
 def reachable_regions(free: np.ndarray) -> Regions:
     """The 4-connected regions of a free mask (e.g. :func:`footprint_free_mask`)."""
     grid = flat_grid(free)
-    labels, orders, _ = label_regions(grid)
-    stride = grid.stride
-    label_array = np.asarray(labels, dtype=np.int32).reshape(-1, stride)[1:-1, 1:-1]
-    return Regions(np.ascontiguousarray(label_array), [len(order) for order in orders])
+    regions = label_regions(grid)
+    label_array = regions.labels.reshape(-1, grid.stride)[1:-1, 1:-1]
+    return Regions(np.ascontiguousarray(label_array), regions.sizes.tolist())
 
 
 def _check_cell(free: np.ndarray, cell: Cell, label: str) -> None:

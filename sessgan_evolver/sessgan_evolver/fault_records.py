@@ -26,8 +26,9 @@ from sessgan_evolver.fault_picture import scene_from_bag, write_scene_png
 from sessgan_evolver.faults import Confirmation, FaultEntry, FaultRule, confirm, key_of_failure
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeRecord
+from sessgan_sim.bag_recording import FAULT_PICTURE_FILE
 
-PICTURE_FILE = 'fault.png'
+PICTURE_FILE = FAULT_PICTURE_FILE
 
 
 def confirm_faults(entries: Sequence[FaultEntry], records: Sequence[EpisodeRecord],

@@ -308,8 +308,8 @@ def measure_track(track: np.ndarray, route_points: np.ndarray | None, cell_size:
     clearance = track_clearance(mask)
     track_cells = int(mask.sum())
     dead_ends = count_dead_ends(mask, spur_length, clearance)
-    labels, orders, _ = label_regions(flat_grid(mask))
-    fragments = len(orders)
+    labels, sizes = label_regions(flat_grid(mask))
+    fragments = len(sizes)
     empty = np.zeros(0)
     route = None if route_points is None else np.asarray(route_points, dtype=np.float64)
     if route is None or len(route) == 0 or track_cells == 0:
@@ -329,7 +329,7 @@ def measure_track(track: np.ndarray, route_points: np.ndarray | None, cell_size:
     stride = mask.shape[1] + 2
     start_row, start_col = _cell_of(route[0], mask.shape)
     component = labels[(start_row + 1) * stride + start_col + 1]
-    route_component = len(orders[component]) if component >= 0 else 0
+    route_component = int(sizes[component]) if component >= 0 else 0
     per_cell = resample_polyline(route, 1.0)
     widths = discs.widths(per_cell)
     lap = on_route

@@ -84,7 +84,10 @@ VOLATILE_DEPTH = 10
 EPISODE_FILE = 'episode.json'
 MAP_YAML_FILE = 'map.yaml'
 METADATA_FILE = 'metadata.yaml'
-_BAG_SIDE_FILES = frozenset({EPISODE_FILE, MAP_YAML_FILE, 'map.pgm', METADATA_FILE})
+FAULT_PICTURE_FILE = 'fault.png'
+"""The picture a confirmed fault's record draws beside its bag (sessgan_evolver.fault_records)."""
+_BAG_SIDE_FILES = frozenset({EPISODE_FILE, MAP_YAML_FILE, 'map.pgm', METADATA_FILE,
+                             FAULT_PICTURE_FILE})
 
 STAGING_MARKER = '.sessgan-staging.json'
 """The first file of a staging directory: who writes it (pid, host, process start time)."""

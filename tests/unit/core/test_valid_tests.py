@@ -91,6 +91,53 @@ def test_reachable_regions_are_four_connected():
     assert regions.labels.dtype == np.int32
 
 
+def flood_fill_labels(mask):
+    """Reference labelling: a flood fill from each unlabelled cell in row-major order."""
+    labels = np.full(mask.shape, -1)
+    sizes = []
+    for seed in zip(*np.nonzero(mask)):
+        if labels[seed] >= 0:
+            continue
+        labels[seed] = len(sizes)
+        stack, size = [seed], 0
+        while stack:
+            row, col = stack.pop()
+            size += 1
+            for n_row, n_col in ((row - 1, col), (row + 1, col), (row, col - 1), (row, col + 1)):
+                if (0 <= n_row < mask.shape[0] and 0 <= n_col < mask.shape[1]
+                        and mask[n_row, n_col] and labels[n_row, n_col] < 0):
+                    labels[n_row, n_col] = len(sizes)
+                    stack.append((n_row, n_col))
+        sizes.append(size)
+    return labels, sizes
+
+
+def spiral(side):
+    """A one-cell corridor wound inwards: each turn joins runs only through the next row."""
+    mask = np.zeros((side, side), dtype=bool)
+    top, left, bottom, right = 0, 0, side - 1, side - 1
+    while top <= bottom and left <= right:
+        mask[top, left:right + 1] = True
+        mask[top:bottom + 1, right] = True
+        mask[bottom, left:right + 1] = True
+        mask[top + 2:bottom + 1, left] = True
+        top, left, bottom, right = top + 2, left + 2, bottom - 2, right - 2
+        if top <= bottom:
+            mask[top - 1, left] = True
+    return mask
+
+
+def test_region_labels_match_a_flood_fill():
+    rng = np.random.default_rng(7)
+    masks = [spiral(21), spiral(8), np.zeros((3, 4), bool), np.ones((5, 1), bool)]
+    masks += [rng.random(rng.integers(1, 30, 2)) < rng.random() for _ in range(200)]
+    for mask in masks:
+        regions = reachable_regions(mask)
+        labels, sizes = flood_fill_labels(mask)
+        assert regions.labels.tolist() == labels.tolist()
+        assert regions.sizes == sizes
+
+
 def test_shortest_path_in_free():
     mask = free("""
         ..#..

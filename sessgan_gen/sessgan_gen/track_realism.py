@@ -250,20 +250,22 @@ def _disc_hits(centres: np.ndarray, radii: np.ndarray, points: np.ndarray) -> np
 def paint_discs(shape: tuple[int, ...], rows: np.ndarray, cols: np.ndarray,
                  radii: np.ndarray) -> np.ndarray:
     """Bool mask of the cells whose centres lie in at least one disc (centre = a cell centre,
-    radius in cells); discs of one radius are painted together by shifted ORs."""
-    covered = np.zeros(shape, dtype=bool)
+    radius in cells, rounded to 1e-6); one shifted comparison per offset for all discs at
+    once (the largest squared radius reaching from each centre)."""
     height, width = shape
-    keys = np.round(radii, 6)
-    for radius in np.unique(keys):
-        chosen = keys == radius
-        reach = int(math.floor(radius + 1e-9))
-        seeds = np.zeros((height + 2 * reach, width + 2 * reach), dtype=bool)
-        seeds[rows[chosen] + reach, cols[chosen] + reach] = True
-        for d_row in range(-reach, reach + 1):
-            for d_col in range(-reach, reach + 1):
-                if d_row * d_row + d_col * d_col <= radius * radius + 1e-9:
-                    covered |= seeds[reach - d_row:reach - d_row + height,
-                                     reach - d_col:reach - d_col + width]
+    covered = np.zeros(shape, dtype=bool)
+    keys = np.round(np.asarray(radii, dtype=np.float64), 6)
+    if not len(keys):
+        return covered
+    reach = int(math.floor(float(keys.max()) + 1e-9))
+    # Squared radius (with the tolerance) of the disc centred on each cell, -1 elsewhere.
+    reaches = np.full((height + 2 * reach, width + 2 * reach), -1.0)
+    np.maximum.at(reaches, (rows + reach, cols + reach), keys * keys + 1e-9)
+    for d_row in range(-reach, reach + 1):
+        for d_col in range(-reach, reach + 1):
+            reaching = reaches[reach - d_row:reach - d_row + height,
+                               reach - d_col:reach - d_col + width]
+            covered |= reaching >= d_row * d_row + d_col * d_col
     return covered
 
 

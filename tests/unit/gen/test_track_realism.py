@@ -11,6 +11,7 @@ from sessgan_gen.track_realism import (
     count_dead_ends,
     measure_environment,
     measure_track,
+    paint_discs,
     route_curvatures,
     skeleton,
     track_clearance,
@@ -157,3 +158,16 @@ def test_measure_environment_of_a_generated_style_race_track_ring():
     assert not blocked.feasible
     result = measure_environment(blocked)
     assert result.route_widths.size == 0 and result.fragments == 1
+
+
+def test_painted_discs_cover_the_cells_within_any_radius():
+    rng = np.random.default_rng(5)
+    height, width = 23, 31
+    rows, cols = rng.integers(0, height, 12), rng.integers(0, width, 12)
+    radii = rng.choice([0.0, 1.0, math.sqrt(2), 2.5, math.sqrt(13), 4.0], 12)
+    grid_rows, grid_cols = np.mgrid[:height, :width]
+    expected = np.zeros((height, width), dtype=bool)
+    for row, col, radius in zip(rows, cols, np.round(radii, 6)):  # sqrt(13) rounds down
+        expected |= (grid_rows - row) ** 2 + (grid_cols - col) ** 2 <= radius * radius + 1e-9
+    assert np.array_equal(paint_discs((height, width), rows, cols, radii), expected)
+    assert not paint_discs((4, 4), rows[:0], cols[:0], radii[:0]).any()

@@ -138,10 +138,10 @@ def largest_loop_block(skeleton_mask: np.ndarray) -> np.ndarray:
     height, width = thin.shape
     index = np.full((height + 2, width + 2), -1, dtype=np.int64)
     index[rows + 1, cols + 1] = np.arange(len(rows))
-    neighbours = [[int(index[row + 1 + d_row, col + 1 + d_col])
-                   for d_row in (-1, 0, 1) for d_col in (-1, 0, 1)
-                   if (d_row or d_col) and index[row + 1 + d_row, col + 1 + d_col] >= 0]
-                  for row, col in zip(rows.tolist(), cols.tolist())]
+    # Each pixel's skeleton neighbours, row-major around it, gathered for all pixels at once.
+    around = np.stack([index[rows + 1 + d_row, cols + 1 + d_col]
+                       for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if d_row or d_col], axis=1)
+    neighbours = [[other for other in row if other >= 0] for row in around.tolist()]
     order = [-1] * len(rows)
     low = [0] * len(rows)
     counter = 0

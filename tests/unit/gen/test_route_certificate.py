@@ -113,6 +113,12 @@ def test_bottleneck_is_the_tightest_unavoidable_passage():
     assert bottleneck_clearance(clearance, (0, 0), (3, 3), 0.0) == 1.0
     clearance[1:3, :] = [[0.2, 0.6, 0.3, 0.2], [0.2, 0.4, 0.3, 0.2]]
     assert bottleneck_clearance(clearance, (0, 0), (3, 3), 0.0) == 0.4
+    # Cells below the floor are never entered: the wall of 0.2 around the sides cuts it.
+    assert bottleneck_clearance(clearance, (0, 0), (3, 3), 0.35) == 0.4
+    assert bottleneck_clearance(clearance, (0, 0), (3, 3), 0.45) == 0.0
+    assert bottleneck_clearance(clearance, (1, 1), (3, 3), 0.0) == 0.4  # starts in the gap
+    assert bottleneck_clearance(clearance, (0, 0), (1, 0), 0.5) == 0.0  # goal below floor
+    assert bottleneck_clearance(clearance, (2, 1), (2, 1), 0.0) == 0.4
 
 
 def serpentine_track(size=64):

@@ -28,8 +28,6 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeRecord
 from sessgan_sim.bag_recording import FAULT_PICTURE_FILE
 
-PICTURE_FILE = FAULT_PICTURE_FILE
-
 
 def confirm_faults(entries: Sequence[FaultEntry], records: Sequence[EpisodeRecord],
                    evaluator: InProcessEvaluator, rule: FaultRule, repeats: int,
@@ -81,7 +79,7 @@ def write_fault_record(directory: Path, record: EpisodeRecord, run: Any,
     worker_bag = str(run.metrics.get('bag_path') or '')
     if worker_bag and (run.trace is None or run.trace.scans is None):
         bag = copy_worker_bag(Path(worker_bag), directory, fault_facts)
-        write_scene_png(scene_from_bag(bag), bag / PICTURE_FILE)
+        write_scene_png(scene_from_bag(bag), bag / FAULT_PICTURE_FILE)
         return bag
     facts = {
         **evaluator.episode_facts(record.sim_seed, record.environment),
@@ -90,7 +88,7 @@ def write_fault_record(directory: Path, record: EpisodeRecord, run: Any,
         **fault_facts,
     }
     bag = write_trace_bag(directory, record.environment, run.trace, facts)
-    write_scene_png(scene_from_bag(bag), bag / PICTURE_FILE)
+    write_scene_png(scene_from_bag(bag), bag / FAULT_PICTURE_FILE)
     return bag
 
 

@@ -18,11 +18,11 @@ from sessgan_evolver.fault_picture import (
     write_scene_grid,
     write_scene_png,
 )
-from sessgan_evolver.fault_records import PICTURE_FILE, confirm_faults
+from sessgan_evolver.fault_records import confirm_faults
 from sessgan_evolver.faults import FaultRule, group_faults
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.search import EpisodeLog
-from sessgan_sim.bag_recording import jazzy_typestore
+from sessgan_sim.bag_recording import FAULT_PICTURE_FILE, jazzy_typestore
 
 pytestmark = pytest.mark.unit
 
@@ -129,8 +129,8 @@ def test_confirmed_faults_get_a_bag_and_a_picture(tmp_path):
         again = confirm_faults(faults, log.records, evaluator, rule, repeats=1,
                                record_directory=tmp_path / 'all', max_records=-1)
     assert len(every) == len(faults) and again == every
-    assert all((path / PICTURE_FILE).is_file() for path in again)
-    assert len(written) == 1 and (written[0] / PICTURE_FILE).stat().st_size > 10_000
+    assert all((path / FAULT_PICTURE_FILE).is_file() for path in again)
+    assert len(written) == 1 and (written[0] / FAULT_PICTURE_FILE).stat().st_size > 10_000
     facts = json.loads((written[0] / 'episode.json').read_text())
     assert facts['fault'] == faults[0].key.to_dict() and facts['method'] == 'test'
     assert facts['confirmation']['reproduced'] == 2

@@ -106,66 +106,84 @@ def track_clearance(track: np.ndarray) -> np.ndarray:
     below = np.minimum.accumulate(below[::-1], axis=0)[::-1]
     row_gap = np.minimum(rows - above, below - rows)
     along_rows = np.maximum(row_gap - 0.5, 0.0) ** 2
-    columns = np.arange(width, dtype=np.float64)
-    across = np.maximum(np.abs(columns[:, None] - columns[None, :]) - 0.5, 0.0) ** 2
-    squared = np.empty((height, width))
-    chunk = max(1, _CHUNK_ELEMENTS // (width * width))
-    for first in range(0, height, chunk):
-        block = along_rows[first:first + chunk]
-        # squared[r, c] = min over c' of across[c, c'] + along_rows[r, c']
-        squared[first:first + chunk] = (block[:, None, :] + across[None, :, :]).min(axis=2)
+    # squared[r, c] = min over c' of (|c - c'| - 0.5)^2 + along_rows[r, c'], first over the
+    # columns within _BAND of c; columns farther away add at least (_BAND + 0.5)^2, so the
+    # band's minimum is exact wherever it is no larger, and the rest is taken over all.
+    band = min(_BAND, width - 1)
+    padded = np.pad(along_rows, ((0, 0), (band, band)), constant_values=np.inf)
+    squared = along_rows.copy()
+    for offset in range(1, band + 1):
+        step = (offset - 0.5) ** 2
+        np.minimum(squared, padded[:, band - offset:band - offset + width] + step, out=squared)
+        np.minimum(squared, padded[:, band + offset:band + offset + width] + step, out=squared)
+    far_rows = np.nonzero((squared > (band + 0.5) ** 2).any(axis=1))[0]
+    if len(far_rows):
+        columns = np.arange(width, dtype=np.float64)
+        across = np.maximum(np.abs(columns[:, None] - columns[None, :]) - 0.5, 0.0) ** 2
+        chunk = max(1, _CHUNK_ELEMENTS // (width * width))
+        for first in range(0, len(far_rows), chunk):
+            chosen = far_rows[first:first + chunk]
+            squared[chosen] = (along_rows[chosen][:, None, :] + across[None, :, :]).min(axis=2)
     clearance = np.sqrt(squared)[1:-1, 1:-1]
     clearance[~mask] = 0.0
     return clearance
 
 
+_BAND = 8
+"""Columns each side that track_clearance's first pass looks at (wider roads: a second)."""
+
 _NEIGHBOURS = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
 """The 8 neighbours in circular order (P2..P9 of Zhang and Suen)."""
 
 
-def _neighbour_stack(image: np.ndarray) -> np.ndarray:
-    """(8, h, w) uint8: each pixel's 8 neighbours in circular order (outside = 0)."""
-    padded = np.pad(image, 1)
+def _neighbour_codes(image: np.ndarray) -> np.ndarray:
+    """(h, w) uint8: each pixel's 8 neighbours as bits, P2 the lowest (outside = 0)."""
     height, width = image.shape
-    return np.stack([padded[1 + d_row:1 + d_row + height, 1 + d_col:1 + d_col + width]
-                     for d_row, d_col in _NEIGHBOURS])
+    padded = np.zeros((height + 2, width + 2), dtype=np.uint8)
+    padded[1:-1, 1:-1] = image
+    codes = np.zeros((height, width), dtype=np.uint8)
+    for bit, (d_row, d_col) in enumerate(_NEIGHBOURS):
+        codes |= padded[1 + d_row:1 + d_row + height, 1 + d_col:1 + d_col + width] << bit
+    return codes
 
 
-def _transitions(neighbours: np.ndarray) -> np.ndarray:
-    """Number of 0 -> 1 transitions around each pixel's circular neighbourhood."""
-    rolled = np.roll(neighbours, -1, axis=0)
-    return ((neighbours == 0) & (rolled == 1)).sum(axis=0)
+def _code_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per neighbour code: removable in Zhang-Suen's first and second sub-iteration, and
+    whether a skeleton pixel with these neighbours ends a branch."""
+    bits = (np.arange(256)[:, None] >> np.arange(8)[None, :]) & 1
+    p2, p3, p4, p5, p6, p7, p8, p9 = bits.T
+    count = bits.sum(axis=1)
+    # 0 -> 1 transitions around the circular neighbourhood.
+    transitions = ((bits == 0) & (np.roll(bits, -1, axis=1) == 1)).sum(axis=1)
+    thinnable = (count >= 2) & (count <= 6) & (transitions == 1)
+    first = thinnable & (p2 * p4 * p6 == 0) & (p4 * p6 * p8 == 0)
+    second = thinnable & (p2 * p4 * p8 == 0) & (p2 * p6 * p8 == 0)
+    end = (count <= 2) & (transitions <= 1)
+    return first, second, end
+
+
+_THIN_FIRST, _THIN_SECOND, _END_POINT = _code_tables()
 
 
 def skeleton(track: np.ndarray) -> np.ndarray:
     """Zhang-Suen thinning of a bool mask: an 8-connected one-cell-wide centre line."""
-    image = np.asarray(track, dtype=bool).astype(np.uint8)
+    image = np.asarray(track, dtype=bool).copy()
     while True:
         changed = False
-        for sub_iteration in (0, 1):
-            p2, p3, p4, p5, p6, p7, p8, p9 = neighbours = _neighbour_stack(image)
-            count = neighbours.sum(axis=0)
-            if sub_iteration == 0:
-                keep_side = (p2 * p4 * p6 == 0) & (p4 * p6 * p8 == 0)
-            else:
-                keep_side = (p2 * p4 * p8 == 0) & (p2 * p6 * p8 == 0)
-            remove = ((image == 1) & (count >= 2) & (count <= 6)
-                      & (_transitions(neighbours) == 1) & keep_side)
+        for removable in (_THIN_FIRST, _THIN_SECOND):
+            remove = image & removable[_neighbour_codes(image)]
             if remove.any():
-                image[remove] = 0
+                image[remove] = False
                 changed = True
         if not changed:
-            return image.astype(bool)
+            return image
 
 
 def skeleton_end_points(skeleton_mask: np.ndarray) -> np.ndarray:
     """Bool mask of skeleton pixels that end a branch: one neighbour, or two that touch each
     other (a single run of neighbours around the pixel, at most two long), or none."""
-    image = np.asarray(skeleton_mask, dtype=bool).astype(np.uint8)
-    neighbours = _neighbour_stack(image)
-    count = neighbours.sum(axis=0)
-    single_run = _transitions(neighbours) <= 1
-    return (image == 1) & (count <= 2) & single_run
+    image = np.asarray(skeleton_mask, dtype=bool)
+    return image & _END_POINT[_neighbour_codes(image)]
 
 
 def prune_spurs(skeleton_mask: np.ndarray, spur_length: int) -> np.ndarray:
@@ -261,8 +279,12 @@ def paint_discs(shape: tuple[int, ...], rows: np.ndarray, cols: np.ndarray,
     # Squared radius (with the tolerance) of the disc centred on each cell, -1 elsewhere.
     reaches = np.full((height + 2 * reach, width + 2 * reach), -1.0)
     np.maximum.at(reaches, (rows + reach, cols + reach), keys * keys + 1e-9)
+    top = float(keys.max())
+    farthest = top * top + 1e-9
     for d_row in range(-reach, reach + 1):
         for d_col in range(-reach, reach + 1):
+            if d_row * d_row + d_col * d_col > farthest:
+                continue  # beyond every disc
             reaching = reaches[reach - d_row:reach - d_row + height,
                                reach - d_col:reach - d_col + width]
             covered |= reaching >= d_row * d_row + d_col * d_col

@@ -14,6 +14,7 @@ from sessgan_gen.track_realism import (
     paint_discs,
     route_curvatures,
     skeleton,
+    skeleton_end_points,
     track_clearance,
 )
 
@@ -171,3 +172,67 @@ def test_painted_discs_cover_the_cells_within_any_radius():
         expected |= (grid_rows - row) ** 2 + (grid_cols - col) ** 2 <= radius * radius + 1e-9
     assert np.array_equal(paint_discs((height, width), rows, cols, radii), expected)
     assert not paint_discs((4, 4), rows[:0], cols[:0], radii[:0]).any()
+
+
+def random_masks(seed, count=40):
+    """Random masks from speckle to wide blobs (wider than track_clearance's first band)."""
+    rng = np.random.default_rng(seed)
+    masks = []
+    for index in range(count):
+        field = rng.random((int(rng.integers(3, 50)), int(rng.integers(3, 50))))
+        for _ in range(index % 6):
+            field = (field + np.roll(field, 1, 0) + np.roll(field, 1, 1)) / 3
+        masks.append(field < np.quantile(field, rng.uniform(0.3, 1.0)))
+    masks.append(np.ones((40, 45), dtype=bool))  # clearance up to 20 cells
+    return masks
+
+
+def brute_force_clearance(track):
+    """Each track cell's distance to every non-track square (the outside included)."""
+    height, width = track.shape
+    blocked = np.pad(~track, 1, constant_values=True)
+    b_rows, b_cols = np.nonzero(blocked)
+    out = np.zeros(track.shape)
+    for row, col in zip(*np.nonzero(track)):
+        d_row = np.maximum(np.abs(b_rows - (row + 1)) - 0.5, 0.0)
+        d_col = np.maximum(np.abs(b_cols - (col + 1)) - 0.5, 0.0)
+        out[row, col] = np.sqrt(d_row ** 2 + d_col ** 2).min()
+    return out
+
+
+def zhang_suen_reference(track):
+    """Zhang-Suen thinning written out condition by condition (the lookup tables' source)."""
+    image = np.pad(track.astype(np.uint8), 1)
+    order = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
+    while True:
+        changed = False
+        for sub_iteration in (0, 1):
+            remove = []
+            for row, col in zip(*np.nonzero(image)):
+                p = [image[row + d_row, col + d_col] for d_row, d_col in order]
+                transitions = sum(p[k] == 0 and p[(k + 1) % 8] == 1 for k in range(8))
+                p2, _, p4, _, p6, _, p8, _ = p
+                side = ((p2 * p4 * p6 == 0 and p4 * p6 * p8 == 0) if sub_iteration == 0
+                        else (p2 * p4 * p8 == 0 and p2 * p6 * p8 == 0))
+                if 2 <= sum(p) <= 6 and transitions == 1 and side:
+                    remove.append((row, col))
+            for row, col in remove:
+                image[row, col] = 0
+            changed |= bool(remove)
+        if not changed:
+            return image[1:-1, 1:-1].astype(bool)
+
+
+def test_clearance_skeleton_and_end_points_match_their_definitions_on_random_masks():
+    for mask in random_masks(11):
+        assert np.allclose(track_clearance(mask), brute_force_clearance(mask), atol=1e-12)
+        thin = skeleton(mask)
+        assert np.array_equal(thin, zhang_suen_reference(mask))
+        ends = skeleton_end_points(thin)
+        padded = np.pad(thin, 1)
+        for row, col in zip(*np.nonzero(thin)):
+            around = [padded[row + 1 + d_row, col + 1 + d_col]
+                      for d_row, d_col in ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1),
+                                           (0, -1), (-1, -1))]
+            runs = sum(not around[k] and around[(k + 1) % 8] for k in range(8))
+            assert ends[row, col] == (sum(around) <= 2 and runs <= 1)

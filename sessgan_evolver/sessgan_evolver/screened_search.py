@@ -26,7 +26,8 @@ and where the map changed around the fault place the failure is a new distinct f
   (the best of ``fresh_candidates`` by the screen), so new regions keep being found.
 * **Screen** (cheap work, timed in ``cheap_wall_time``): each candidate's route is certified
   (the certificate every test gets); candidates without one, children that keep the map
-  around their parent's fault place unchanged (they would show that fault again) and maps
+  unchanged around a fault place that a test with their start, goal and simulator seed
+  showed (the parent's, a sibling's: they would most likely show that fault again) and maps
   less realistic than the generator's own (single-map TPKL above ``tpkl_quantile`` of fresh
   samples: the realism constraint) are dropped; the rest are ranked by a surrogate of
   P(valid failure) over route-local features (sessgan_evolver.screening.OnlineLogistic,
@@ -247,6 +248,9 @@ class ScreenedSearch:
         self.situations = SituationArchive()
         self.surrogate = OnlineLogistic(len(FEATURE_NAMES) + 1)
         self.parents: list[Parent] = []
+        self.route_faults: dict[tuple[tuple[Pose, Pose], int], set[tuple[int, int, str]]] = {}
+        """Fault places (coarse row, col, context) shown by the tests of each start, goal and
+        simulator seed: a child that keeps one of them would most likely show it again."""
         self.operators = {operator.name: operator for operator in self.config.operators}
         self.operator_records = {name: Record() for name in self.operators}
         self.asked = 0
@@ -395,13 +399,15 @@ class ScreenedSearch:
         return candidates[int(np.argmax(scores))][0]
 
     def _repeats_parent(self, test: Test, certified: CertifiedCandidate) -> bool:
-        """Whether a child keeps its parent's start, goal and the map around the parent's
-        fault place: it would most likely show the same fault again."""
+        """Whether a child keeps its parent's start, goal and simulator seed and the map
+        around a fault place that a test with them showed (the parent's own, or a sibling's
+        or an ancestor's): the robot would most likely drive there as before and show that
+        fault again."""
         if test.parent is None or test.route is None:
             return False
-        key = self.parents[test.parent].key
-        return place_context(certified.occupancy, key.row, key.col,
-                             self.config.rule) == key.context
+        places = self.route_faults.get((test.route, test.sim_seed), ())
+        return any(place_context(certified.occupancy, row, col, self.config.rule) == context
+                   for row, col, context in places)
 
     def _score(self, test: Test, certified: CertifiedCandidate) -> float:
         assert test.features is not None
@@ -433,6 +439,8 @@ class ScreenedSearch:
             key = self._fault_key(result) if failed else None
             if key is not None:
                 self.archive.add(key)
+                lineage = (_route_of(result.environment), test.sim_seed)
+                self.route_faults.setdefault(lineage, set()).add((key.row, key.col, key.context))
             new = key is not None and self.situations.add(key, result.environment.occupancy)
             if test.parent is not None:
                 self.parents[test.parent].credit(new)
@@ -441,9 +449,7 @@ class ScreenedSearch:
                 record.successes += new
             if new:
                 assert key is not None
-                start, goal = result.environment.start, result.environment.goal
-                self.parents.append(Parent(test, key, ((start.x, start.y, start.yaw),
-                                                       (goal.x, goal.y, goal.yaw))))
+                self.parents.append(Parent(test, key, _route_of(result.environment)))
         self._pending = []
         self.surrogate.fit()
         self.cheap_wall_time += time.perf_counter() - started
@@ -459,6 +465,12 @@ class ScreenedSearch:
         except FaultError as err:
             raise SearchMethodError(f'the screened search keys failures by their episode '
                                     f'trace: {err}') from err
+
+
+def _route_of(environment: Environment) -> tuple[Pose, Pose]:
+    """(start, goal) of an environment as (x, y, yaw) each."""
+    start, goal = environment.start, environment.goal
+    return (start.x, start.y, start.yaw), (goal.x, goal.y, goal.yaw)
 
 
 ARCHIVE_TRIES = 8

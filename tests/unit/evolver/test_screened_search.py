@@ -28,12 +28,16 @@ from sessgan_evolver.screened_search import (
     ScreenedConfig,
     ScreenedSearch,
 )
+from sessgan_evolver.screened_search import (
+    Test as ScreenedTest,
+)
 from sessgan_evolver.screening import (
     FEATURE_NAMES,
     CertifiedCandidate,
     FaultArchive,
     OnlineLogistic,
     certify_candidate,
+    certify_route,
     route_coarse_cells,
     route_features,
 )
@@ -445,3 +449,48 @@ def test_fresh_seed_evaluation_runs_an_archive_s_tests_as_made():
                                                                      'fresh-0001-s22']
     assert [record.sim_seed for record in result.records] == [5, 6]
     assert result.summary.generator == 'archive' and result.summary.valid_maps == 2
+
+
+def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25,
+                            operators=(Operator('local', 0.8, local=True),))
+    search = with_parents(config)
+    proposals = search.ask()
+    children = [(proposal, test) for proposal, test in zip(proposals, search._pending)
+                if test.parent is not None]
+    assert children
+    # The children fail at their start, away from their parents' fault (the goal).
+    search.tell(failing_at(proposals, lambda e: (e.start.x, e.start.y)))
+    rule = search.config.rule
+    changed_maps = 0
+    for proposal, child in children:
+        parent = search.parents[child.parent]
+        sibling = ScreenedTest(child.noise, child.cells, -1, parent.test.environment_seed,
+                       parent.test.sim_seed, 'child', child.parent, 'local', parent.route)
+        # A sibling on this child's map keeps the map around the child's failing place: run
+        # again with the same start, goal and simulator seed it would most likely repeat it.
+        occupancy = proposal.environment.occupancy
+        candidate = certify_route(occupancy, search.spec, *parent.route)
+        assert candidate.feasible and search._repeats_parent(sibling, candidate)
+        # The same map changed in one cell around that place is worth running.
+        size = search.spec.cell_size * rule.coarse_cells
+        row = int(proposal.environment.start.y // size) * rule.coarse_cells
+        col = int(proposal.environment.start.x // size) * rule.coarse_cells
+        window = occupancy[max(row - rule.context_cells, 0):row + rule.coarse_cells
+                           + rule.context_cells,
+                           max(col - rule.context_cells, 0):col + rule.coarse_cells
+                           + rule.context_cells]
+        walls = np.argwhere(window == 100)
+        if not len(walls):
+            continue
+        changed = occupancy.copy()
+        r, c = walls[0] + (max(row - rule.context_cells, 0), max(col - rule.context_cells, 0))
+        changed[r, c] = 0  # a wall cell opened: the route stays certified
+        candidate = certify_route(changed, search.spec, *parent.route)
+        assert candidate.feasible and not search._repeats_parent(sibling, candidate)
+        changed_maps += 1
+        # With another simulator seed the robot meets other agents: no prediction.
+        sibling.sim_seed += 1
+        assert not search._repeats_parent(sibling, certify_route(occupancy, search.spec,
+                                                                 *parent.route))
+    assert changed_maps

@@ -468,8 +468,10 @@ class ScreenedSearch:
 
 
 def _route_of(environment: Environment) -> tuple[Pose, Pose]:
-    """(start, goal) of an environment as (x, y, yaw) each."""
-    start, goal = environment.start, environment.goal
+    """(start, goal) of an environment as (x, y, yaw) each, in the search's frame (the map
+    at (0, 0); a driver runs it where the generator's training map lies)."""
+    at_zero = environment.moved_to((0.0, 0.0))
+    start, goal = at_zero.start, at_zero.goal
     return (start.x, start.y, start.yaw), (goal.x, goal.y, goal.yaw)
 
 

@@ -494,3 +494,28 @@ def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
         assert not search._repeats_parent(sibling, certify_route(occupancy, search.spec,
                                                                  *parent.route))
     assert changed_maps
+
+
+def test_children_keep_their_parents_start_and_goal_when_the_map_runs_elsewhere():
+    # A facility generator's maps run at its training map's origin; the search works at (0, 0).
+    origin = (-12.5, 4.0)
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25)
+    search = ScreenedSearch('factory', 1, config=config)
+    proposals = search.ask()
+    results = []
+    for proposal in proposals:
+        moved = proposal.environment.moved_to(origin)
+        results.append(Evaluated(proposal, moved, {
+            'feasible': True, 'collisions': 0, 'fault_collisions': 0, 'outcome': 'stuck'},
+            ended_at(moved.goal.x, moved.goal.y)))
+    search.tell(results)
+    assert [parent.route for parent in search.parents] == [
+        ((p.environment.start.x, p.environment.start.y, p.environment.start.yaw),
+         (p.environment.goal.x, p.environment.goal.y, p.environment.goal.yaw))
+        for p in proposals]
+    children = [p for p in search.ask() if p.origin.startswith('child')]
+    assert children
+    starts = {parent.route[0] for parent in search.parents}
+    for child in children:
+        start = child.environment.start
+        assert (start.x, start.y, start.yaw) in starts and child.environment.origin == (0, 0)

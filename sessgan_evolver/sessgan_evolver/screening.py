@@ -206,11 +206,31 @@ class OnlineLogistic:
         penalty[0, 0] = 0.0  # the intercept is not shrunk
         weights = np.zeros(design.shape[1])
         weights[0] = math.log(y.mean() / (1 - y.mean()))
+
+        def loss(w: np.ndarray) -> float:
+            """Penalised negative log-likelihood (log(1 + e^z) without overflow)."""
+            logits = design @ w
+            return float(np.sum(np.logaddexp(0.0, logits) - y * logits) + 0.5 * w @ penalty @ w)
+
+        current = loss(weights)
         for _ in range(self.iterations):
-            p = 1.0 / (1.0 + np.exp(-design @ weights))
+            p = 1.0 / (1.0 + np.exp(-np.clip(design @ weights, -30.0, 30.0)))
             gradient = design.T @ (p - y) + penalty @ weights
             hessian = (design * (p * (1 - p))[:, None]).T @ design + penalty
-            weights -= np.linalg.solve(hessian, gradient)
+            try:
+                step = np.linalg.solve(hessian, gradient)
+            except np.linalg.LinAlgError:
+                break  # flat in some direction (the intercept unshrunk): keep the last fit
+            # Newton's full step, halved while it would raise the loss (a pure Newton step can
+            # overshoot on nearly separable labels until every row saturates).
+            for _ in range(30):
+                trial = loss(weights - step)
+                if trial <= current + 1e-9 * max(1.0, abs(current)):
+                    break
+                step = step / 2
+            else:
+                break
+            weights, current = weights - step, trial
         self.weights = weights
 
     def predict(self, x: np.ndarray) -> np.ndarray:

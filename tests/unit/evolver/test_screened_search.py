@@ -3,6 +3,8 @@ surrogate, route features, and a budget counted in episodes of the robot under t
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -286,6 +288,25 @@ def test_the_surrogate_learns_a_toy_rule():
     assert auc > 0.9
     assert model.weights[1] > model.weights[2] > abs(model.weights[3])
 
+
+
+def test_the_surrogate_fit_does_not_diverge_where_plain_newton_steps_do():
+    # A race-track search's own episodes (reference navigator, 270 rows of FEATURE_NAMES and
+    # the child flag): undamped Newton steps overshot from the 258th row on (intercept -1314,
+    # then a singular Hessian that stopped the search).
+    data = np.load(Path(__file__).parent / 'data' / 'diverging_surrogate.npz')
+    x, y = data['x'].astype(np.float64), data['y']
+    for rows in (258, 264, 270):
+        model = OnlineLogistic(x.shape[1])
+        for row, label in zip(x[:rows], y[:rows]):
+            model.add(row, bool(label))
+        model.fit()
+        assert np.all(np.isfinite(model.weights)) and abs(model.weights[0]) < 20
+        p = model.predict(x[:rows])
+        # The fit explains the labels better than the base rate does.
+        rate = y[:rows].mean()
+        log_loss = -np.mean(np.where(y[:rows], np.log(p), np.log(1 - p)))
+        assert log_loss < -(rate * np.log(rate) + (1 - rate) * np.log(1 - rate))
 
 def test_the_budget_is_episodes_of_the_robot_under_test_only():
     search = ScreenedSearch('factory', 8, config=SMALL)

@@ -384,7 +384,7 @@ class ScreenedSearch:
                 certified = (certify_candidate(occupancy, self.spec, test.environment_seed)
                              if test.route is None else
                              certify_route(occupancy, self.spec, *test.route))
-                if certified.feasible and not self._repeats_parent(test, certified) \
+                if certified.feasible and not self._repeats_lineage(test, certified) \
                         and self._tpkl(test.cells) <= self.tpkl_limit:
                     test.features = route_features(certified, self.spec)
                     test.environment = environment_of(certified, self.spec, self.name,
@@ -398,7 +398,7 @@ class ScreenedSearch:
         scores = [self._score(test, certified) for test, certified in candidates]
         return candidates[int(np.argmax(scores))][0]
 
-    def _repeats_parent(self, test: Test, certified: CertifiedCandidate) -> bool:
+    def _repeats_lineage(self, test: Test, certified: CertifiedCandidate) -> bool:
         """Whether a child keeps its parent's start, goal and simulator seed and the map
         around a fault place that a test with them showed (the parent's own, or a sibling's
         or an ancestor's): the robot would most likely drive there as before and show that
@@ -437,10 +437,11 @@ class ScreenedSearch:
             if test.features is not None:
                 self.surrogate.add(self._row(test), failed)
             key = self._fault_key(result) if failed else None
+            route = _route_of(result.environment)
             if key is not None:
                 self.archive.add(key)
-                lineage = (_route_of(result.environment), test.sim_seed)
-                self.route_faults.setdefault(lineage, set()).add((key.row, key.col, key.context))
+                self.route_faults.setdefault((route, test.sim_seed), set()).add(
+                    (key.row, key.col, key.context))
             new = key is not None and self.situations.add(key, result.environment.occupancy)
             if test.parent is not None:
                 self.parents[test.parent].credit(new)
@@ -449,7 +450,7 @@ class ScreenedSearch:
                 record.successes += new
             if new:
                 assert key is not None
-                self.parents.append(Parent(test, key, _route_of(result.environment)))
+                self.parents.append(Parent(test, key, route))
         self._pending = []
         self.surrogate.fit()
         self.cheap_wall_time += time.perf_counter() - started

@@ -87,6 +87,10 @@ class TrackRealism:
     """rad/m, absolute heading change per metre along the smoothed route (may be empty)."""
 
 
+_BAND = 8
+"""Columns each side that track_clearance's first pass looks at (wider roads: a second)."""
+
+
 def track_clearance(track: np.ndarray) -> np.ndarray:
     """Clearance in cells of every cell centre to the nearest non-track cell square.
 
@@ -128,9 +132,6 @@ def track_clearance(track: np.ndarray) -> np.ndarray:
     clearance[~mask] = 0.0
     return clearance
 
-
-_BAND = 8
-"""Columns each side that track_clearance's first pass looks at (wider roads: a second)."""
 
 _NEIGHBOURS = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
 """The 8 neighbours in circular order (P2..P9 of Zhang and Suen)."""

@@ -289,7 +289,6 @@ def test_the_surrogate_learns_a_toy_rule():
     assert model.weights[1] > model.weights[2] > abs(model.weights[3])
 
 
-
 def test_the_surrogate_fit_does_not_diverge_where_plain_newton_steps_do():
     # A race-track search's own episodes (reference navigator, 270 rows of FEATURE_NAMES and
     # the child flag): undamped Newton steps overshot from the 258th row on (intercept -1314,
@@ -307,6 +306,7 @@ def test_the_surrogate_fit_does_not_diverge_where_plain_newton_steps_do():
         rate = y[:rows].mean()
         log_loss = -np.mean(np.where(y[:rows], np.log(p), np.log(1 - p)))
         assert log_loss < -(rate * np.log(rate) + (1 - rate) * np.log(1 - rate))
+
 
 def test_the_budget_is_episodes_of_the_robot_under_test_only():
     search = ScreenedSearch('factory', 8, config=SMALL)
@@ -487,12 +487,13 @@ def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
     for proposal, child in children:
         parent = search.parents[child.parent]
         sibling = ScreenedTest(child.noise, child.cells, -1, parent.test.environment_seed,
-                       parent.test.sim_seed, 'child', child.parent, 'local', parent.route)
+                               parent.test.sim_seed, 'child', child.parent, 'local',
+                               parent.route)
         # A sibling on this child's map keeps the map around the child's failing place: run
         # again with the same start, goal and simulator seed it would most likely repeat it.
         occupancy = proposal.environment.occupancy
         candidate = certify_route(occupancy, search.spec, *parent.route)
-        assert candidate.feasible and search._repeats_parent(sibling, candidate)
+        assert candidate.feasible and search._repeats_lineage(sibling, candidate)
         # The same map changed in one cell around that place is worth running.
         size = search.spec.cell_size * rule.coarse_cells
         row = int(proposal.environment.start.y // size) * rule.coarse_cells
@@ -508,11 +509,11 @@ def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
         r, c = walls[0] + (max(row - rule.context_cells, 0), max(col - rule.context_cells, 0))
         changed[r, c] = 0  # a wall cell opened: the route stays certified
         candidate = certify_route(changed, search.spec, *parent.route)
-        assert candidate.feasible and not search._repeats_parent(sibling, candidate)
+        assert candidate.feasible and not search._repeats_lineage(sibling, candidate)
         changed_maps += 1
         # With another simulator seed the robot meets other agents: no prediction.
         sibling.sim_seed += 1
-        assert not search._repeats_parent(sibling, certify_route(occupancy, search.spec,
+        assert not search._repeats_lineage(sibling, certify_route(occupancy, search.spec,
                                                                  *parent.route))
     assert changed_maps
 

@@ -14,9 +14,12 @@ and where the map changed around the fault place the failure is a new distinct f
   fails at the same place is a new distinct fault by the exact-context rule, but the same
   situation: it earns no credit and makes no parent.
 * **Parents**: every test that showed a new fault situation, with its start and goal. A
-  parent is picked by Thompson sampling on its children's record (new situations /
-  children), so productive lineages get more budget; a parent whose last ``retire_after``
-  children showed no new situation is retired.
+  child slot goes by Thompson sampling on the record (new situations / tests) of each parent's
+  children and of fresh samples, so productive lineages get more budget and fresh samples
+  get more where they find more. A parent whose last ``retire_after`` children showed no new
+  situation is retired once its record falls to fresh samples' (posterior means): where
+  fresh samples rarely fail (the race track with the reference navigator: 1-3 %), a lineage
+  stays worth its children longer.
 * **Operators** (:class:`Operator`), also by Thompson sampling on their record in this
   run: the parent's noise mutated only around its fault place (``local``), or on the two
   finest scales everywhere (mildly or strongly), the parent's start and goal kept
@@ -152,7 +155,8 @@ class ScreenedConfig:
     retries: int = 4
     """Extra candidates drawn for a test whose candidates were all dropped."""
     retire_after: int = 3
-    """A parent whose last this many children showed no new fault situation gets no more."""
+    """A parent whose last this many children showed no new fault situation gets no more
+    once its record is no better than fresh samples'."""
     rule: FaultRule = field(default_factory=FaultRule)
     """How fault places are keyed (the archive's novelty)."""
 
@@ -225,6 +229,11 @@ class Record:
     trials: int = 0
     successes: int = 0
 
+    @property
+    def mean(self) -> float:
+        """Posterior mean success rate (uniform prior)."""
+        return (1 + self.successes) / (2 + self.trials)
+
     def draw(self, rng: np.random.Generator) -> float:
         return float(rng.beta(1 + self.successes, 1 + self.trials - self.successes))
 
@@ -253,6 +262,8 @@ class ScreenedSearch:
         simulator seed: a child that keeps one of them would most likely show it again."""
         self.operators = {operator.name: operator for operator in self.config.operators}
         self.operator_records = {name: Record() for name in self.operators}
+        self.fresh_record = Record()
+        """Fresh samples run and those that showed a new fault situation."""
         self.asked = 0
         self.fresh_asked = 0
         self.told = 0
@@ -306,13 +317,23 @@ class ScreenedSearch:
         return self._screen(draw, self.config.fresh_candidates) or draw(1)[0]
 
     def _pick_parent(self) -> int | None:
-        """Thompson sampling over the parents not retired (None: all are)."""
-        live = [index for index, parent in enumerate(self.parents)
-                if parent.barren < self.config.retire_after]
+        """Thompson sampling over the parents not retired and fresh samples (None: a fresh
+        sample)."""
+        live = self._live_parents()
         if not live:
             return None
         records = self._parent_records()
-        return live[int(np.argmax([records[index].draw(self.rng) for index in live]))]
+        draws = [records[index].draw(self.rng) for index in live]
+        if self.fresh_record.draw(self.rng) > max(draws):
+            return None
+        return live[int(np.argmax(draws))]
+
+    def _live_parents(self) -> list[int]:
+        """Indices of the parents not retired (the module docstring)."""
+        fresh = self.fresh_record.mean
+        return [index for index, (parent, record) in enumerate(zip(self.parents,
+                                                                  self._parent_records()))
+                if parent.barren < self.config.retire_after or record.mean > fresh]
 
     def _child_test(self) -> Test | None:
         index = self._pick_parent()
@@ -443,7 +464,10 @@ class ScreenedSearch:
                 self.route_faults.setdefault((route, test.sim_seed), set()).add(
                     (key.row, key.col, key.context))
             new = key is not None and self.situations.add(key, result.environment.occupancy)
-            if test.parent is not None:
+            if test.parent is None:
+                self.fresh_record.trials += 1
+                self.fresh_record.successes += new
+            else:
                 self.parents[test.parent].credit(new)
                 record = self.operator_records[test.operator]
                 record.trials += 1
@@ -505,8 +529,7 @@ class ArchiveSource:
         self.reference = search.example
         self.origin = origin
         records = search.operator_records
-        self.operator = search.operators[max(
-            records, key=lambda name: (1 + records[name].successes) / (2 + records[name].trials))]
+        self.operator = search.operators[max(records, key=lambda name: records[name].mean)]
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         return np.stack([cells for cells, _ in self.environments(seeds)])

@@ -27,6 +27,7 @@ from sessgan_evolver.screened_search import (
     RELOCATE,
     ArchiveSource,
     Operator,
+    Record,
     ScreenedConfig,
     ScreenedSearch,
 )
@@ -419,19 +420,52 @@ def test_a_near_duplicate_failure_earns_no_credit_and_a_failure_at_a_new_place_d
 def test_a_parent_whose_children_repeat_known_situations_is_retired():
     config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25, retire_after=2)
     search = with_parents(config)
+    # Fresh samples that show a new situation half the time.
+    search.fresh_record = Record(20, 10)
     first = search.parents[0]
     first.credit(False)
-    assert first.barren == 1 and search._pick_parent() is not None
+    assert first.barren == 1 and 0 in search._live_parents()
     for parent in search.parents:
         parent.credit(False)
         parent.credit(False)
     # Every parent retired: each slot is a fresh sample.
+    assert search._live_parents() == []
     assert search._pick_parent() is None and search._child_test() is None
     assert all(p.origin == 'fresh sample' for p in search.ask())
     # A new situation revives a parent's streak: only it is picked.
     first.credit(True)
     first.credit(False)
-    assert first.barren == 1 and search._pick_parent() == 0
+    assert first.barren == 1 and search._live_parents() == [0]
+
+
+def test_a_barren_parent_lives_on_while_its_record_beats_fresh_samples():
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25, retire_after=2)
+    search = with_parents(config)
+    for parent in search.parents:
+        parent.credit(True)
+        parent.credit(False)
+        parent.credit(False)
+    # 1 new situation in 3 children (posterior mean 0.4) against fresh samples' 1 in 48
+    # (0.04): the barren streak alone does not retire them.
+    search.fresh_record = Record(48, 1)
+    assert search._live_parents() == list(range(len(search.parents)))
+    search.fresh_record = Record(48, 24)
+    assert search._live_parents() == []
+
+
+def test_fresh_samples_compete_with_parents_for_child_slots():
+    config = ScreenedConfig(batch=4, reference_maps=4, exploration=0.25)
+    search = with_parents(config)
+    for parent in search.parents:
+        for _ in range(2):
+            parent.credit(False)
+    parents = len(search.parents)
+    # Fresh samples that always show a new situation take the slots; ones that never do
+    # leave them to the parents.
+    search.fresh_record = Record(200, 200)
+    assert all(search._pick_parent() is None for _ in range(20))
+    search.fresh_record = Record(200, 0)
+    assert all(search._pick_parent() in range(parents) for _ in range(20))
 
 
 def test_the_archive_makes_children_of_its_failing_tests_with_their_start_and_goal():

@@ -319,20 +319,21 @@ class ScreenedSearch:
     def _pick_parent(self) -> int | None:
         """Thompson sampling over the parents not retired and fresh samples (None: a fresh
         sample)."""
-        live = self._live_parents()
+        records = self._parent_records()
+        live = self._live_parents(records)
         if not live:
             return None
-        records = self._parent_records()
         draws = [records[index].draw(self.rng) for index in live]
         if self.fresh_record.draw(self.rng) > max(draws):
             return None
         return live[int(np.argmax(draws))]
 
-    def _live_parents(self) -> list[int]:
-        """Indices of the parents not retired (the module docstring)."""
+    def _live_parents(self, records: list[Record] | None = None) -> list[int]:
+        """Indices of the parents not retired (the module docstring), given their records
+        (default: computed)."""
+        records = self._parent_records() if records is None else records
         fresh = self.fresh_record.mean
-        return [index for index, (parent, record) in enumerate(zip(self.parents,
-                                                                  self._parent_records()))
+        return [index for index, (parent, record) in enumerate(zip(self.parents, records))
                 if parent.barren < self.config.retire_after or record.mean > fresh]
 
     def _child_test(self) -> Test | None:

@@ -548,7 +548,7 @@ def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
         # With another simulator seed the robot meets other agents: no prediction.
         sibling.sim_seed += 1
         assert not search._repeats_lineage(sibling, certify_route(occupancy, search.spec,
-                                                                 *parent.route))
+                                                                  *parent.route))
     assert changed_maps
 
 

@@ -19,7 +19,11 @@ making one:
   parent's start and goal kept and re-certified (``certify_route``);
 * ``keep_local_S``: the finest scale mutated only around the parent's fault place.
 * ``keep_two_finest_S``, ``keep_noise_S``: the two finest / all scales mutated everywhere, start
-  and goal kept (``--ways`` picks ways; default all).
+  and goal kept;
+* ``keep_near_miss_0.8``: the finest scale mutated only around the parent's near miss (where
+  its robot came closest to a wall before the fault, outside the fault's coarse cell), start
+  and goal kept: does a change where the robot nearly failed make it fail there instead?
+  (``--ways`` picks ways; default all).
 
 Per way: the share of children that are valid tests, P(valid failure) and P(new distinct
 fault) per child run (new: not seen before in the whole benchmark), and the share of run
@@ -47,7 +51,13 @@ from sessgan_core.environment import Environment  # noqa: E402
 from sessgan_core.scenarios import get_scenario  # noqa: E402
 from sessgan_core.token_map import tokens_to_occupancy  # noqa: E402
 from sessgan_core.valid_tests import make_environment  # noqa: E402
-from sessgan_evolver.faults import FaultKey, FaultRule, SituationArchive  # noqa: E402
+from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
+from sessgan_evolver.faults import (  # noqa: E402
+    FaultKey,
+    FaultRule,
+    SituationArchive,
+    first_fault_event,
+)
 from sessgan_evolver.in_process import InProcessEvaluator  # noqa: E402
 from sessgan_evolver.map_operators import mutate_noise, mutate_noise_region  # noqa: E402
 from sessgan_evolver.screening import certify_route, environment_of  # noqa: E402
@@ -55,6 +65,50 @@ from sessgan_evolver.search import EpisodeLog  # noqa: E402
 from sessgan_evolver.search_methods import load_pyramid  # noqa: E402
 from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps  # noqa: E402
 from sessgan_gen.track_cleanup import clean_generated_maps  # noqa: E402
+
+
+class TracingLog(EpisodeLog):
+    """An EpisodeLog that also keeps the last episode's trace and metrics."""
+
+    def __call__(self, environment, seed, run, origin) -> None:
+        super().__call__(environment, seed, run, origin)
+        self.last_trace, self.last_metrics = run.trace, run.metrics
+
+
+def near_miss_cell(environment: Environment, trace: EpisodeTrace, metrics, key: FaultKey,
+                   rule: FaultRule) -> tuple[int, int] | None:
+    """The coarse cell where the robot came closest to a wall before its fault, outside the
+    fault's coarse cell (None: no such pose or no wall)."""
+    rows, cols = np.nonzero(np.asarray(environment.occupancy) > 50)
+    if not len(rows):
+        return None
+    wall_x = environment.origin[0] + (cols + 0.5) * environment.resolution
+    wall_y = environment.origin[1] + (rows + 0.5) * environment.resolution
+    fault_time = first_fault_event(metrics, trace).time
+    best: tuple[float, int, int] | None = None
+    for time_s, (x, y, _) in zip(trace.times, trace.poses):
+        if time_s >= fault_time:
+            break
+        row, col = environment.cell_of(x, y)
+        cell = (row // rule.coarse_cells, col // rule.coarse_cells)
+        if cell == (key.row, key.col):
+            continue
+        distance = float(np.min(np.hypot(wall_x - x, wall_y - y)))
+        if best is None or distance < best[0]:
+            best = (distance, *cell)
+    return None if best is None else best[1:]
+
+
+def region_around(row: int, col: int, shape: tuple[int, int], rule: FaultRule
+                  ) -> tuple[float, float, float, float]:
+    """Coarse cell (row, col) and its context margin as (top, left, bottom, right) fractions
+    of a map of ``shape`` cells (mutate_noise_region's region)."""
+    height, width = shape
+    side = rule.coarse_cells
+    return (max(0.0, (row * side - rule.context_cells) / height),
+            max(0.0, (col * side - rule.context_cells) / width),
+            min(1.0, ((row + 1) * side + rule.context_cells) / height),
+            min(1.0, ((col + 1) * side + rule.context_cells) / width))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     rule = FaultRule()
     rng = np.random.default_rng(args.seed)
     pyramid = load_pyramid(args.scenario, None)
-    log = EpisodeLog(rule)
+    log = TracingLog(rule)
 
     def express(noise):
         return clean_generated_maps(sample_token_maps_from_noise(pyramid, [noise]),
@@ -99,21 +153,19 @@ def main(argv: list[str] | None = None) -> int:
             if record.fault is not None:
                 archive.add(record.fault)
                 situations.add(record.fault, environment.occupancy)
-                parents.append((noise, environment, map_seed, sim_seed, record.fault))
+                near = near_miss_cell(environment, log.last_trace, log.last_metrics,
+                                      record.fault, rule)
+                parents.append((noise, environment, map_seed, sim_seed, record.fault, near))
         fresh_situations = len(situations)
         print(f'{args.fresh} fresh tests, {len(parents)} valid failures '
               f'({time.perf_counter() - started:.0f} s)', file=sys.stderr, flush=True)
 
         stats: dict[str, list[float]] = defaultdict(lambda: [0, 0, 0, 0, 0, 0, 0.0])
-        for noise, environment, map_seed, sim_seed, key in parents:
+        for noise, environment, map_seed, sim_seed, key, near in parents:
             route = ((environment.start.x, environment.start.y, environment.start.yaw),
                      (environment.goal.x, environment.goal.y, environment.goal.yaw))
-            height, width = np.shape(environment.occupancy)
-            side = rule.coarse_cells
-            region = (max(0.0, (key.row * side - rule.context_cells) / height),
-                      max(0.0, (key.col * side - rule.context_cells) / width),
-                      min(1.0, ((key.row + 1) * side + rule.context_cells) / height),
-                      min(1.0, ((key.col + 1) * side + rule.context_cells) / width))
+            shape = np.shape(environment.occupancy)
+            region = region_around(key.row, key.col, shape, rule)
             last = (len(noise) - 1,)
             middle = (len(noise) - 2, len(noise) - 1)
 
@@ -150,8 +202,12 @@ def main(argv: list[str] | None = None) -> int:
                                                                  scales=middle)),
                 'keep_noise_0.7': lambda: kept(mutate_noise(noise, rng, 0.7)),
             }
+            if near is not None:
+                near_region = region_around(*near, shape, rule)
+                ways['keep_near_miss_0.8'] = lambda: kept(mutate_noise_region(
+                    noise, rng, 0.8, near_region, last))
             if args.ways:
-                unknown = set(args.ways.split(',')) - set(ways)
+                unknown = set(args.ways.split(',')) - set(ways) - {'keep_near_miss_0.8'}
                 if unknown:
                     parser.error(f'unknown ways {sorted(unknown)}; known: {sorted(ways)}')
                 ways = {name: make for name, make in ways.items()

@@ -13,7 +13,10 @@ hands the messages over in. A scan waits for its odometry and for a goal
 (sim time going back starts a new episode: the old goal and pose are
 dropped). Once the goal is reached the command is zero. Every
 message on ``goal_pose`` is a new goal (as for Nav2's bt_navigator), even at
-the same position: a new episode may reuse a goal.
+the same position: a new episode may reuse a goal. The one exception is the
+goal in force sent again with its own (non-zero) stamp: the simulator resends
+it for readers that joined late, and taking it as new would reset the
+controller at a moment set by wall-clock timing.
 
 The goal is read in its own frame; the simulator's map->odom transform is
 the identity (perfect localisation), so map and odom coordinates agree.
@@ -161,6 +164,7 @@ class ControllerNode(Node):
         self._last_scan_stamp: int | None = None
         self._goal_since_last_scan = False
         self._goal: Goal | None = None
+        self._goal_stamp: int | None = None
         self._goal_reached = False
         self._warned_no_odom = False
         self._warned_frames: set[str] = set()
@@ -290,12 +294,18 @@ class ControllerNode(Node):
         if not (math.isfinite(goal.x) and math.isfinite(goal.y)):
             self.get_logger().warning(f'Ignoring a goal that is not finite: ({goal.x}, {goal.y})')
             return
+        stamp = _nanoseconds(msg.header.stamp)
+        if stamp and (goal, stamp) == (self._goal, self._goal_stamp):
+            # The same stamped goal again: a simulator's resend for readers that joined late
+            # (or a slow first answer), not a new goal. Resetting here would make the episode
+            # depend on wall-clock timing (a planner's path and state dropped mid-run).
+            return
         frame = msg.header.frame_id
         if frame not in ('', 'map', 'odom') and frame not in self._warned_frames:
             self._warned_frames.add(frame)
             self.get_logger().warning(
                 f'Goal in frame {frame!r}: read as map coordinates (map = odom here)')
-        self._goal = goal
+        self._goal, self._goal_stamp = goal, stamp
         self._goal_since_last_scan = True
         self._goal_reached = False
         self._controller.reset()

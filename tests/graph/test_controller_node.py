@@ -138,6 +138,29 @@ def test_scan_waits_for_a_goal_then_drives_to_the_goal(harness):
     assert run.tick().linear.x > 0.0
 
 
+def test_a_resent_goal_is_not_a_new_goal(harness):
+    run = harness('reference_navigator')
+    goal = goal_msg(3.0, 0.0)
+    goal.header.stamp.sec = 5
+    run.odom.publish(odom_msg(2.95, 0.0))
+    run.goal.publish(goal)
+    run.spin_until(lambda: run.node._goal is not None and run.node._state is not None)
+    assert run.tick().linear.x == 0.0 and run.node._goal_reached
+    # The simulator resends the goal (same stamp) for a reader that joined late: the goal in
+    # force, so the navigator keeps its state instead of being reset as for a new goal.
+    run.node._controller.path = 'kept'
+    run.goal.publish(goal)
+    deadline = time.monotonic() + 0.5
+    while time.monotonic() < deadline:
+        run.executor.spin_once(timeout_sec=0.02)
+    assert run.node._goal_reached and run.node._controller.path == 'kept'
+    # The same place with a new stamp is a new goal.
+    goal.header.stamp.sec = 6
+    run.goal.publish(goal)
+    run.spin_until(lambda: not run.node._goal_reached)
+    assert run.node._controller.path is None
+
+
 @pytest.mark.parametrize('controller', ['velocity_projection', 'race_controller'])
 def test_stamped_commands(harness, controller):
     run = harness(controller, [Parameter('use_stamped_cmd_vel', value=True)])

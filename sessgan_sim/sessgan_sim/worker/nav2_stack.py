@@ -13,10 +13,12 @@ nav2_msgs is imported when first needed: a worker that never drives Nav2 runs wi
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import Any
 
 from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient
 
 from sessgan_sim import ros_messages as rm
 from sessgan_sim.worker.topics import time_of
@@ -75,10 +77,8 @@ class Nav2Stack:
         from nav2_msgs.action import NavigateToPose
 
         if self._action_client is None:
-            from rclpy.action import ActionClient
-
-            self._action_client = ActionClient(self.node, NavigateToPose, NAVIGATE_ACTION,
-                                               callback_group=self.callback_group)
+            self._action_client = FilingActionClient(self.node, NavigateToPose, NAVIGATE_ACTION,
+                                                     callback_group=self.callback_group)
         client = self._action_client
         name = self.node.resolve_topic_name(NAVIGATE_ACTION)
         self._goal_handle = self._result_future = None
@@ -141,3 +141,36 @@ class Nav2Stack:
                 return False
             time.sleep(POLL)
         return True
+
+
+class FilingActionClient(ActionClient):
+    """rclpy's ActionClient with each request filed before its answer can be handled.
+
+    rclpy 7.1 (the Jazzy wheels pinned here) sends a goal, cancel or result request and only
+    then files the request's future. An answer the executor thread takes in between is dropped
+    ("Ignoring unexpected goal response. There may be more than one action server ...") and the
+    future never completes (ros2/rclpy#1123, fixed upstream by rclpy#1308). Seen on a loaded
+    machine: the stack accepted the goal and the episode still ended controller_unresponsive.
+    Sending and filing hold a lock that the handling of answers waits for.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._filing = threading.Lock()
+
+    def send_goal_async(self, *args: Any, **kwargs: Any):
+        with self._filing:
+            return super().send_goal_async(*args, **kwargs)
+
+    def _cancel_goal_async(self, goal_handle):
+        with self._filing:
+            return super()._cancel_goal_async(goal_handle)
+
+    def _get_result_async(self, goal_handle):
+        with self._filing:
+            return super()._get_result_async(goal_handle)
+
+    async def execute(self, taken_data):
+        with self._filing:  # a request being sent now is filed before any answer is handled
+            pass
+        return await super().execute(taken_data)

@@ -99,9 +99,8 @@ class RobotChannel:
         matched its writer, would be lost and stall the episode until the startup timeout. A
         tick is never published twice (a repeated one would earn a second answer and shift
         every later command by a tick). An endpoint that never matches (incompatible QoS) holds
-        the start up for at most a second, as does a controller that reads none of the
-        ``expected_readers`` it read before (or odom, at first). False after ``timeout`` wall
-        seconds or on shutdown.
+        the start up for at most a second, as does a controller without a reader of one of
+        its ``expected_readers``. False after ``timeout`` wall seconds or on shutdown.
         """
         topics, commands = self.topics, self.commands
         deadline = time.monotonic() + timeout

@@ -19,6 +19,7 @@ Conventions:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -145,18 +146,27 @@ def shortest_path_in_free(free: np.ndarray, start: Cell, goal: Cell) -> list[Cel
 
     Both ends are included; [] when either end is not free or no path exists.
     """
+    return shortest_paths_from(free, start)(goal)
+
+
+def shortest_paths_from(free: np.ndarray, start: Cell) -> Callable[[Cell], list[Cell]]:
+    """shortest_path_in_free(free, start, goal) for any goal, searching from start once."""
     mask = np.asarray(free, dtype=bool)
     _check_cell(mask, start, 'start')
-    _check_cell(mask, goal, 'goal')
-    if not (mask[start] and mask[goal]):
-        return []
     grid = flat_grid(mask)
     dist = [-1] * len(grid.open_cells)
-    bfs(grid, to_flat(grid, start), dist)
-    target = to_flat(grid, goal)
-    if dist[target] < 0:
-        return []
-    return [to_cell(grid, index) for index in walk_back(grid, dist, target)]
+    if mask[start]:
+        bfs(grid, to_flat(grid, start), dist)
+
+    def path_to(goal: Cell) -> list[Cell]:
+        _check_cell(mask, goal, 'goal')
+        if not (mask[start] and mask[goal]):
+            return []
+        target = to_flat(grid, goal)
+        if dist[target] < 0:
+            return []
+        return [to_cell(grid, index) for index in walk_back(grid, dist, target)]
+    return path_to
 
 
 def certify_environment(environment: Environment) -> RouteCertificate | None:

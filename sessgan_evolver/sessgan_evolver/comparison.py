@@ -330,7 +330,8 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
             source_key = f'sessgan:{source.label}'
         else:
             searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
-                                     config.ga_config(), config.map_size())
+                                     config.ga_config(), config.map_size(),
+                                     '' if config.external else config.controller)
             origin = map_origin(checkpoint_metadata(config.scenario, config.checkpoint or None))
             run_search(searcher, evaluator, config.budget, label, origin)
             cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))

@@ -47,7 +47,7 @@ from sessgan_controllers.controller_interface import (
     ScanData,
 )
 from sessgan_controllers.errors import UnknownControllerError
-from sessgan_controllers.registry import get_controller
+from sessgan_controllers.registry import ControllerSpec, get_controller
 from sessgan_core.environment import Environment
 from sessgan_core.quaternion import quaternion_from_yaw, yaw_from_quaternion
 from sessgan_core.scenarios import get_scenario
@@ -156,6 +156,19 @@ class EpisodeRun:
     """Wall seconds of reset and ticks."""
 
 
+def settings_for_controller(scenario: str, controller: ControllerSpec,
+                            settings: SimulatorSettings | None = None) -> SimulatorSettings:
+    """``settings`` (default: the defaults) with the robot the campaign's simulators host for
+    ``controller`` (campaign_cli): its own where it cannot drive the scenario's (the tricycle
+    of tricycle_nearness_diagram)."""
+    settings = settings or SimulatorSettings()
+    default = get_scenario(scenario).robot
+    robot = controller.robot_in(default)
+    if not settings.robot and robot != default:
+        settings = dataclasses.replace(settings, robot=robot)
+    return settings
+
+
 class EpisodeRunner:
     """Owns one simulator (a pybullet client) and runs episodes one at a time.
 
@@ -179,12 +192,7 @@ class EpisodeRunner:
             raise EpisodeRunnerError(str(err)) from err
         require_non_negative('time limit (0: the scenario default)', time_limit,
                              EpisodeRunnerError, unit=' s')
-        self.settings = settings or SimulatorSettings()
-        # The robot the campaign's simulators host for this controller (campaign_cli): its own
-        # where it cannot drive the scenario's (the tricycle of tricycle_nearness_diagram).
-        robot = self.controller_spec.robot_in(spec.robot)
-        if not self.settings.robot and robot != spec.robot:
-            self.settings = dataclasses.replace(self.settings, robot=robot)
+        self.settings = settings_for_controller(spec.name, self.controller_spec, settings)
         if self.settings.mode != 'lockstep':
             raise EpisodeRunnerError('in-process episodes are lockstep episodes; the settings '
                                      f'ask for {self.settings.mode!r}')

@@ -90,7 +90,8 @@ def method_of(config: CampaignConfig) -> SearchMethod:
                   fitness=config.fitness)
     try:
         return make_baseline(config.method, config.scenario, config.seed,
-                             config.checkpoint or None, ga, (config.height, config.width))
+                             config.checkpoint or None, ga, (config.height, config.width),
+                             '' if config.external else config.controller)
     except SearchMethodError as err:
         raise CampaignError(f'method {config.method}: {err}') from err
 

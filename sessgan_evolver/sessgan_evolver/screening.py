@@ -9,6 +9,10 @@ the robot under test, never a rollout of it:
 * :class:`OnlineLogistic`: a surrogate of P(valid failure | features), an L2-regularised
   logistic regression refitted on the run's own episodes (a few Newton steps; hundreds of
   rows);
+* :func:`closest_encounter`: how near the episode's dummy agents (their patrols for a
+  simulator seed, sessgan_sim.episode.PatrolPlanner) come to the robot driving
+  :func:`reactive_path` at its speed: a third of Nearness-Diagram's factory failures are
+  drives into an agent, and they happen where the two meet;
 * :class:`FaultArchive`: the fault keys seen so far (sessgan_evolver.faults), so a
   candidate whose route passes a known fault place with the same surrounding map is known
   to risk finding that fault again.
@@ -17,12 +21,13 @@ the robot under test, never a rollout of it:
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.grid_search import descend, distance_field
 from sessgan_core.route_certificate import (
     Placement,
     certify,
@@ -34,6 +39,7 @@ from sessgan_core.route_certificate import (
 from sessgan_core.scenarios import Scenario
 from sessgan_evolver.errors import SearchMethodError
 from sessgan_evolver.faults import FaultKey, FaultRule, place_context
+from sessgan_sim.agents import PatrolPath
 
 Pose = tuple[float, float, float]
 """(x, y, yaw): metres and radians, map frame."""
@@ -132,6 +138,49 @@ def route_features(candidate: CertifiedCandidate, spec: Scenario) -> np.ndarray:
         certificate.length / straight if straight > 0 else 1.0,
         candidate.placement.start_clearance, candidate.placement.goal_clearance,
     ], dtype=np.float64)
+
+
+def reactive_path(candidate: CertifiedCandidate, spec: Scenario) -> np.ndarray:
+    """Points (m) of the shortest way from the certified start to the goal where the robot's
+    body fits (clearance >= its radius; the certificate grid's diagonal steps), else the
+    certified route: the route keeps a margin that a reactive controller does not, and it
+    drives through gaps the route goes around."""
+    certificate = candidate.placement.certificate
+    if certificate is None:
+        raise SearchMethodError('an infeasible candidate has no way to drive')
+    grid = certificate.grid
+    (start_row, start_col), (goal_row, goal_col) = certificate.path[0], certificate.path[-1]
+    steps = distance_field(grid.clearance >= spec.robot_radius, (int(goal_row), int(goal_col)),
+                           diagonal=True)
+    cells = descend(steps, (int(start_row), int(start_col)))
+    if len(cells) < 2:
+        return np.asarray(certificate.points, dtype=float)
+    return np.array([grid.centre(cell) for cell in cells])
+
+
+ENCOUNTER_STEP = 0.05
+"""m between the points of the robot's way where closest_encounter compares positions."""
+
+
+def closest_encounter(path: np.ndarray, patrols: Sequence[PatrolPath], robot_speed: float,
+                      agent_speed: float) -> float:
+    """Least distance (m, centre to centre) between the robot driving ``path`` at
+    ``robot_speed`` from time 0 and any agent walking its patrol at ``agent_speed`` at the
+    same moment; inf without agents. A forecast, not a simulation: the robot is assumed to
+    drive on without waiting."""
+    path = np.asarray(path, dtype=float)
+    if not patrols or len(path) < 2:
+        return math.inf
+    if robot_speed <= 0 or agent_speed < 0:
+        raise SearchMethodError(f'speeds must be positive, got robot {robot_speed}, agents '
+                                f'{agent_speed}')
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+    along = np.append(np.arange(0.0, travelled[-1], ENCOUNTER_STEP), travelled[-1])
+    robot = np.stack([np.interp(along, travelled, path[:, 0]),
+                      np.interp(along, travelled, path[:, 1])], axis=-1)
+    walked = agent_speed * along / robot_speed
+    return min(float(np.hypot(*(robot - patrol.positions(walked)).T).min())
+               for patrol in patrols)
 
 
 def route_coarse_cells(candidate: CertifiedCandidate, rule: FaultRule) -> set[tuple[int, int]]:

@@ -414,30 +414,29 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
             sample_token_maps_from_noise(self.pyramid, genotypes), self.spec.name))
 
 
-def _screened(scenario: str, seed: int, checkpoint: str | bytes | None,
-              size: tuple[int, int] | None) -> SearchMethod:
+def _screened(scenario: str, seed: int, checkpoint: str | bytes | None, ga: GAConfig | None,
+              size: tuple[int, int] | None, controller: str) -> SearchMethod:
     # Imported here: sessgan_evolver.screened_search builds on this module's types.
     from sessgan_evolver.screened_search import ScreenedSearch
 
-    return ScreenedSearch(scenario, seed, checkpoint, size=size)
+    return ScreenedSearch(scenario, seed, checkpoint, size=size, controller=controller)
 
 
 BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None',
-                            'tuple[int, int] | None'], SearchMethod]
+                            'tuple[int, int] | None', str], SearchMethod]
 """(scenario, search seed, generator checkpoint or None, GA settings or None, map size or
-None: the generator's) -> method."""
+None: the generator's, controller under test or '') -> method."""
 
 BASELINES: dict[str, BaselineFactory] = {
-    'random': lambda scenario, seed, checkpoint, ga, size: RandomSampling(
+    'random': lambda scenario, seed, checkpoint, ga, size, controller: RandomSampling(
         scenario, seed, checkpoint, size=size),
-    'grid_ga': lambda scenario, seed, checkpoint, ga, size: GridGA(
+    'grid_ga': lambda scenario, seed, checkpoint, ga, size, controller: GridGA(
         scenario, seed, ga, checkpoint=checkpoint, size=size),
-    'cellular_automaton': lambda scenario, seed, checkpoint, ga, size: CellularAutomatonSampling(
-        scenario, seed, checkpoint=checkpoint, size=size),
-    'latent': lambda scenario, seed, checkpoint, ga, size: LatentEvolution(
+    'cellular_automaton': lambda scenario, seed, checkpoint, ga, size, controller:
+        CellularAutomatonSampling(scenario, seed, checkpoint=checkpoint, size=size),
+    'latent': lambda scenario, seed, checkpoint, ga, size, controller: LatentEvolution(
         scenario, seed, ga, checkpoint, size),
-    'screened': lambda scenario, seed, checkpoint, ga, size: _screened(
-        scenario, seed, checkpoint, size),
+    'screened': _screened,
 }
 """Methods the search driver runs, by name (``sessgan`` runs as the real Campaign)."""
 
@@ -446,13 +445,15 @@ METHODS = ('sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent', 'scre
 
 
 def make_baseline(name: str, scenario: str, seed: int, checkpoint: str | bytes | None = None,
-                  ga_config: GAConfig | None = None,
-                  size: tuple[int, int] | None = None) -> SearchMethod:
+                  ga_config: GAConfig | None = None, size: tuple[int, int] | None = None,
+                  controller: str = '') -> SearchMethod:
     """A baseline by name (SearchMethodError lists the known ones); ``size``: (height, width)
-    of its maps (None or a zero side: the generator's training map's)."""
+    of its maps (None or a zero side: the generator's training map's); ``controller``: the
+    one under test ('' for the scenario's or another stack), for a method that screens
+    tests by its robot."""
     try:
         factory = BASELINES[name]
     except KeyError as err:
         raise SearchMethodError(f'unknown search method {name!r}; known: '
                                 f'{", ".join(METHODS)}') from err
-    return factory(scenario, seed, checkpoint, ga_config, size)
+    return factory(scenario, seed, checkpoint, ga_config, size, controller)

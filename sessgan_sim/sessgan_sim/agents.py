@@ -28,7 +28,7 @@ import numpy as np
 import pybullet as p
 
 from sessgan_core.environment import Environment, Pose2D
-from sessgan_core.valid_tests import inflate, shortest_path_in_free
+from sessgan_core.valid_tests import inflate, shortest_paths_from
 from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.robots import Robot
@@ -99,6 +99,57 @@ class PatrolPath:
         (x0, y0), (x1, y1) = self._corners[index - 1], self._corners[index]
         return x0 + (x1 - x0) * share, y0 + (y1 - y0) * share
 
+    def positions(self, distances: np.ndarray) -> np.ndarray:
+        """(n, 2) points reached after travelling each of ``distances`` metres (position,
+        for many distances at once)."""
+        distances = np.asarray(distances, dtype=float)
+        if self.length <= 0:
+            return np.broadcast_to(self.points[0], (len(distances), 2)).copy()
+        along = np.mod(distances, 2 * self.length)
+        along = np.where(along > self.length, 2 * self.length - along, along)
+        return np.stack([np.interp(along, self._cumulative, self.points[:, 0]),
+                         np.interp(along, self._cumulative, self.points[:, 1])], axis=-1)
+
+
+def plan_patrols(environment: Environment, passable_values: Sequence[int],
+                 config: AgentConfig, count: int, rng: np.random.Generator,
+                 keep_clear: Sequence[tuple[float, float, float]] = ()) -> list[PatrolPath]:
+    """The patrols of up to ``count`` agents (the class docstring's rule), drawn from ``rng``:
+    what DummyAgents.spawn places, without a simulation (a screen predicts encounters from
+    them). ``passable_values``: the occupancy values the robot's plane passes; ``keep_clear``:
+    discs (x, y, radius) in metres where no patrol starts or ends."""
+    resolution = environment.resolution
+    passable = np.isin(environment.occupancy, passable_values)
+    free = inflate(passable, config.radius / resolution)
+    rows, cols = np.nonzero(free)
+    centres_x = environment.origin[0] + (cols + 0.5) * resolution
+    centres_y = environment.origin[1] + (rows + 0.5) * resolution
+    start: Pose2D = environment.start
+    allowed = np.ones(len(rows), dtype=bool)
+    for x, y, radius in keep_clear:
+        allowed &= np.hypot(centres_x - x, centres_y - y) >= radius
+    far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
+    spawn_cells = np.flatnonzero(far & allowed)
+    end_cells = np.flatnonzero(allowed)
+    if not len(spawn_cells):
+        return []
+    paths = []
+    for _ in range(count):
+        first = int(rng.choice(spawn_cells))
+        origin_cell = (int(rows[first]), int(cols[first]))
+        path_to = shortest_paths_from(free, origin_cell)
+        best = [origin_cell]
+        for _ in range(PATH_TRIES):
+            other = int(rng.choice(end_cells))
+            path = path_to((int(rows[other]), int(cols[other])))
+            if len(path) > len(best):
+                best = path
+            if len(best) >= config.min_patrol_cells:
+                break
+        paths.append(PatrolPath(np.array([environment.cell_center(row, col)
+                                          for row, col in best])))
+    return paths
+
 
 class DummyAgents:
     """The agents of one episode."""
@@ -133,40 +184,16 @@ class DummyAgents:
         if count == 0:
             self.positions = np.zeros((0, 2))
             return 0
-        config = self.config
-        resolution = environment.resolution
-        passable = np.isin(environment.occupancy, robot.passable_values)
-        free = inflate(passable, config.radius / resolution)
-        rows, cols = np.nonzero(free)
-        centres_x = environment.origin[0] + (cols + 0.5) * resolution
-        centres_y = environment.origin[1] + (rows + 0.5) * resolution
-        start: Pose2D = environment.start
-        allowed = np.ones(len(rows), dtype=bool)
-        for x, y, radius in keep_clear:
-            allowed &= np.hypot(centres_x - x, centres_y - y) >= radius
-        far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
-        spawn_cells = np.flatnonzero(far & allowed)
-        end_cells = np.flatnonzero(allowed)
-        if not len(spawn_cells):
+        self.paths = plan_patrols(environment, robot.passable_values, self.config, count, rng,
+                                  keep_clear)
+        if not self.paths:
             self.positions = np.zeros((0, 2))
             return 0
+        config = self.config
         shape = p.createCollisionShape(p.GEOM_CYLINDER, radius=config.radius,
                                        height=config.height, physicsClientId=client)
-        for _ in range(count):
-            first = int(rng.choice(spawn_cells))
-            origin_cell = (int(rows[first]), int(cols[first]))
-            best = [origin_cell]
-            for _ in range(PATH_TRIES):
-                other = int(rng.choice(end_cells))
-                path = shortest_path_in_free(free, origin_cell, (int(rows[other]),
-                                                                 int(cols[other])))
-                if len(path) > len(best):
-                    best = path
-                if len(best) >= config.min_patrol_cells:
-                    break
-            points = np.array([environment.cell_center(row, col) for row, col in best])
-            self.paths.append(PatrolPath(points))
-            x, y = points[0]
+        for path in self.paths:
+            x, y = path.points[0]
             body = p.createMultiBody(0.0, shape, basePosition=[x, y, self._height],
                                      physicsClientId=client)
             p.setCollisionFilterGroupMask(

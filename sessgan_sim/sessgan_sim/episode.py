@@ -46,7 +46,7 @@ from sessgan_core.environment import Environment, Pose2D
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.route_certificate import map_clearance, required_clearances
 from sessgan_core.scenarios import get_scenario
-from sessgan_sim.agents import DummyAgents
+from sessgan_sim.agents import DummyAgents, PatrolPath, plan_patrols
 from sessgan_sim.contacts import ContactClassifier
 from sessgan_sim.episode_config import (  # noqa: F401 (also imported from here)
     MAX_TIME_LIMIT,
@@ -401,12 +401,8 @@ class Episode:
                 proximity_distance=float(config.proximity_distance or 0.0),
                 goal_tolerance=float(config.goal_tolerance or 0.0),
                 next_scan_time=record.lidar_info.scan_time)
-            keep_clear += [disc for leg_goal, progress in zip(waypoints,
-                                                              each.live.progress.legs)
-                           for disc in self._agent_keep_clear(leg_goal, body, config, progress,
-                                                              route_need)]
-            if each.index > 0:  # agents start away from every robot, as from r0's start
-                keep_clear.append((each.start.x, each.start.y, config.agents.min_start_distance))
+            keep_clear += robot_keep_clear(each.index, each.start, waypoints,
+                                           each.live.progress.legs, body, config, route_need)
         self._agents.spawn(client, environment, robot, int(config.dummy_agents or 0),
                            np.random.default_rng(agent_seed), keep_clear=keep_clear)
         for each in records:
@@ -727,26 +723,6 @@ class Episode:
                 return record.index, record.live.robot.position
         return None
 
-    @staticmethod
-    def _agent_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig,
-                          progress: ProgressField, route_need: float
-                          ) -> list[tuple[float, float, float]]:
-        """Discs (x, y, radius) where agents may neither start nor end a patrol leg: around
-        a leg's goal, and on its certified route's narrow passages (where the robot could not
-        pass an agent standing there)."""
-        agents = config.agents
-        discs = [(goal.x, goal.y, agents.min_start_distance)]
-        # Narrow: the robot on the route could not pass an agent standing beside it.
-        narrow_below = agents.radius + route_need
-        reach = agents.radius + robot.footprint_radius
-        grid = progress.grid
-        step = max(1, len(progress.route) // 400)  # bound the disc count on long routes
-        for row, col in progress.route[::step]:
-            if grid.clearance[row, col] < narrow_below:
-                x, y = grid.centre((row, col))
-                discs.append((x, y, reach))
-        return discs
-
     def _agent_nearby(self, live: _RobotSimulation) -> bool:
         """Whether an agent's body, or another robot under test, is within
         AGENT_WAIT_DISTANCE of the robot's body."""
@@ -855,3 +831,73 @@ class Episode:
         return Observation(time=0.0, scan=record.scan, scan_updated=False,
                            lidar=record.lidar_info, pose=pose, twist=Twist2D(0.0, 0.0, 0.0),
                            goal=goal, in_contact=False)
+
+
+def leg_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig, progress: ProgressField,
+                   route_need: float) -> list[tuple[float, float, float]]:
+    """Discs (x, y, radius) where agents may neither start nor end a patrol leg: around a
+    leg's goal, and on its certified route's narrow passages (where the robot could not pass
+    an agent standing there)."""
+    agents = config.agents
+    discs = [(goal.x, goal.y, agents.min_start_distance)]
+    # Narrow: the robot on the route could not pass an agent standing beside it.
+    narrow_below = agents.radius + route_need
+    reach = agents.radius + robot.footprint_radius
+    grid = progress.grid
+    step = max(1, len(progress.route) // 400)  # bound the disc count on long routes
+    for row, col in progress.route[::step]:
+        if grid.clearance[row, col] < narrow_below:
+            x, y = grid.centre((row, col))
+            discs.append((x, y, reach))
+    return discs
+
+
+def robot_keep_clear(index: int, start: Pose2D, waypoints: Sequence[Pose2D],
+                     legs: Sequence[ProgressField], robot: Robot, config: EpisodeConfig,
+                     route_need: float) -> list[tuple[float, float, float]]:
+    """The keep-clear discs of robot under test ``index`` (0: r0) for its legs to
+    ``waypoints``; agents also start away from every other robot's start, as from r0's."""
+    discs = [disc for goal, progress in zip(waypoints, legs, strict=True)
+             for disc in leg_keep_clear(goal, robot, config, progress, route_need)]
+    if index > 0:
+        discs.append((start.x, start.y, config.agents.min_start_distance))
+    return discs
+
+
+class PatrolPlanner:
+    """The patrols the dummy agents of an episode of a valid ``environment`` walk (what
+    Episode.reset spawns) for any simulator seed, computed without a simulation: a screen
+    predicts from them where agents will meet the robot. ``config``: the episode's, but for
+    its seed."""
+
+    def __init__(self, environment: Environment, config: EpisodeConfig) -> None:
+        spec = get_scenario(environment.scenario)
+        self.environment = environment
+        self.config = config = config.resolved(spec)
+        self.count = int(config.dummy_agents or 0)
+        robot = create_robot(str(config.robot), config.robot_params)
+        self.passable_values = robot.passable_values
+        self.keep_clear: list[tuple[float, float, float]] = []
+        if self.count == 0:
+            return
+        grid = map_clearance(environment.occupancy, environment.resolution, environment.origin,
+                             spec)
+        route_need = required_clearances(spec)[1]
+        robots = [(0, environment.start, environment.waypoints),
+                  *((index, member.start, (member.goal,))
+                    for index, member in enumerate(environment.fleet, start=1))]
+        for index, start, waypoints in robots:
+            legs = [progress_field(grid, leg_start, leg_goal, environment.feasible,
+                                   robot.footprint_radius, route_need)
+                    for leg_start, leg_goal in zip((start, *waypoints), waypoints)]
+            self.keep_clear += robot_keep_clear(index, start, waypoints, legs, robot, config,
+                                                route_need)
+
+    def patrols(self, seed: int) -> list[PatrolPath]:
+        """The patrols of an episode with simulator seed ``seed``."""
+        if self.count == 0:
+            return []
+        # The agents' stream of Episode.reset: the second of three spawned from the seed.
+        agent_seed = np.random.SeedSequence(int(seed)).spawn(3)[1]
+        return plan_patrols(self.environment, self.passable_values, self.config.agents,
+                            self.count, np.random.default_rng(agent_seed), self.keep_clear)

@@ -134,3 +134,48 @@ def test_an_agent_running_into_the_robot_is_a_collision():
         x_agent = episode.agents.positions[0, 0]
         assert observation.pose.x < x_agent
         assert episode.metrics().collisions == 1
+
+
+@pytest.mark.parametrize('scenario,kind', [('factory', 'plain'), ('drone', 'plain'),
+                                           ('factory', 'mission'), ('factory', 'fleet'),
+                                           ('factory', 'origin')])
+def test_planned_patrols_are_the_patrols_an_episode_spawns(scenario, kind):
+    """A screen predicts encounters from planned_patrols: they must be the episode's own."""
+    from sessgan_core.fleet import FleetSpec
+    from sessgan_core.missions import MissionSpec
+    from sessgan_sim.episode import PatrolPlanner
+
+    cells = load_example_map(scenario).cells
+    options = {'mission': {'mission': MissionSpec(2, 1.0)}, 'fleet': {'fleet': FleetSpec(2)},
+               'origin': {'origin': (-3.0, 5.5)}}.get(kind, {})
+    compared = 0
+    with Episode() as episode:
+        for seed in range(4):
+            environment = make_environment(cells, scenario, f'e{seed}', seed=seed, **options)
+            if not environment.feasible:
+                continue
+            config = EpisodeConfig(seed=100 + seed, dummy_agents=3)
+            # The planner's config may carry any seed: it plans for the one it is given.
+            planned = PatrolPlanner(environment, EpisodeConfig(dummy_agents=3)).patrols(100 + seed)
+            episode.reset(environment, config)
+            spawned = episode._agents.paths
+            assert len(planned) == len(spawned) > 0
+            for mine, theirs in zip(planned, spawned):
+                np.testing.assert_array_equal(mine.points, theirs.points)
+            compared += 1
+    assert compared >= 2
+
+
+def test_no_agents_planned_without_agents():
+    from sessgan_sim.episode import PatrolPlanner
+
+    assert PatrolPlanner(factory(), EpisodeConfig(dummy_agents=0)).patrols(3) == []
+
+
+def test_patrol_positions_of_many_distances_are_those_of_one():
+    path = PatrolPath(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.0]]))
+    distances = np.linspace(0.0, 20.0, 97)
+    np.testing.assert_allclose(path.positions(distances),
+                               [path.position(d) for d in distances], atol=1e-12)
+    still = PatrolPath(np.array([[1.0, 2.0]]))
+    np.testing.assert_array_equal(still.positions(np.array([0.0, 3.0])), [[1.0, 2.0]] * 2)

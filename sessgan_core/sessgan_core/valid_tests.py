@@ -27,7 +27,15 @@ import numpy as np
 
 from sessgan_core.environment import Environment, FleetRobot, Pose2D
 from sessgan_core.fleet import FleetSpec, certify_robots, place_fleet
-from sessgan_core.grid_search import bfs, flat_grid, label_regions, to_cell, to_flat, walk_back
+from sessgan_core.grid_search import (
+    FlatGrid,
+    bfs,
+    flat_grid,
+    label_regions,
+    to_cell,
+    to_flat,
+    walk_back,
+)
 from sessgan_core.missions import MissionSpec, certify_legs, place_mission
 from sessgan_core.route_certificate import (
     RouteCertificate,
@@ -149,11 +157,13 @@ def shortest_path_in_free(free: np.ndarray, start: Cell, goal: Cell) -> list[Cel
     return shortest_paths_from(free, start)(goal)
 
 
-def shortest_paths_from(free: np.ndarray, start: Cell) -> Callable[[Cell], list[Cell]]:
-    """shortest_path_in_free(free, start, goal) for any goal, searching from start once."""
+def shortest_paths_from(free: np.ndarray, start: Cell, grid: FlatGrid | None = None
+                        ) -> Callable[[Cell], list[Cell]]:
+    """shortest_path_in_free(free, start, goal) for any goal, searching from start once
+    (``grid``: ``free``'s flat_grid, when the caller has it)."""
     mask = np.asarray(free, dtype=bool)
     _check_cell(mask, start, 'start')
-    grid = flat_grid(mask)
+    grid = flat_grid(mask) if grid is None else grid
     dist = [-1] * len(grid.open_cells)
     if mask[start]:
         bfs(grid, to_flat(grid, start), dist)

@@ -512,7 +512,10 @@ class ScreenedSearch:
         if int(self.episode_config.dummy_agents or 0) == 0:
             return
         assert test.environment is not None
-        planner = PatrolPlanner(test.environment, self.episode_config)
+        certificate = certified.placement.certificate
+        assert certificate is not None
+        # The certificate's grid is the map's clearance at the search's origin, (0, 0).
+        planner = PatrolPlanner(test.environment, self.episode_config, certificate.grid)
         path = reactive_path(certified, self.spec)
         seeds = [test.sim_seed] + [self._seed() for _ in range(self.config.agent_seeds - 1)]
         encounters = [closest_encounter(path, planner.patrols(seed), self.robot_speed.value,

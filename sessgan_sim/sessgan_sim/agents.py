@@ -28,6 +28,7 @@ import numpy as np
 import pybullet as p
 
 from sessgan_core.environment import Environment, Pose2D
+from sessgan_core.grid_search import flat_grid
 from sessgan_core.valid_tests import inflate, shortest_paths_from
 from sessgan_core.validation import require_non_negative, require_positive
 from sessgan_sim.errors import InvalidConfigError
@@ -111,44 +112,53 @@ class PatrolPath:
                          np.interp(along, self._cumulative, self.points[:, 1])], axis=-1)
 
 
-def plan_patrols(environment: Environment, passable_values: Sequence[int],
-                 config: AgentConfig, count: int, rng: np.random.Generator,
-                 keep_clear: Sequence[tuple[float, float, float]] = ()) -> list[PatrolPath]:
-    """The patrols of up to ``count`` agents (the class docstring's rule), drawn from ``rng``:
-    what DummyAgents.spawn places, without a simulation (a screen predicts encounters from
-    them). ``passable_values``: the occupancy values the robot's plane passes; ``keep_clear``:
-    discs (x, y, radius) in metres where no patrol starts or ends."""
-    resolution = environment.resolution
-    passable = np.isin(environment.occupancy, passable_values)
-    free = inflate(passable, config.radius / resolution)
-    rows, cols = np.nonzero(free)
-    centres_x = environment.origin[0] + (cols + 0.5) * resolution
-    centres_y = environment.origin[1] + (rows + 0.5) * resolution
-    start: Pose2D = environment.start
-    allowed = np.ones(len(rows), dtype=bool)
-    for x, y, radius in keep_clear:
-        allowed &= np.hypot(centres_x - x, centres_y - y) >= radius
-    far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
-    spawn_cells = np.flatnonzero(far & allowed)
-    end_cells = np.flatnonzero(allowed)
-    if not len(spawn_cells):
-        return []
-    paths = []
-    for _ in range(count):
-        first = int(rng.choice(spawn_cells))
-        origin_cell = (int(rows[first]), int(cols[first]))
-        path_to = shortest_paths_from(free, origin_cell)
-        best = [origin_cell]
-        for _ in range(PATH_TRIES):
-            other = int(rng.choice(end_cells))
-            path = path_to((int(rows[other]), int(cols[other])))
-            if len(path) > len(best):
-                best = path
-            if len(best) >= config.min_patrol_cells:
-                break
-        paths.append(PatrolPath(np.array([environment.cell_center(row, col)
-                                          for row, col in best])))
-    return paths
+class PatrolSpace:
+    """Where the agents of an episode may patrol (the class docstring's rule): the part of
+    their patrols that no random draw decides, so patrols for many seeds cost only their
+    draws. ``passable_values``: the occupancy values the robot's plane passes;
+    ``keep_clear``: discs (x, y, radius) in metres where no patrol starts or ends."""
+
+    def __init__(self, environment: Environment, passable_values: Sequence[int],
+                 config: AgentConfig, keep_clear: Sequence[tuple[float, float, float]] = ()
+                 ) -> None:
+        self.environment, self.config = environment, config
+        resolution = environment.resolution
+        passable = np.isin(environment.occupancy, passable_values)
+        self.free = inflate(passable, config.radius / resolution)
+        self.grid = flat_grid(self.free)
+        self.rows, self.cols = np.nonzero(self.free)
+        centres_x = environment.origin[0] + (self.cols + 0.5) * resolution
+        centres_y = environment.origin[1] + (self.rows + 0.5) * resolution
+        start: Pose2D = environment.start
+        allowed = np.ones(len(self.rows), dtype=bool)
+        for x, y, radius in keep_clear:
+            allowed &= np.hypot(centres_x - x, centres_y - y) >= radius
+        far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
+        self.spawn_cells = np.flatnonzero(far & allowed)
+        self.end_cells = np.flatnonzero(allowed)
+
+    def patrols(self, count: int, rng: np.random.Generator) -> list[PatrolPath]:
+        """The patrols of up to ``count`` agents, drawn from ``rng``: what DummyAgents.spawn
+        places (none where no cell is far enough from the start)."""
+        if not len(self.spawn_cells):
+            return []
+        rows, cols = self.rows, self.cols
+        paths = []
+        for _ in range(count):
+            first = int(rng.choice(self.spawn_cells))
+            origin_cell = (int(rows[first]), int(cols[first]))
+            path_to = shortest_paths_from(self.free, origin_cell, self.grid)
+            best = [origin_cell]
+            for _ in range(PATH_TRIES):
+                other = int(rng.choice(self.end_cells))
+                path = path_to((int(rows[other]), int(cols[other])))
+                if len(path) > len(best):
+                    best = path
+                if len(best) >= self.config.min_patrol_cells:
+                    break
+            paths.append(PatrolPath(np.array([self.environment.cell_center(row, col)
+                                              for row, col in best])))
+        return paths
 
 
 class DummyAgents:
@@ -184,8 +194,8 @@ class DummyAgents:
         if count == 0:
             self.positions = np.zeros((0, 2))
             return 0
-        self.paths = plan_patrols(environment, robot.passable_values, self.config, count, rng,
-                                  keep_clear)
+        self.paths = PatrolSpace(environment, robot.passable_values, self.config,
+                                 keep_clear).patrols(count, rng)
         if not self.paths:
             self.positions = np.zeros((0, 2))
             return 0

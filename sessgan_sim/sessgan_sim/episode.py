@@ -44,9 +44,9 @@ import pybullet as p
 
 from sessgan_core.environment import Environment, Pose2D
 from sessgan_core.errors import SessganCoreError
-from sessgan_core.route_certificate import map_clearance, required_clearances
+from sessgan_core.route_certificate import CertificateGrid, map_clearance, required_clearances
 from sessgan_core.scenarios import get_scenario
-from sessgan_sim.agents import DummyAgents, PatrolPath, plan_patrols
+from sessgan_sim.agents import DummyAgents, PatrolPath, PatrolSpace
 from sessgan_sim.contacts import ContactClassifier
 from sessgan_sim.episode_config import (  # noqa: F401 (also imported from here)
     MAX_TIME_LIMIT,
@@ -868,20 +868,22 @@ class PatrolPlanner:
     """The patrols the dummy agents of an episode of a valid ``environment`` walk (what
     Episode.reset spawns) for any simulator seed, computed without a simulation: a screen
     predicts from them where agents will meet the robot. ``config``: the episode's, but for
-    its seed."""
+    its seed; ``grid``: the environment's map_clearance, when the caller has it."""
 
-    def __init__(self, environment: Environment, config: EpisodeConfig) -> None:
+    def __init__(self, environment: Environment, config: EpisodeConfig,
+                 grid: CertificateGrid | None = None) -> None:
         spec = get_scenario(environment.scenario)
         self.environment = environment
         self.config = config = config.resolved(spec)
         self.count = int(config.dummy_agents or 0)
         robot = create_robot(str(config.robot), config.robot_params)
-        self.passable_values = robot.passable_values
-        self.keep_clear: list[tuple[float, float, float]] = []
+        keep_clear: list[tuple[float, float, float]] = []
+        self.space: PatrolSpace | None = None
         if self.count == 0:
             return
-        grid = map_clearance(environment.occupancy, environment.resolution, environment.origin,
-                             spec)
+        if grid is None:
+            grid = map_clearance(environment.occupancy, environment.resolution,
+                                 environment.origin, spec)
         route_need = required_clearances(spec)[1]
         robots = [(0, environment.start, environment.waypoints),
                   *((index, member.start, (member.goal,))
@@ -890,14 +892,14 @@ class PatrolPlanner:
             legs = [progress_field(grid, leg_start, leg_goal, environment.feasible,
                                    robot.footprint_radius, route_need)
                     for leg_start, leg_goal in zip((start, *waypoints), waypoints)]
-            self.keep_clear += robot_keep_clear(index, start, waypoints, legs, robot, config,
-                                                route_need)
+            keep_clear += robot_keep_clear(index, start, waypoints, legs, robot, config,
+                                           route_need)
+        self.space = PatrolSpace(environment, robot.passable_values, config.agents, keep_clear)
 
     def patrols(self, seed: int) -> list[PatrolPath]:
         """The patrols of an episode with simulator seed ``seed``."""
-        if self.count == 0:
+        if self.space is None:
             return []
         # The agents' stream of Episode.reset: the second of three spawned from the seed.
         agent_seed = np.random.SeedSequence(int(seed)).spawn(3)[1]
-        return plan_patrols(self.environment, self.passable_values, self.config.agents,
-                            self.count, np.random.default_rng(agent_seed), self.keep_clear)
+        return self.space.patrols(self.count, np.random.default_rng(agent_seed))

@@ -68,6 +68,9 @@ class ScriptedEvaluator:
                 'feasible': environment.feasible, 'collisions': int(fails),
                 'fault_collisions': int(fails), 'proximity_time': 1.0,
                 'simulation_time': 10.0, 'risk_score': 0.1 * fails,
+                # A speed with many digits: the screened search learns the robot's from it,
+                # so a resumed run must be told exactly what the first was.
+                'distance_travelled': environment.route_length / 3,
                 'fault_risk_score': 0.1 * fails,
                 'contacts': [{'kind': 'static', 'x': x, 'y': y, 'time': 1.0}] if fails else []}
             trace = EpisodeTrace(times=np.array([0.0]), poses=np.array([[x, y, 0.0]]),

@@ -172,8 +172,8 @@ def closest_encounter(path: np.ndarray, patrols: Sequence[PatrolPath], robot_spe
     if not patrols or len(path) < 2:
         return math.inf
     if robot_speed <= 0 or agent_speed < 0:
-        raise SearchMethodError(f'speeds must be positive, got robot {robot_speed}, agents '
-                                f'{agent_speed}')
+        raise SearchMethodError(f'the robot speed must be positive and the agent speed not '
+                                f'negative, got {robot_speed} and {agent_speed}')
     travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
     along = np.append(np.arange(0.0, travelled[-1], ENCOUNTER_STEP), travelled[-1])
     robot = np.stack([np.interp(along, travelled, path[:, 0]),

@@ -47,7 +47,7 @@ def test_a_robot_and_an_agent_crossing_at_the_same_moment_meet():
 def test_no_agents_no_encounter_and_bad_speeds_are_refused():
     way = np.array([[0.0, 0.0], [10.0, 0.0]])
     assert closest_encounter(way, [], 1.0, 0.5) == math.inf
-    with pytest.raises(SearchMethodError, match='speeds'):
+    with pytest.raises(SearchMethodError, match='robot speed must be positive'):
         closest_encounter(way, [PatrolPath(np.array([[1.0, 1.0]]))], 0.0, 0.5)
 
 

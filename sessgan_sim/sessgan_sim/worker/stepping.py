@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 from sessgan_sim import ros_messages as rm
@@ -272,12 +272,12 @@ class EpisodeStepper:
                     if now - heard[index] > limit:
                         silent = index
                         break
-                # Every robot whose stack could not keep pace is named, not only the first.
-                overloaded = '; '.join(
-                    self.who(index) + self.overload_detail(detail, settings)
-                    for index in driving if (detail := paces[index].overload()))
-                if silent is None and overloaded:
-                    episode.abort(Outcome.OVERLOADED, overloaded)
+                if silent is None and any(paces[index].overload() for index in driving):
+                    # The episode ends here, so every robot is judged as at an episode's end:
+                    # each that could not keep pace is named, also one whose stack started
+                    # later and has not yet been measured long enough to be judged mid-way.
+                    episode.abort(Outcome.OVERLOADED,
+                                  self.overloads(paces, driving, settings))
                     break
             if silent is not None:
                 if all(channel.commands.running for channel in channels):
@@ -315,9 +315,7 @@ class EpisodeStepper:
         if not lockstep and not is_harness_outcome(metrics.outcome):
             # A result reached while starved (a collision, stuck, even the goal) says how busy
             # the machine was, not how the stack drives.
-            overloaded = '; '.join(
-                self.who(index) + self.overload_detail(detail, settings)
-                for index, pace in enumerate(paces) if (detail := pace.overload(final=True)))
+            overloaded = self.overloads(paces, range(len(paces)), settings)
             if overloaded:
                 return dataclasses.replace(
                     metrics, outcome=Outcome.OVERLOADED, success=False,
@@ -365,6 +363,13 @@ class EpisodeStepper:
     @staticmethod
     def overload_detail(overload: str, settings: SimulatorSettings) -> str:
         return f'{overload}; real_time_factor {settings.real_time_factor:g}'
+
+    def overloads(self, paces: Sequence[PaceMonitor], robots: Iterable[int],
+                  settings: SimulatorSettings) -> str:
+        """The detail naming every robot of ``robots`` whose stack could not keep pace,
+        judged as at the episode's end; '' when none."""
+        return '; '.join(self.who(index) + self.overload_detail(detail, settings)
+                         for index in robots if (detail := paces[index].overload(final=True)))
 
     @staticmethod
     def prepare(episode, before_first_step) -> bool:

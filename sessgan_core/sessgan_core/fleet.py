@@ -136,8 +136,9 @@ def _joined(free: np.ndarray, start: Cell, goal: Cell) -> bool:
         return False
     flat = flat_grid(free)
     dist = [-1] * len(flat.open_cells)
-    bfs(flat, to_flat(flat, start), dist)
-    return dist[to_flat(flat, goal)] >= 0
+    target = to_flat(flat, goal)
+    bfs(flat, to_flat(flat, start), dist, target)
+    return dist[target] >= 0
 
 
 def _route_yaws(grid: CertificateGrid, path: list[Cell]) -> tuple[float, float]:

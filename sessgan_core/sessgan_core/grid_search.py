@@ -44,15 +44,29 @@ def to_cell(grid: FlatGrid, index: int) -> Cell:
     return (row - 1, col - 1)
 
 
-def bfs(grid: FlatGrid, start: int, dist: list[int]) -> list[int]:
-    """Fill ``dist`` (pre-set to -1) with step counts from ``start``; return the visit order."""
-    open_cells = grid.open_cells
-    stride = grid.stride
+def bfs(grid: FlatGrid, start: int, dist: list[int], target: int | None = None) -> list[int]:
+    """Fill ``dist`` (pre-set to -1) with step counts from ``start``; return the visit order.
+
+    With ``target``, stop once it is reached (after the cell that reached it): every cell
+    nearer than it then has its final count, so walk_back from it gives the path a full
+    search would, and cells further away may still be -1."""
     dist[start] = 0
     queue = [start]
+    bfs_continue(grid, dist, queue, 0, target)
+    return queue
+
+
+def bfs_continue(grid: FlatGrid, dist: list[int], queue: list[int], head: int,
+                 target: int | None = None) -> int:
+    """Go on with a search that :func:`bfs` (or this) left with ``queue[head:]`` still to
+    expand, until ``target`` is reached or, without one, every reachable cell is; the new
+    head (len(queue) once nothing is left)."""
+    open_cells = grid.open_cells
+    stride = grid.stride
     append = queue.append
-    head = 0
-    while head < len(queue):
+    # Without a target, watch the border's first cell: it is blocked, so never reached.
+    watched = 0 if target is None else target
+    while head < len(queue) and dist[watched] < 0:
         current = queue[head]
         head += 1
         step = dist[current] + 1
@@ -60,7 +74,7 @@ def bfs(grid: FlatGrid, start: int, dist: list[int]) -> list[int]:
             if open_cells[neighbour] and dist[neighbour] < 0:
                 dist[neighbour] = step
                 append(neighbour)
-    return queue
+    return head
 
 
 def farthest(order: list[int], dist: list[int]) -> int:

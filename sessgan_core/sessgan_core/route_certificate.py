@@ -277,8 +277,8 @@ def certify(grid: CertificateGrid, start: Cell, goal: Cell,
         if not (0 <= row < height and 0 <= col < width) or not free[row, col]:
             return None
     dist = [-1] * len(flat.open_cells)
-    bfs(flat, to_flat(flat, start), dist)
     target = to_flat(flat, goal)
+    bfs(flat, to_flat(flat, start), dist, target)
     if dist[target] < 0:
         return None
     path = [to_cell(flat, index) for index in walk_back(flat, dist, target)]

@@ -29,7 +29,7 @@ from sessgan_core.environment import Environment, FleetRobot, Pose2D
 from sessgan_core.fleet import FleetSpec, certify_robots, place_fleet
 from sessgan_core.grid_search import (
     FlatGrid,
-    bfs,
+    bfs_continue,
     flat_grid,
     label_regions,
     to_cell,
@@ -160,19 +160,24 @@ def shortest_path_in_free(free: np.ndarray, start: Cell, goal: Cell) -> list[Cel
 def shortest_paths_from(free: np.ndarray, start: Cell, grid: FlatGrid | None = None
                         ) -> Callable[[Cell], list[Cell]]:
     """shortest_path_in_free(free, start, goal) for any goal, searching from start once
-    (``grid``: ``free``'s flat_grid, when the caller has it)."""
+    (``grid``: ``free``'s flat_grid, when the caller has it). The search goes only as far
+    as the goals asked so far need (grid_search.bfs: the same paths as a full search)."""
     mask = np.asarray(free, dtype=bool)
     _check_cell(mask, start, 'start')
     grid = flat_grid(mask) if grid is None else grid
     dist = [-1] * len(grid.open_cells)
-    if mask[start]:
-        bfs(grid, to_flat(grid, start), dist)
+    queue = [to_flat(grid, start)] if mask[start] else []
+    head = 0  # queue[head:] is still to expand
+    if queue:
+        dist[queue[0]] = 0
 
     def path_to(goal: Cell) -> list[Cell]:
+        nonlocal head
         _check_cell(mask, goal, 'goal')
         if not (mask[start] and mask[goal]):
             return []
         target = to_flat(grid, goal)
+        head = bfs_continue(grid, dist, queue, head, target)
         if dist[target] < 0:
             return []
         return [to_cell(grid, index) for index in walk_back(grid, dist, target)]

@@ -17,6 +17,7 @@ from sessgan_core.valid_tests import (
     passable_mask,
     reachable_regions,
     shortest_path_in_free,
+    shortest_paths_from,
 )
 
 pytestmark = pytest.mark.unit
@@ -282,3 +283,31 @@ def test_the_diagonal_distance_field_is_breadth_first_search(seed):
     checker = np.array([[True, False], [False, True]])
     assert distance_field(checker, (0, 0), diagonal=True)[1, 1] == 1.0
     assert np.isinf(distance_field(mask, (-1, 0), diagonal=True)).all()
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_searches_that_stop_at_their_goal_find_the_paths_of_full_searches(seed):
+    from sessgan_core.grid_search import bfs, flat_grid, to_flat, walk_back
+
+    rng = np.random.default_rng(seed)
+    mask = rng.random((int(rng.integers(2, 40)), int(rng.integers(2, 40)))) < 0.75
+    flat = flat_grid(mask)
+    free = list(zip(*np.nonzero(mask)))
+    starts = [free[int(i)] for i in rng.integers(len(free), size=4)]
+    for start in starts:
+        full = [-1] * len(flat.open_cells)
+        bfs(flat, to_flat(flat, start), full)
+        # One search answering every goal in a random order (the agents' patrols ask some).
+        lazy = shortest_paths_from(mask, start, flat)
+        for asked, goal in enumerate(free[int(i)] for i in rng.permutation(len(free))):
+            target = to_flat(flat, goal)
+            expected = walk_back(flat, full, target) if full[target] >= 0 else []
+            assert lazy(goal) == [(index // flat.stride - 1, index % flat.stride - 1)
+                                  for index in expected]
+            if asked >= 10:
+                continue
+            stopped = [-1] * len(flat.open_cells)
+            bfs(flat, to_flat(flat, start), stopped, target)
+            assert (walk_back(flat, stopped, target) if stopped[target] >= 0 else []) == expected
+            if 0 <= full[target] < max(full):  # it stopped before the farthest cells
+                assert sum(d >= 0 for d in stopped) < sum(d >= 0 for d in full)

@@ -57,6 +57,7 @@ def pyramid_scale_shapes(
     width: int,
     scale_factor: float = DEFAULT_SCALE_FACTOR,
     coarsest_coverage: float = DEFAULT_COARSEST_COVERAGE,
+    max_scales: int = 0,
 ) -> list[tuple[int, int]]:
     """Return the (height, width) of every scale, coarsest first, finest = (height, width).
 
@@ -67,7 +68,9 @@ def pyramid_scale_shapes(
     window the coarsest discriminator judges spans at least half the map, and
     the generator's windows overlap over the whole of it (SinGAN's rule). A
     32x32 room gets 3 scales (8, 16, 32), a 128x128 track 5 (8 ... 128). No side
-    shrinks below one receptive field.
+    shrinks below one receptive field. ``max_scales`` > 0 keeps only the finest that many
+    (a 128x128 facility with 3: 32, 64, 128), where the whole layout matters less than
+    the detail and a 16x downsampled map has lost its 1-cell walls.
     """
     if height < 1 or width < 1:
         raise ValueError(f'map size must be positive, got {height}x{width}')
@@ -75,11 +78,15 @@ def pyramid_scale_shapes(
         raise ValueError(f'scale_factor must lie in (0, 1), got {scale_factor}')
     if coarsest_coverage <= 0:
         raise ValueError(f'coarsest_coverage must be positive, got {coarsest_coverage}')
+    if max_scales < 0:
+        raise ValueError(f'max_scales must not be negative, got {max_scales}')
     field = receptive_field()
     target = coarsest_coverage * field
     longest = max(height, width)
     steps = 0 if longest <= target else math.ceil(
         math.log(target / longest) / math.log(scale_factor) - 1e-9)
+    if max_scales:
+        steps = min(steps, max_scales - 1)
     shapes = []
     for step in range(steps, -1, -1):
         factor = scale_factor ** step

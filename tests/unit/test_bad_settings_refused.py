@@ -100,6 +100,7 @@ def test_compare_tells_a_usage_error_from_a_failed_comparison(tmp_path, capsys, 
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--beta1', 'nan'], 'beta1'), (['--lr-decay', '0'], 'lr_decay'),
     (['--coarsest-coverage', 'inf'], 'coarsest_coverage'), (['--seed', '-1'], 'seed'),
+    (['--max-scales', '-2'], 'max_scales'),
     # The inputs an option names count as options: read before anything is written.
     (['--map-file', '/nonexistent.txt'], '/nonexistent.txt'),
     (['--map-yaml', '/nonexistent.yaml'], '/nonexistent.yaml'), (['--resume'], '--resume')])

@@ -38,6 +38,15 @@ def test_scale_count_grows_with_map_size_and_coarsest_sees_the_layout():
         assert shapes == sorted(shapes)
 
 
+def test_a_scale_limit_keeps_the_finest_scales():
+    assert pyramid_scale_shapes(128, 128, max_scales=3) == [(32, 32), (64, 64), (128, 128)]
+    assert pyramid_scale_shapes(32, 32, max_scales=3) == pyramid_scale_shapes(32, 32)
+    assert pyramid_scale_shapes(128, 128, max_scales=0) == pyramid_scale_shapes(128, 128)
+    assert pyramid_scale_shapes(128, 128, max_scales=1) == [(128, 128)]
+    with pytest.raises(ValueError, match='max_scales'):
+        pyramid_scale_shapes(32, 32, max_scales=-1)
+
+
 def test_scale_shapes_of_non_square_and_tiny_maps():
     shapes = pyramid_scale_shapes(20, 60)
     assert shapes[-1] == (20, 60)

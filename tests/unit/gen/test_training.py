@@ -132,6 +132,22 @@ def test_config_defaults_validation_and_resume_comparison():
     assert same_training(a, a | {'seed': 9}) == ['seed']
 
 
+def test_a_facility_map_trains_on_its_three_finest_scales_and_a_race_track_on_all():
+    big = np.zeros((128, 128), dtype=np.int64)
+    factory = resolve_config(TrainConfig(scenario='factory', progress=False))
+    race = resolve_config(TrainConfig(scenario='racetrack', progress=False))
+    assert (factory.max_scales, race.max_scales) == (3, 0)
+    assert Trainer(big, FACTORY, factory).pyramid.scale_shapes == ((32, 32), (64, 64),
+                                                                   (128, 128))
+    assert len(Trainer(big, get_scenario('racetrack'), race).pyramid.scale_shapes) == 5
+    # The shipped 32x32 scenarios keep their three scales; a limit the user gives is kept.
+    assert Trainer(np.zeros((32, 32), dtype=np.int64), FACTORY,
+                   factory).pyramid.scale_shapes == ((8, 8), (16, 16), (32, 32))
+    assert resolve_config(TrainConfig(scenario='factory', max_scales=99)).max_scales == 99
+    with pytest.raises(ValueError, match='max_scales'):
+        validate_config(tiny_config(max_scales=-1))
+
+
 def test_config_fields_become_documented_options():
     help_text = build_parser(TrainConfig).format_help()
     assert '--map-file' in help_text and '--no-deterministic' in help_text

@@ -77,9 +77,9 @@ class TrainConfig:
     of scales so the coarsest GAN sees the whole layout."""
     max_scales: int = 0
     """Most scales (the finest kept); 0 picks the scenario's default: 3 for the factory and the
-    drone (a facility map's realism is in its detail: a 128x128 map trained on 3 scales scored
-    TPKL 0.96-1.08 to its map, on 5 scales 1.20-1.31), no limit for the race track (its loop is
-    the layout). A large number (99) sets no limit."""
+    drone (a facility map's realism is in its detail: 128x128 maps, 3 seeds x 2 layouts, scored
+    TPKL 0.88-1.08 to their map on 3 scales, 0.92-1.31 on 5), no limit for the race track (its
+    loop is the layout). A large number (99) sets no limit."""
     noise_update: float = 0.1
     """Noise amplitude of a scale per unit RMSE of the coarser scales' reconstruction."""
     discriminator_steps: int = 3

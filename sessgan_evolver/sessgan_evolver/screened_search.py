@@ -73,6 +73,7 @@ from sessgan_core.token_map import tokens_to_occupancy
 from sessgan_evolver.episode_runner import settings_for_controller
 from sessgan_evolver.errors import FaultError, SearchMethodError
 from sessgan_evolver.faults import (
+    FAULT_KIND_OF_CONTACT,
     FaultKey,
     FaultRule,
     SituationArchive,
@@ -108,6 +109,7 @@ from sessgan_gen.sampling import sample_token_maps_from_noise, seed_noise_maps
 from sessgan_gen.track_cleanup import clean_generated_maps
 from sessgan_sim.episode import PatrolPlanner
 from sessgan_sim.episode_config import EpisodeConfig
+from sessgan_sim.metrics import ContactKind
 from sessgan_sim.robots import create_robot
 from sessgan_sim.simulator_settings import SimulatorSettings
 
@@ -597,6 +599,8 @@ def _route_of(environment: Environment) -> tuple[Pose, Pose]:
     return (start.x, start.y, start.yaw), (goal.x, goal.y, goal.yaw)
 
 
+AGENT_FAULT = FAULT_KIND_OF_CONTACT[ContactKind.ROBOT_INTO_AGENT.value]
+"""The fault kind of a drive into an agent."""
 ARCHIVE_TRIES = 8
 """Children an archive test draws before it falls back to its parent's own map."""
 ARCHIVE_STREAM = 20
@@ -613,7 +617,10 @@ class ArchiveSource:
     in the run (posterior mean), the parent's start and goal kept and re-certified, as the
     search made children; after ``ARCHIVE_TRIES`` children without a certified route the test
     is the parent's own map. The simulator seed is the evaluation's (fresh), so an archived
-    failure shows again only where it is a property of the test, not of one agent draw."""
+    failure shows again only where it is a property of the test, not of one agent draw: the
+    parents drawn are those whose fault the map made (a wall, a dead end), not a drive into an
+    agent, which depended on where that episode's agents walked (all parents when every fault
+    was one)."""
 
     def __init__(self, search: ScreenedSearch, label: str,
                  origin: tuple[float, float] = (0.0, 0.0)) -> None:
@@ -627,6 +634,8 @@ class ArchiveSource:
         self.origin = origin
         records = search.operator_records
         self.operator = search.operators[max(records, key=lambda name: records[name].mean)]
+        self.parents = [parent for parent in search.parents
+                        if parent.key.kind != AGENT_FAULT] or search.parents
 
     def maps(self, seeds: Sequence[int]) -> np.ndarray:
         return np.stack([cells for cells, _ in self.environments(seeds)])
@@ -637,7 +646,7 @@ class ArchiveSource:
         made = []
         for seed in seeds:
             rng = np.random.default_rng([int(seed), ARCHIVE_STREAM])
-            parent = search.parents[int(rng.integers(len(search.parents)))]
+            parent = self.parents[int(rng.integers(len(self.parents)))]
             cells, certified = parent.test.cells, None
             for _ in range(ARCHIVE_TRIES):
                 child = search.express([search.mutate(parent, self.operator, rng)])[0]

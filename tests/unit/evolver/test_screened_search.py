@@ -3,6 +3,7 @@ surrogate, route features, and a budget counted in episodes of the robot under t
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ from sessgan_evolver.faults import (
 from sessgan_evolver.fresh_seed import EnvironmentSource, SeedPlan, evaluate_source
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.screened_search import (
+    AGENT_FAULT,
     RELOCATE,
     ArchiveSource,
     Operator,
@@ -491,6 +493,23 @@ def test_the_archive_makes_children_of_its_failing_tests_with_their_start_and_go
     # Mutated, not a copy of the parents' maps (all four would be copies only by chance).
     assert any(not any(np.array_equal(cells, p.test.cells) for p in search.parents)
                for cells, _ in made)
+
+
+def test_the_archive_draws_the_parents_whose_fault_the_map_made():
+    search = with_parents(SMALL)
+    assert len(search.parents) >= 2
+    agent = search.parents[0]
+    agent.key = dataclasses.replace(agent.key, kind=AGENT_FAULT)
+    goal = agent.test.environment.goal
+    # A drive into an agent depended on where that episode's agents walked: the archive runs
+    # fresh simulator seeds, so it draws the other parents.
+    made = ArchiveSource(search, 'archive').environments(range(30))
+    assert all(environment.goal != goal for _, environment in made)
+    # Where every fault was one, it draws them all.
+    for parent in search.parents:
+        parent.key = dataclasses.replace(parent.key, kind=AGENT_FAULT)
+    made = ArchiveSource(search, 'archive').environments(range(30))
+    assert any(environment.goal == goal for _, environment in made)
 
 
 def test_fresh_seed_evaluation_runs_an_archive_s_tests_as_made():

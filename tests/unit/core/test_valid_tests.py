@@ -287,7 +287,7 @@ def test_the_diagonal_distance_field_is_breadth_first_search(seed):
 
 @pytest.mark.parametrize('seed', range(6))
 def test_searches_that_stop_at_their_goal_find_the_paths_of_full_searches(seed):
-    from sessgan_core.grid_search import bfs, flat_grid, to_flat, walk_back
+    from sessgan_core.grid_search import bfs, flat_grid, to_cell, to_flat, walk_back
 
     rng = np.random.default_rng(seed)
     mask = rng.random((int(rng.integers(2, 40)), int(rng.integers(2, 40)))) < 0.75
@@ -302,8 +302,7 @@ def test_searches_that_stop_at_their_goal_find_the_paths_of_full_searches(seed):
         for asked, goal in enumerate(free[int(i)] for i in rng.permutation(len(free))):
             target = to_flat(flat, goal)
             expected = walk_back(flat, full, target) if full[target] >= 0 else []
-            assert lazy(goal) == [(index // flat.stride - 1, index % flat.stride - 1)
-                                  for index in expected]
+            assert lazy(goal) == [to_cell(flat, index) for index in expected]
             if asked >= 10:
                 continue
             stopped = [-1] * len(flat.open_cells)

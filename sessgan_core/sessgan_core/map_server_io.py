@@ -66,6 +66,8 @@ OCCUPIED_PIXEL = 0
 UNKNOWN_PIXEL = 127
 """Mid grey: occ 0.502 lies between the thresholds we write, so it reads back as unknown
 (map_saver's 205 would read as free under its own default free_thresh 0.25)."""
+MAP_SAVER_UNKNOWN_PIXEL = 205
+"""The grey map_saver writes for unknown cells in trinary mode."""
 MAX_IMAGE_SIDE = 1 << 16
 """Images larger than this per side are rejected (a corrupt header, not a map)."""
 
@@ -312,15 +314,31 @@ def read_image(path: Path) -> tuple[np.ndarray, int]:
     return np.clip(array, 0, maxval).astype(np.uint16), maxval
 
 
+def read_map_pixels(metadata: MapMetadata) -> tuple[np.ndarray, int]:
+    """The map image's shades (top row first) and their maxval."""
+    if metadata.image.suffix.lower() in ('.pgm', ''):
+        return read_pgm(metadata.image)
+    return read_image(metadata.image)
+
+
 def read_map_server(yaml_path: str | os.PathLike) -> MapServerMap:
     """Read a map_server map: (occupancy int8 in OccupancyGrid order, resolution, origin)."""
     metadata = read_map_yaml(yaml_path)
-    if metadata.image.suffix.lower() in ('.pgm', ''):
-        pixels, maxval = read_pgm(metadata.image)
-    else:
-        pixels, maxval = read_image(metadata.image)
+    pixels, maxval = read_map_pixels(metadata)
     return MapServerMap(pixels_to_occupancy(pixels, maxval, metadata), metadata.resolution,
                         metadata.origin)
+
+
+def map_saver_unknown(pixels: np.ndarray, maxval: int, metadata: MapMetadata) -> np.ndarray:
+    """Where (OccupancyGrid order) a trinary map holds map_saver's unknown grey, 205, that
+    map_server reads as free: Nav2's map_saver wrote ``free_thresh: 0.25`` into trinary YAMLs
+    until mid-2025 (navigation2 pull request 5278), under which 205 (occ 0.196) is free, so
+    every SLAM map it saved would make its unexplored space floor."""
+    unknown_occ = 1.0 - MAP_SAVER_UNKNOWN_PIXEL / 255.0
+    if (metadata.mode != 'trinary' or metadata.negate or maxval != 255
+            or unknown_occ >= metadata.free_thresh):
+        return np.zeros(np.shape(pixels), dtype=bool)[::-1]
+    return np.ascontiguousarray((np.asarray(pixels) == MAP_SAVER_UNKNOWN_PIXEL)[::-1])
 
 
 # --- writing -----------------------------------------------------------------------------------
@@ -504,10 +522,19 @@ class FacilityImport(NamedTuple):
     """Share of the kept pixels that are known (the rest count as walls)."""
     free_fraction: float
     """Share of the token map's cells that are free floor."""
+    saver_unknown: int = 0
+    """Pixels of map_saver's unknown grey taken as unknown where map_server would read them
+    as free (:func:`map_saver_unknown`)."""
 
     def warnings(self) -> list[str]:
         """What a user should hear about this import (empty when nothing is odd)."""
         found = []
+        if self.saver_unknown:
+            found.append(
+                f"{self.saver_unknown} pixels of grey {MAP_SAVER_UNKNOWN_PIXEL} (map_saver's "
+                "unknown) would read as free under the YAML's free_thresh, as map_saver "
+                'wrote it before mid-2025: they are taken as unknown (set free_thresh: 0.196 '
+                "for Nav2's map_server to read them so too)")
         if self.free_fraction < LOW_FREE_FRACTION:
             found.append(
                 f'only {self.free_fraction:.0%} of the imported map is free floor (less than '
@@ -552,13 +579,19 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     somewhere inside: the image is first cropped to the bounding box of its known pixels, since
     unknown space outside the mapped area is outside the facility, not part of it. Unknown
     pixels that remain inside the box count as walls (a test map must not invent floor).
-    Then :func:`import_map_server`'s conversion with the size that keeps the map's metres: an
+    map_saver's unknown grey stays unknown where its old free_thresh would read it as free
+    (:func:`map_saver_unknown`). Then :func:`import_map_server`'s conversion with the size that keeps the map's metres: an
     image of h x w pixels at r m/px becomes round(h*r/cell) x round(w*r/cell) cells of the
     scenario's ``cell_size``. MapFormatError when the result exceeds the grid limits or holds
     no known pixel.
     """
     spec = resolve_scenario(scenario)
-    loaded = read_map_server(yaml_path)
+    metadata = read_map_yaml(yaml_path)
+    pixels, maxval = read_map_pixels(metadata)
+    occupancy = pixels_to_occupancy(pixels, maxval, metadata)
+    saver_unknown = map_saver_unknown(pixels, maxval, metadata)
+    occupancy[saver_unknown] = UNKNOWN
+    loaded = MapServerMap(occupancy, metadata.resolution, metadata.origin)
     try:
         top, bottom, left, right = known_bounding_box(loaded.occupancy)
     except MapFormatError as err:
@@ -581,7 +614,8 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     known = float(np.mean(cropped != UNKNOWN))
     return FacilityImport(TokenMap(scenario=spec.name, cells=cells), origin,
                           (int(loaded.occupancy.shape[0]), int(loaded.occupancy.shape[1])),
-                          (top, bottom, left, right), loaded.resolution, known, free)
+                          (top, bottom, left, right), loaded.resolution, known, free,
+                          int(np.count_nonzero(saver_unknown)))
 
 
 def import_map_server_for_scenario(yaml_path: str | os.PathLike,

@@ -116,6 +116,10 @@ class CampaignConfig:
     budget: int = 0
     """[0: generations x population x maps per member] Episodes of the robot under test
     (the budget); sessgan runs the whole generations it pays for."""
+    screening_effort: int = 0
+    """[0: 1, or 3 with --external] The screened method's work per test: candidate maps
+    and simulator seeds screened, times its defaults (milliseconds each; worth more where an
+    episode of the robot under test costs seconds)."""
     generations: int = 30
     """[30] Generations to evaluate (generation 0 is the mutated pre-trained generator)."""
     population: int = 12
@@ -199,6 +203,9 @@ class CampaignConfig:
         if self.budget < 0:
             raise CampaignError(f'budget must be >= 0 (0: generations x population x maps '
                                 f'per member), got {self.budget}')
+        if self.screening_effort < 0:
+            raise CampaignError(f'screening effort must be >= 0 (0: 1, or 3 with external), '
+                                f'got {self.screening_effort}')
         if (self.method == SESSGAN_METHOD and self.budget
                 and self.budget < self.population * self.maps_per_member):
             raise CampaignError(f'a budget of {self.budget} episodes pays for no sessgan '

@@ -65,7 +65,7 @@ from sessgan_evolver.fresh_seed import (
 from sessgan_evolver.in_process import EpisodeObserver, InProcessEvaluator
 from sessgan_evolver.screened_search import ArchiveSource, ScreenedSearch
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
-from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline
+from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline, screening_effort
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.checkpoint import checkpoint_metadata, checkpoint_training_map, map_origin
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
@@ -88,6 +88,9 @@ class CompareConfig:
     """One run of each method per seed (at least 3 for a spread). (default: 0,1,2)"""
     budget: int = 360
     """Episodes per run (SESS-GAN: whole generations of population x K). (default: 360)"""
+    screening_effort: int = 0
+    """The screened method's work per test: candidate maps and simulator seeds screened,
+    times its defaults. (default: 0: 1, or 3 with --external)"""
     fresh_episodes: int = 30
     """Fresh seed pairs per final generator. (default: 30)"""
     repeats: int = 3
@@ -161,7 +164,7 @@ class CompareConfig:
         for name in ('budget', 'fresh_episodes', 'population', 'maps_per_member'):
             if getattr(self, name) < 1:
                 raise CompareError(f'{name} must be >= 1, got {getattr(self, name)}')
-        for name in ('repeats', 'confirm_limit'):
+        for name in ('repeats', 'confirm_limit', 'screening_effort'):
             if getattr(self, name) < 0:
                 raise CompareError(f'{name} must be >= 0, got {getattr(self, name)}')
         if self.seed_schedule not in SEED_SCHEDULES:
@@ -331,7 +334,9 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
         else:
             searcher = make_baseline(method, config.scenario, seed, config.checkpoint or None,
                                      config.ga_config(), config.map_size(),
-                                     '' if config.external else config.controller)
+                                     '' if config.external else config.controller,
+                                     screening_effort(config.screening_effort,
+                                                      config.external))
             origin = map_origin(checkpoint_metadata(config.scenario, config.checkpoint or None))
             run_search(searcher, evaluator, config.budget, label, origin)
             cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))

@@ -41,8 +41,10 @@ SINGLE_CAUSE_ADVICE: dict[str, tuple[str, str]] = {
         '--adaptive-rtf (each re-run at half the pace)'),
     Outcome.CONTROLLER_UNRESPONSIVE.value: (
         'the controller under test was silent',
-        'Check that the controller runs and answers every scan (its log), or give the machine '
-        'less other work'),
+        'Check that the controller runs and answers every scan (its log); that a stack on '
+        'sim time under a namespace reads its clock and tf there (-r /clock:=clock -r '
+        '/tf:=tf -r /tf_static:=tf_static: /clock and /tf are absolute names); or give the '
+        'machine less other work'),
 }
 """What stopped an episode whose every try ended with one of these outcomes, and what to do
 about it (the HarnessFailureError's message)."""

@@ -62,6 +62,7 @@ from sessgan_evolver.search_methods import (
     Proposal,
     SearchMethod,
     make_baseline,
+    screening_effort,
 )
 from sessgan_gen.checkpoint import (
     checkpoint_metadata,
@@ -91,7 +92,8 @@ def method_of(config: CampaignConfig) -> SearchMethod:
     try:
         return make_baseline(config.method, config.scenario, config.seed,
                              config.checkpoint or None, ga, (config.height, config.width),
-                             '' if config.external else config.controller)
+                             '' if config.external else config.controller,
+                             screening_effort(config.screening_effort, config.external))
     except SearchMethodError as err:
         raise CampaignError(f'method {config.method}: {err}') from err
 

@@ -243,12 +243,21 @@ class RosEvaluator:
         return True
 
     def wait_for_workers(self, count: int, timeout: float) -> None:
+        """Wait until ``count`` evaluate servers answer; CampaignError after ``timeout`` wall
+        seconds. Says what it waits for once a few seconds went by without them (a user's
+        stack not started yet looks like a hang otherwise)."""
         deadline = time.monotonic() + timeout
+        announce: float | None = time.monotonic() + 3.0
         ready: list[str] = []
         while time.monotonic() < deadline:
             ready = [n for n in self.discover_workers() if self.clients[n].server_is_ready()]
             if len(ready) >= count:
                 return
+            if announce is not None and time.monotonic() >= announce:
+                self.log(f'waiting up to {timeout:.0f} s for {count} simulator worker(s) '
+                         f'(evaluate action servers) in ROS_DOMAIN_ID='
+                         f'{os.environ.get("ROS_DOMAIN_ID", "0")}; {len(ready)} answer so far')
+                announce = None
             self.check_children()
             self.spin(0.1)
         raise CampaignError(f'only {len(ready)} of {count} simulator workers answered within '

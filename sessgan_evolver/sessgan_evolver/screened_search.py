@@ -186,10 +186,15 @@ class ScreenedConfig:
     once its record is no better than fresh samples'."""
     rule: FaultRule = field(default_factory=FaultRule)
     """How fault places are keyed (the archive's novelty)."""
+    effort: int = 1
+    """Screening work per test: ``fresh_candidates``, ``child_candidates`` and
+    ``agent_seeds`` are each tried this many times over. A candidate or a seed costs
+    milliseconds; an episode of a real stack costs seconds, so there more is nearly free
+    (``SCREENING_EFFORT``)."""
 
     def validate(self) -> None:
         for name in ('batch', 'fresh_candidates', 'child_candidates', 'reference_maps',
-                     'retire_after', 'agent_seeds'):
+                     'retire_after', 'agent_seeds', 'effort'):
             if getattr(self, name) < 1:
                 raise SearchMethodError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('surrogate_warmup', 'retries'):
@@ -381,7 +386,8 @@ class ScreenedSearch:
             return [Test(noise, cells, seed, seed, self._seed(), 'fresh sample')
                     for noise, cells, seed in zip(noises, self.express(noises), seeds)]
         # A generator whose samples all fail the screen: run the last like random does.
-        return self._screen(draw, self.config.fresh_candidates) or draw(1)[0]
+        return (self._screen(draw, self.config.fresh_candidates * self.config.effort)
+                or draw(1)[0])
 
     def _pick_parent(self) -> int | None:
         """Thompson sampling over the parents not retired and fresh samples (None: a fresh
@@ -427,7 +433,7 @@ class ScreenedSearch:
                     f'child of {parent.key.label} by {operator.name}', index, operator.name,
                     parent.route if operator.keep_route else None))
             return children
-        test = self._screen(draw, self.config.child_candidates)
+        test = self._screen(draw, self.config.child_candidates * self.config.effort)
         if test is None:
             # No child worth an episode: a failed trial of the parent and the operator, and
             # the slot goes to a fresh sample.
@@ -520,7 +526,8 @@ class ScreenedSearch:
         # The certificate's grid is the map's clearance at the search's origin, (0, 0).
         planner = PatrolPlanner(test.environment, self.episode_config, certificate.grid)
         path = reactive_path(certified, self.spec)
-        seeds = [test.sim_seed] + [self._seed() for _ in range(self.config.agent_seeds - 1)]
+        tries = self.config.agent_seeds * self.config.effort
+        seeds = [test.sim_seed] + [self._seed() for _ in range(tries - 1)]
         encounters = [closest_encounter(path, planner.patrols(seed), self.robot_speed.value,
                                         self.episode_config.agents.speed) for seed in seeds]
         best = int(np.argmin(encounters))

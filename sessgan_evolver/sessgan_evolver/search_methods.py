@@ -415,30 +415,47 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
 
 
 def _screened(scenario: str, seed: int, checkpoint: str | bytes | None, ga: GAConfig | None,
-              size: tuple[int, int] | None, controller: str) -> SearchMethod:
+              size: tuple[int, int] | None, controller: str, effort: int) -> SearchMethod:
     # Imported here: sessgan_evolver.screened_search builds on this module's types.
-    from sessgan_evolver.screened_search import ScreenedSearch
+    from sessgan_evolver.screened_search import ScreenedConfig, ScreenedSearch
 
-    return ScreenedSearch(scenario, seed, checkpoint, size=size, controller=controller)
+    return ScreenedSearch(scenario, seed, checkpoint, ScreenedConfig(effort=effort), size,
+                          controller)
 
 
 BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None',
-                            'tuple[int, int] | None', str], SearchMethod]
+                            'tuple[int, int] | None', str, int], SearchMethod]
 """(scenario, search seed, generator checkpoint or None, GA settings or None, map size or
-None: the generator's, controller under test or '') -> method."""
+None: the generator's, controller under test or '', screening effort) -> method."""
 
 BASELINES: dict[str, BaselineFactory] = {
-    'random': lambda scenario, seed, checkpoint, ga, size, controller: RandomSampling(
+    'random': lambda scenario, seed, checkpoint, ga, size, controller, effort: RandomSampling(
         scenario, seed, checkpoint, size=size),
-    'grid_ga': lambda scenario, seed, checkpoint, ga, size, controller: GridGA(
+    'grid_ga': lambda scenario, seed, checkpoint, ga, size, controller, effort: GridGA(
         scenario, seed, ga, checkpoint=checkpoint, size=size),
-    'cellular_automaton': lambda scenario, seed, checkpoint, ga, size, controller:
+    'cellular_automaton': lambda scenario, seed, checkpoint, ga, size, controller, effort:
         CellularAutomatonSampling(scenario, seed, checkpoint=checkpoint, size=size),
-    'latent': lambda scenario, seed, checkpoint, ga, size, controller: LatentEvolution(
+    'latent': lambda scenario, seed, checkpoint, ga, size, controller, effort: LatentEvolution(
         scenario, seed, ga, checkpoint, size),
     'screened': _screened,
 }
 """Methods the search driver runs, by name (``sessgan`` runs as the real Campaign)."""
+
+SCREENING_EFFORT = {False: 1, True: 3}
+"""The screened method's default effort (ScreenedConfig.effort) by whether the robot under
+test is a stack already running (``--external``): a built-in controller's episode costs
+0.2-0.5 s, against which the default screen is already about a fifth of the search's wall
+time; a real stack's episode costs 10-60 s, against which three times the screen is still
+under 1 % (README, Fault-finding power)."""
+
+
+def screening_effort(requested: int, external: bool) -> int:
+    """The screened method's effort: ``requested``, or by default (0) SCREENING_EFFORT's."""
+    if requested < 0:
+        raise SearchMethodError(f'screening effort must be >= 0 (0: {SCREENING_EFFORT[False]}, '
+                                f'{SCREENING_EFFORT[True]} with external), got {requested}')
+    return requested or SCREENING_EFFORT[external]
+
 
 METHODS = ('sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent', 'screened')
 """Every method ``compare`` knows, in report order."""
@@ -446,14 +463,14 @@ METHODS = ('sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent', 'scre
 
 def make_baseline(name: str, scenario: str, seed: int, checkpoint: str | bytes | None = None,
                   ga_config: GAConfig | None = None, size: tuple[int, int] | None = None,
-                  controller: str = '') -> SearchMethod:
+                  controller: str = '', screening_effort: int = 1) -> SearchMethod:
     """A baseline by name (SearchMethodError lists the known ones); ``size``: (height, width)
     of its maps (None or a zero side: the generator's training map's); ``controller``: the
     one under test ('' for the scenario's or another stack), for a method that screens
-    tests by its robot."""
+    tests by its robot; ``screening_effort``: the screened method's (ScreenedConfig.effort)."""
     try:
         factory = BASELINES[name]
     except KeyError as err:
         raise SearchMethodError(f'unknown search method {name!r}; known: '
                                 f'{", ".join(METHODS)}') from err
-    return factory(scenario, seed, checkpoint, ga_config, size, controller)
+    return factory(scenario, seed, checkpoint, ga_config, size, controller, screening_effort)

@@ -22,7 +22,7 @@ from pathlib import Path
 from sessgan_core.config_cli import parse_config
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.ros_spin import run_command
-from sessgan_gen.errors import SessganGenError
+from sessgan_gen.errors import CheckpointError, SessganGenError
 
 
 @dataclass
@@ -74,9 +74,15 @@ def check_options(config: ExportConfig) -> Path:
         from sessgan_core.scenarios import get_scenario
 
         get_scenario(config.scenario)
-    for option, path in (('--map-file', config.map_file), ('--checkpoint', config.checkpoint)):
-        if path and not Path(path).is_file():
-            raise SessganGenError(f'{option} {path} does not exist')
+    if config.map_file and not Path(config.map_file).is_file():
+        raise SessganGenError(f'--map-file {config.map_file} does not exist')
+    if config.checkpoint:  # a missing, truncated or foreign file is a bad option too
+        from sessgan_gen.checkpoint import read_checkpoint
+
+        try:
+            read_checkpoint(config.checkpoint)
+        except CheckpointError as err:
+            raise SessganGenError(f'--checkpoint: {err}') from err
     if config.map_file:  # a file that is no token map is a bad option too
         from sessgan_core.token_map import read_token_map
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import torch
 
@@ -14,7 +13,8 @@ from sessgan_core.config_cli import parse_config
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.ros_spin import run_command
 from sessgan_core.scenarios import get_scenario
-from sessgan_gen.errors import SessganGenError
+from sessgan_gen.checkpoint import read_checkpoint
+from sessgan_gen.errors import CheckpointError, SessganGenError
 from sessgan_gen.report import (
     REPORT_SCENARIOS,
     compute_report,
@@ -65,8 +65,11 @@ def check_options(config: ReportConfig) -> list[str]:
     for name in scenarios:
         get_scenario(name)
         checkpoint = getattr(config, f'{name}_checkpoint', '')
-        if checkpoint and not Path(checkpoint).is_file():
-            raise SessganGenError(f'--{name}-checkpoint {checkpoint} does not exist')
+        if checkpoint:  # missing, truncated or foreign: a bad option, nothing written
+            try:
+                read_checkpoint(checkpoint)
+            except CheckpointError as err:
+                raise SessganGenError(f'--{name}-checkpoint: {err}') from err
     return scenarios
 
 

@@ -571,6 +571,18 @@ class Episode:
         """The robots under test that have no outcome yet (r0 is 0)."""
         return [record.index for record in self._records if record.outcome is None]
 
+    def await_first_command(self, index: int) -> None:
+        """Robot ``index``'s stack has sent no command in this episode yet (clocked mode: sim
+        time runs on): the next tick is not judged, so the robot's stuck rule and time limit
+        start with its first command. A robot that never moved is no test result; the wall
+        clock bounds the wait (the simulator's controller_startup_timeout)."""
+        self._require_record()
+        record = self._records[index]
+        live = record.live
+        if live is not None and record.outcome is None:
+            live.progress.hold(self.time + record.config.control_period)
+            live.time_limit += record.config.control_period
+
     def abort(self, outcome: Outcome | str, detail: str = '') -> None:
         """End the running episode from outside (e.g. controller_unresponsive), for every
         robot that has not ended yet.

@@ -142,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed-schedule', default='per-generation')
     parser.add_argument('--population', type=int, default=12)
     parser.add_argument('--maps-per-member', type=int, default=3)
+    parser.add_argument('--screening-effort', type=int, default=0,
+                        help="the screened method's (0: its in-process default, 1)")
     parser.add_argument('--output', type=Path, default=Path('runs/bench-fault-finding'))
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
@@ -161,8 +163,9 @@ def run_one(args: argparse.Namespace, controller: str, budget: int, command: str
         budget=budget, fresh_episodes=args.fresh, repeats=args.repeats,
         confirm_limit=args.confirm_limit, time_limit=args.time_limit,
         seed_schedule=args.seed_schedule, population=args.population,
-        maps_per_member=args.maps_per_member)
-    output = args.output / f'{args.scenario}-{controller or "default"}-{budget}'
+        maps_per_member=args.maps_per_member, screening_effort=args.screening_effort)
+    effort = f'-effort{args.screening_effort}' if args.screening_effort else ''
+    output = args.output / f'{args.scenario}-{controller or "default"}-{budget}{effort}'
     result = run_comparison(
         config, output, f'python tests/benchmarks/bench_fault_finding.py {command}',
         log=lambda message: print(f'[compare] {message}', file=sys.stderr, flush=True))

@@ -85,9 +85,11 @@ def test_goal_reaches_subscribers_that_join_during_the_episode(node_processes, r
 
     namespace = f'/late_{mode}'
     # A controller that never answers holds a lockstep episode at its first tick for the
-    # start-up timeout; in clocked mode the episode runs at real time meanwhile.
+    # start-up timeout; in clocked mode the episode runs on meanwhile, here at 4x real time,
+    # so the stuck rule (10 sim s) would end it in 2.5 wall s if the wait were judged: a
+    # robot that never got a command must end controller_unresponsive, never stuck.
     start_simulator(node_processes, namespace, 'dummy_agents:=0', f'mode:={mode}',
-                    'controller_startup_timeout:=8.0')
+                    'controller_startup_timeout:=8.0', 'real_time_factor:=4.0')
     start_stand_in(node_processes, namespace, '--silent')
     environment = environment_msg(room(), 'factory', 'late')
     client = ActionClient(ros_node, EvaluateEnvironment, f'{namespace}/evaluate')

@@ -11,6 +11,7 @@ from sessgan_evolver import campaign_cli, compare_cli, evaluate_cli
 from sessgan_evolver.campaign import CampaignConfig, CampaignError
 from sessgan_evolver.errors import CompareError
 from sessgan_gen import export_cli, report_cli, train_cli
+from sessgan_gen.checkpoint import default_checkpoint_path
 from sessgan_sim.episode import MAX_TIME_LIMIT
 
 pytestmark = pytest.mark.unit
@@ -121,6 +122,21 @@ def test_export_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments
     err = capsys.readouterr().err
     assert status == 2, err
     assert named in err and not (tmp_path / 'out').exists()
+
+
+def test_export_and_report_refuse_a_truncated_checkpoint_before_writing(tmp_path, capsys):
+    truncated = tmp_path / 'truncated.pt'
+    truncated.write_bytes(default_checkpoint_path('factory').read_bytes()[:100_000])
+    for command, arguments, output in (
+            (export_cli, ['--generate', '--checkpoint', str(truncated), '--output',
+                          str(tmp_path / 'out' / 'map.yaml')], tmp_path / 'out'),
+            (report_cli, ['--scenarios', 'factory', '--factory-checkpoint', str(truncated),
+                          '--output-dir', str(tmp_path / 'report')], tmp_path / 'report')):
+        status = command.main(arguments)
+        err = capsys.readouterr().err
+        assert status == 2, err
+        assert 'truncated.pt' in err and 'not a valid checkpoint' in err
+        assert not output.exists()
 
 
 def test_export_refuses_a_map_file_that_is_no_token_map(tmp_path, capsys):

@@ -272,6 +272,13 @@ class EpisodeStepper:
                     if now - heard[index] > limit:
                         silent = index
                         break
+                if silent is None and overridden is None:
+                    # The wait for a stack's first command is not judged (the startup timeout
+                    # bounds it): a stack that never answers, or plans its first route slowly
+                    # on a fast clock, must not end the episode stuck or timed out.
+                    for index in driving:
+                        if commands[index] is None:
+                            episode.await_first_command(index)
                 if silent is None and any(paces[index].overload() for index in driving):
                     # The episode ends here, so every robot is judged as at an episode's end:
                     # each that could not keep pace is named, also one whose stack started

@@ -67,5 +67,7 @@ def test_bad_settings_and_the_spread():
         CompareConfig(search_seeds=(1, 1)).validate()
     with pytest.raises(CompareError, match='no SESS-GAN generation'):
         CompareConfig(budget=10).validate()
+    with pytest.raises(CompareError, match='screening_effort must be >= 0'):
+        CompareConfig(methods=('screened',), screening_effort=-1).validate()
     assert spread([1.0, 3.0, None]) == (2.0, pytest.approx(2 ** 0.5), 2)
     assert spread([None]) == (None, None, 0)

@@ -34,7 +34,7 @@ from sessgan_evolver.fault_tally import (
 from sessgan_evolver.faults import FaultKey, FaultRule, key_of_failure, place_context
 from sessgan_evolver.fresh_seed import campaign_sources, used_seeds
 from sessgan_evolver.in_process import InProcessEvaluator
-from sessgan_evolver.method_campaign import MethodCampaign
+from sessgan_evolver.method_campaign import MethodCampaign, method_of
 from sessgan_evolver.run_store import RunStore
 
 pytestmark = pytest.mark.unit
@@ -173,6 +173,8 @@ def test_methods_are_validated_and_each_runs_as_its_own_campaign(tmp_path):
         CampaignConfig(method='hill_climbing').validate()
     with pytest.raises(CampaignError, match='budget must be >= 0'):
         CampaignConfig(budget=-1).validate()
+    with pytest.raises(CampaignError, match='screening effort must be >= 0'):
+        CampaignConfig(screening_effort=-1).validate()
     with pytest.raises(CampaignError, match='pays for no sessgan generation'):
         CampaignConfig(budget=5, population=3, maps_per_member=2).validate()
     with pytest.raises(CampaignError, match='MethodCampaign'):
@@ -196,6 +198,11 @@ def test_the_command_defaults_to_the_default_method_and_records_the_chosen_one(t
     assert (config.method, config.budget) == ('random', 5)
     assert isinstance(make_campaign(config, 'r', tmp_path, tmp_path, print, {}),
                       MethodCampaign)
+    # The screened method screens three times as much for a stack already running.
+    for arguments, effort in (([], 1), (['--external'], 3), (['--screening-effort', '2'], 2)):
+        screened = config_from_args(campaign_parser().parse_args(['--method', 'screened',
+                                                                  *arguments]))
+        assert method_of(screened).config.effort == effort
     sessgan = config_from_args(campaign_parser().parse_args(['--method', 'sessgan']))
     assert isinstance(make_campaign(sessgan, 's', tmp_path, tmp_path, print, {}), Campaign)
 

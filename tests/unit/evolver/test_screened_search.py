@@ -53,6 +53,7 @@ from sessgan_evolver.search_methods import (
     Evaluated,
     SearchMethodError,
     make_baseline,
+    screening_effort,
 )
 
 pytestmark = pytest.mark.unit
@@ -85,6 +86,32 @@ def oracle_results(proposals, fails=lambda environment: environment.route_length
 def test_screened_is_registered_for_compare_and_the_campaign():
     assert 'screened' in METHODS and 'screened' in BASELINES
     assert make_baseline('screened', 'factory', 0).name == 'screened'
+
+
+def test_the_screening_effort_multiplies_candidates_and_simulator_seeds(monkeypatch):
+    """Effort e screens e times each test's candidates and tries e times each kept
+    candidate's simulator seeds; by default 1 in process and 3 for a stack already running
+    (--external), whose episodes cost seconds where a candidate costs milliseconds."""
+    import sessgan_evolver.screened_search as screened_module
+
+    tried: list[int] = []
+    forecast = screened_module.closest_encounter
+    monkeypatch.setattr(screened_module, 'closest_encounter',
+                        lambda *args: tried.append(1) or forecast(*args))
+    for effort in (1, 3):
+        tried.clear()
+        search = ScreenedSearch('factory', 3, config=dataclasses.replace(SMALL, effort=effort))
+        search.ask()
+        assert search.screened == SMALL.batch * SMALL.fresh_candidates * effort
+        per_candidate = SMALL.agent_seeds * effort
+        assert len(tried) % per_candidate == 0 and len(tried) >= SMALL.batch * per_candidate
+    assert (screening_effort(0, False), screening_effort(0, True)) == (1, 3)
+    assert screening_effort(2, True) == 2
+    assert make_baseline('screened', 'factory', 0, screening_effort=2).config.effort == 2
+    with pytest.raises(SearchMethodError, match='screening effort must be >= 0'):
+        screening_effort(-1, False)
+    with pytest.raises(SearchMethodError, match='effort must be >= 1'):
+        ScreenedConfig(effort=0).validate()
 
 
 def test_ask_tell_contract():

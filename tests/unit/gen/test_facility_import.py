@@ -20,7 +20,7 @@ FREE, WALL, UNKNOWN = 254, 0, 205  # map_saver's shades
 
 
 def slam_map(folder, name='slam', room=(120, 160), image=(240, 300), at=(50, 70),
-             origin=(-5.0, -3.0, 0.0), suffix='.pgm'):
+             origin=(-5.0, -3.0, 0.0), suffix='.pgm', free_thresh=0.196):
     """A SLAM-like map: a free room with 2-pixel walls at image row/column ``at`` (top
     first), surrounded by unknown space; map_saver's YAML (free_thresh 0.196, so its unknown
     grey 205 reads as unknown). Returns the YAML path."""
@@ -31,7 +31,7 @@ def slam_map(folder, name='slam', room=(120, 160), image=(240, 300), at=(50, 70)
     pixels[top + 2:top + height - 2, left + 2:left + width - 2] = FREE
     Image.fromarray(pixels, mode='L').save(folder / f'{name}{suffix}')
     document = {'image': f'{name}{suffix}', 'resolution': 0.05, 'origin': list(origin),
-                'negate': 0, 'occupied_thresh': 0.65, 'free_thresh': 0.196}
+                'negate': 0, 'occupied_thresh': 0.65, 'free_thresh': free_thresh}
     (folder / f'{name}.yaml').write_text(yaml.safe_dump(document))
     return folder / f'{name}.yaml'
 
@@ -52,6 +52,19 @@ def test_a_slam_map_is_cropped_to_its_known_region(tmp_path):
     moved = import_facility_map(slam_map(tmp_path, origin=(-2.3, -2.3, 0.0)), 'factory')
     assert moved.origin == (1.2, 1.2, 0.0)
     assert 'cropped to its known region of 160x120 px' in imported.summary()
+
+
+def test_map_savers_unknown_grey_stays_unknown_under_its_old_free_thresh(tmp_path):
+    """Nav2's map_saver wrote free_thresh 0.25 until mid-2025, under which its unknown grey
+    205 reads as free in map_server: the import still crops to the known region and says so."""
+    exact = import_facility_map(slam_map(tmp_path), 'factory')
+    old = import_facility_map(slam_map(tmp_path, 'old', free_thresh=0.25), 'factory')
+    assert np.array_equal(old.token_map.cells, exact.token_map.cells)
+    assert (old.known_box, old.origin) == (exact.known_box, exact.origin)
+    assert old.saver_unknown == 240 * 300 - 120 * 160 and exact.saver_unknown == 0
+    assert 'grey 205' in ' '.join(old.warnings()) and exact.warnings() == []
+    # map_server itself reads it as free, and this reader is map_server's.
+    assert (read_map_server(tmp_path / 'old.yaml').occupancy == 0).mean() > 0.9
 
 
 def test_a_rotated_origin_moves_along_the_maps_axes(tmp_path):

@@ -103,6 +103,27 @@ def test_standing_still_ends_stuck_or_at_the_time_limit(episode):
     assert metrics.ticks == 60
 
 
+def test_the_wait_for_a_first_command_is_not_judged(episode):
+    """Clocked mode: while the stack has sent nothing, neither the stuck rule nor the time
+    limit runs (the wall-clock startup timeout bounds that wait); both start with the first
+    command, so a silent or slowly planning stack is never a stuck or timed-out result."""
+    episode.reset(corridor(), config(stuck_timeout=2.0, time_limit=3.0))
+    for _ in range(100):  # 5 s without a command
+        episode.await_first_command(0)
+        episode.step(BodyCommand())
+    assert not episode.done
+    metrics = run(episode, BodyCommand())  # the first command: stand still
+    assert metrics.outcome is Outcome.STUCK
+    assert metrics.simulation_time == pytest.approx(5.0 + 2.0)
+    episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=3.0))
+    for _ in range(40):
+        episode.await_first_command(0)
+        episode.step(BodyCommand())
+    metrics = run(episode, BodyCommand())
+    assert metrics.outcome is Outcome.TIMEOUT
+    assert metrics.simulation_time == pytest.approx(2.0 + 3.0)
+
+
 def test_progress_is_measured_along_the_free_space():
     passable = np.array([[1, 1, 1], [0, 0, 1], [1, 1, 1]], dtype=bool)
     field = distance_field(passable, (0, 0))

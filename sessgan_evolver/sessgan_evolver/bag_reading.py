@@ -21,6 +21,8 @@ from typing import Any, NamedTuple
 from rosbags.interfaces import Connection, ConnectionExtRosbag2
 from rosbags.rosbag2 import Reader, ReaderError
 
+from sessgan_core.environment import check_environment_id
+from sessgan_core.errors import InvalidEnvironmentError
 from sessgan_evolver.errors import BagReadError
 from sessgan_sim.bag_recording import sha256_of
 
@@ -228,6 +230,15 @@ def _poses(value: object) -> bool:
     return isinstance(value, list) and all(_pose(item) for item in value)
 
 
+def _safe_id(value: object) -> bool:
+    """An id re-simulation may name a bag directory with (check_environment_id)."""
+    try:
+        check_environment_id(value)
+    except InvalidEnvironmentError:
+        return False
+    return True
+
+
 def _fleet(value: object) -> bool:
     return value is None or (isinstance(value, list) and all(
         isinstance(robot, Mapping) and _pose(robot.get('start')) and _pose(robot.get('goal'))
@@ -237,7 +248,8 @@ def _fleet(value: object) -> bool:
 _Check = tuple[Callable[[object], bool], str]
 _EPISODE_FIELDS: dict[str, tuple[bool, _Check]] = {
     # name: (required, (check, what it must be))
-    'environment_id': (True, (lambda v: isinstance(v, str), 'a string')),
+    'environment_id': (True, (_safe_id, 'a safe name (a letter or digit, then letters, '
+                                        'digits, ".", "_" or "-"; no "..")')),
     'scenario': (True, (lambda v: isinstance(v, str), 'a string')),
     'start': (True, (_pose, 'a list [x, y] or [x, y, yaw] of numbers')),
     'goal': (True, (_pose, 'a list [x, y] or [x, y, yaw] of numbers')),

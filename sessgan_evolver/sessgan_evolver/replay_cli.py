@@ -239,7 +239,7 @@ def resimulate(args: ReplayConfig, episode: dict) -> int:
         finally:
             node.destroy_node()
             rclpy.try_shutdown()
-    print(f'{"":16}{"recorded":>18}{"re-simulated":>18}')
+    print(f'{"":16} {"recorded":>18} {"re-simulated":>18}')
     for label, old, now in (
             ('outcome', recorded['outcome'], new.outcome),
             ('collisions', recorded['collisions'], new.collisions),
@@ -252,7 +252,7 @@ def resimulate(args: ReplayConfig, episode: dict) -> int:
             ('legs completed', f'{recorded.get("legs_completed", "-")}/'
                                f'{recorded.get("legs", 1)}',
              f'{new.legs_completed}/{new.legs}')):
-        print(f'{label:16}{str(old):>18}{str(now):>18}')
+        print(f'{label:16} {str(old):>18} {str(now):>18}')  # spaced: a long outcome
     same = (new.outcome == recorded['outcome']
             and int(new.collisions) == int(recorded['collisions']))
     failed = is_controller_failure(new)

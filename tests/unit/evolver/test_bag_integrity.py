@@ -226,6 +226,8 @@ def test_the_recorded_episode_passes_the_field_checks(bag):
     ('fleet', [{'start': 1}], 'field "fleet"'),
     ('metrics', {'outcome': 'stuck'}, 'field "metrics.collisions" is missing'),
     ('scenario', None, 'field "scenario" must be a string'),
+    # It names the bag directory re-simulation writes: no path may escape through it.
+    ('environment_id', '../../pwn', 'field "environment_id" must be a safe name'),
 ])
 def test_resimulate_names_a_malformed_field_and_exits_2(bag, capsys, field, value, message):
     episode = json.loads((bag / 'episode.json').read_text())

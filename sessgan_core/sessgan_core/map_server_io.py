@@ -580,10 +580,10 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     unknown space outside the mapped area is outside the facility, not part of it. Unknown
     pixels that remain inside the box count as walls (a test map must not invent floor).
     map_saver's unknown grey stays unknown where its old free_thresh would read it as free
-    (:func:`map_saver_unknown`). Then :func:`import_map_server`'s conversion with the size that keeps the map's metres: an
-    image of h x w pixels at r m/px becomes round(h*r/cell) x round(w*r/cell) cells of the
-    scenario's ``cell_size``. MapFormatError when the result exceeds the grid limits or holds
-    no known pixel.
+    (:func:`map_saver_unknown`). Then :func:`import_map_server`'s conversion with the size
+    that keeps the map's metres: an image of h x w pixels at r m/px becomes round(h*r/cell)
+    x round(w*r/cell) cells of the scenario's ``cell_size``. MapFormatError when the result
+    exceeds the grid limits or holds no known pixel.
     """
     spec = resolve_scenario(scenario)
     metadata = read_map_yaml(yaml_path)

@@ -118,19 +118,20 @@ def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_pr
     assert outcomes[-1] == 'pass:goal_reached', props
 
 
-def test_a_clocked_suite_with_an_injected_start_up_delay_is_flaky(node_processes, room_bag,
-                                                                  tmp_path):
-    """Clocked re-runs depend on timing: a stack that, in every other episode, sends its first
-    command 5 s wall late (20 sim s at 4x; no gap is measured before a first command) stands
-    still past the stuck timeout (10 sim s) there and reaches the goal otherwise: a pass and a
-    fail, a flaky verdict (not a failure), every attempt a result."""
+def test_a_clocked_suite_does_not_judge_a_stack_s_late_first_command(node_processes, room_bag,
+                                                                   tmp_path):
+    """A stack that sends its first command of the episode 5 s wall late (20 sim s at 4x, past
+    the 10 s stuck timeout) is not judged for that wait: its stuck rule and time limit start
+    with its first command, and the wall-clock controller_startup_timeout bounds the wait. So
+    the delayed attempt reaches the goal and passes. (It used to end stuck: the machine's
+    timing recorded as the stack's failure.)"""
     start_clocked_worker(node_processes, tmp_path / 'sim')
-    start_external(node_processes, '/w0', '--late-start-alternate')
-    flaky = suite(str(room_bag), '--external', '--retries', '1', '--output',
-                  str(tmp_path / 'flaky'), '--record', 'none')
-    assert flaky.returncode == 0, flaky.stdout + flaky.stderr[-3000:]  # flaky is no failure
-    counts, props = junit_case(tmp_path / 'flaky' / 'junit.xml')
+    start_external(node_processes, '/w0', '--late-start-alternate')  # the first goal: late
+    late = suite(str(room_bag), '--external', '--retries', '1', '--output',
+                 str(tmp_path / 'late'), '--record', 'none')
+    assert late.returncode == 0, late.stdout + late.stderr[-3000:]
+    counts, props = junit_case(tmp_path / 'late' / 'junit.xml')
     assert (counts['failures'], counts['errors']) == ('0', '0')
-    assert props['verdict'] == 'flaky', props
-    outcomes = sorted(props['attempt_outcomes'].split())
-    assert outcomes == ['fail:stuck', 'pass:goal_reached'], props
+    assert props['verdict'] == 'pass', props
+    # Both attempts, the late one and the prompt one, reach the goal.
+    assert props['attempt_outcomes'].split() == ['pass:goal_reached'] * 2, props

@@ -38,6 +38,7 @@ from sessgan_evolver.process_supervisor import (
     worker_cores,
 )
 from sessgan_evolver.ros_evaluator import GENERATOR_NAMESPACE, RosEvaluator
+from sessgan_evolver.search_methods import screening_effort
 from sessgan_gen.errors import SessganGenError
 
 
@@ -279,6 +280,9 @@ def plan_of(config: CampaignConfig) -> str:
     if config.method == SESSGAN_METHOD:
         return (f'sessgan, {config.generations} generations x {config.population} members x '
                 f'{config.maps_per_member} maps')
+    if config.method == 'screened':
+        effort = screening_effort(config.screening_effort, config.external)
+        return f'screened (screening effort {effort}), {config.resolved_budget()} episodes'
     return f'{config.method}, {config.resolved_budget()} episodes'
 
 

@@ -20,6 +20,7 @@ from sessgan_evolver.campaign_cli import (
     campaign_parser,
     config_from_args,
     make_campaign,
+    plan_of,
     report_result,
 )
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
@@ -203,6 +204,7 @@ def test_the_command_defaults_to_the_default_method_and_records_the_chosen_one(t
         screened = config_from_args(campaign_parser().parse_args(['--method', 'screened',
                                                                   *arguments]))
         assert method_of(screened).config.effort == effort
+        assert f'screening effort {effort}' in plan_of(screened)  # the run's first log line
     sessgan = config_from_args(campaign_parser().parse_args(['--method', 'sessgan']))
     assert isinstance(make_campaign(sessgan, 's', tmp_path, tmp_path, print, {}), Campaign)
 

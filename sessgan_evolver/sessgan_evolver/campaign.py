@@ -32,7 +32,7 @@ from sessgan_core.scenarios import get_scenario
 from sessgan_core.token_map import occupancy_to_tokens
 from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
-from sessgan_evolver.errors import CampaignError
+from sessgan_evolver.errors import CampaignError, SearchMethodError
 from sessgan_evolver.fault_tally import FaultTally, FaultTracker
 from sessgan_evolver.fitness import (
     FitnessConfig,
@@ -46,7 +46,7 @@ from sessgan_evolver.genome_operators import OperatorConfig
 from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, check_harness_tries
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
-from sessgan_evolver.search_methods import METHODS
+from sessgan_evolver.search_methods import METHODS, screening_effort
 from sessgan_evolver.seeding import SeedStream, shared_seeds
 from sessgan_gen.checkpoint import (
     checkpoint_bytes,
@@ -203,9 +203,10 @@ class CampaignConfig:
         if self.budget < 0:
             raise CampaignError(f'budget must be >= 0 (0: generations x population x maps '
                                 f'per member), got {self.budget}')
-        if self.screening_effort < 0:
-            raise CampaignError(f'screening effort must be >= 0 (0: 1, or 3 with external), '
-                                f'got {self.screening_effort}')
+        try:
+            screening_effort(self.screening_effort, self.external)
+        except SearchMethodError as err:
+            raise CampaignError(str(err)) from err
         if (self.method == SESSGAN_METHOD and self.budget
                 and self.budget < self.population * self.maps_per_member):
             raise CampaignError(f'a budget of {self.budget} episodes pays for no sessgan '

@@ -445,8 +445,8 @@ SCREENING_EFFORT = {False: 1, True: 3}
 """The screened method's default effort (ScreenedConfig.effort) by whether the robot under
 test is a stack already running (``--external``): a built-in controller's episode costs
 0.2-0.7 s, against which the default screen is already about a fifth of the search's wall
-time; a real stack's episode costs 10-60 s, against which three times the screen (0.1-0.2 s a
-test) is 1-2 % (README, *Screening effort*)."""
+time; a real stack's episode costs 10-60 s, against which three times the screen (0.1-0.5 s a
+test) is a few per cent (README, *Screening effort*)."""
 
 
 def screening_effort(requested: int, external: bool) -> int:

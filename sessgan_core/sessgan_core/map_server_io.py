@@ -337,7 +337,7 @@ def map_saver_unknown(pixels: np.ndarray, maxval: int, metadata: MapMetadata) ->
     unknown_occ = 1.0 - MAP_SAVER_UNKNOWN_PIXEL / 255.0
     if (metadata.mode != 'trinary' or metadata.negate or maxval != 255
             or unknown_occ >= metadata.free_thresh):
-        return np.zeros(np.shape(pixels), dtype=bool)[::-1]
+        return np.zeros(np.shape(pixels), dtype=bool)
     return np.ascontiguousarray((np.asarray(pixels) == MAP_SAVER_UNKNOWN_PIXEL)[::-1])
 
 

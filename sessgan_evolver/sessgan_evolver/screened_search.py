@@ -234,6 +234,9 @@ class Test:
     environment: Environment | None = None
     encounter: float = math.inf
     """m, the closest encounter forecast for its simulator seed (inf: no agents)."""
+    seed_options: list[int] = field(default_factory=list)
+    """Simulator seeds its agents' encounter may be forecast for (its own first), drawn when
+    the screen keeps it; forecast only while it could still be the one run (``_best``)."""
 
 
 @dataclass
@@ -476,25 +479,46 @@ class ScreenedSearch:
             for test in draw(count if attempt == 0 else 1):
                 self.screened += 1
                 occupancy = tokens_to_occupancy(test.cells, self.spec)
+                # The cheap checks first: most of a candidate's cost is its certificate.
+                if self._tpkl(test.cells) > self.tpkl_limit \
+                        or self._repeats_lineage(test, occupancy):
+                    continue
                 certified = (certify_candidate(occupancy, self.spec, test.environment_seed)
                              if test.route is None else
                              certify_route(occupancy, self.spec, *test.route))
-                if certified.feasible and not self._repeats_lineage(test, certified) \
-                        and self._tpkl(test.cells) <= self.tpkl_limit:
+                if certified.feasible:
                     test.features = route_features(certified, self.spec)
                     test.environment = environment_of(certified, self.spec, self.name,
                                                       test.environment_seed)
-                    self._pick_sim_seed(test, certified)
+                    self._draw_sim_seeds(test)
                     kept.append((test, certified))
             candidates += kept
             if candidates:
                 break
         else:
             return None
-        scores = [self._score(test, certified) for test, certified in candidates]
-        return candidates[int(np.argmax(scores))][0]
+        return self._best(candidates)
 
-    def _repeats_lineage(self, test: Test, certified: CertifiedCandidate) -> bool:
+    def _best(self, candidates: list[tuple[Test, CertifiedCandidate]]) -> Test:
+        """The highest-scoring candidate (the first of equals), run with its picked simulator
+        seed. The pick (most of the screen's cost) moves a score only through the surrogate's
+        encounter feature, so never above the score at encounter 0 or at ``ENCOUNTER_CAP``:
+        candidates are picked in order of that bound until none left could beat the best,
+        which chooses what picking every candidate would."""
+        novelty = [self._novelty(certified) for _, certified in candidates]
+        bounds = [self._score(test, value, bound=True)
+                  for (test, _), value in zip(candidates, novelty)]
+        scores: dict[int, float] = {}
+        for index in sorted(range(len(candidates)), key=lambda index: -bounds[index]):
+            # A relative margin, so a float's rounding cannot skip a better candidate.
+            if scores and max(scores.values()) > bounds[index] * (1 + 1e-9):
+                break
+            test, certified = candidates[index]
+            self._pick_sim_seed(test, certified)
+            scores[index] = self._score(test, novelty[index])
+        return candidates[max(scores, key=lambda index: (scores[index], -index))][0]
+
+    def _repeats_lineage(self, test: Test, occupancy: np.ndarray) -> bool:
         """Whether a child keeps its parent's start, goal and simulator seed and the map
         around a fault place that a test with them showed (the parent's own, or a sibling's
         or an ancestor's): the robot would most likely drive there as before and show that
@@ -502,23 +526,37 @@ class ScreenedSearch:
         if test.parent is None or test.route is None:
             return False
         places = self.route_faults.get((test.route, test.sim_seed), ())
-        return any(place_context(certified.occupancy, row, col, self.config.rule) == context
+        return any(place_context(occupancy, row, col, self.config.rule) == context
                    for row, col, context in places)
 
-    def _score(self, test: Test, certified: CertifiedCandidate) -> float:
-        assert test.features is not None
+    def _novelty(self, certified: CertifiedCandidate) -> float:
+        """Halved for every known fault along the route (the module docstring)."""
         cells = route_coarse_cells(certified, self.config.rule)
-        novelty = 0.5 ** max(self.archive.known_places_on(certified, cells),
-                             self.situations.known_on(certified.occupancy, cells))
+        return 0.5 ** max(self.archive.known_places_on(certified, cells),
+                          self.situations.known_on(certified.occupancy, cells))
+
+    def _score(self, test: Test, novelty: float, bound: bool = False) -> float:
+        """``novelty`` times P(failure) by the surrogate (route length before it is
+        trained); ``bound``: the most any simulator seed's encounter could make it."""
+        assert test.features is not None
         if self.told < self.config.surrogate_warmup or not self.surrogate.trained:
             # Longer routes expose more (the screening pilot): rank by length in metres.
             return novelty * float(test.features[0])
-        return novelty * float(self.surrogate.predict(self._row(test))[0])
+        rows = ([self._row(test, 0.0), self._row(test, ENCOUNTER_CAP)] if bound
+                else [self._row(test)])
+        return novelty * float(self.surrogate.predict(np.stack(rows)).max())
+
+    def _draw_sim_seeds(self, test: Test) -> None:
+        """The simulator seeds, of ``agent_seeds`` (its own first), whose agents'
+        encounter the pick may forecast; none without agents."""
+        if int(self.episode_config.dummy_agents or 0) > 0:
+            tries = self.config.agent_seeds * self.config.effort
+            test.seed_options = [test.sim_seed] + [self._seed() for _ in range(tries - 1)]
 
     def _pick_sim_seed(self, test: Test, certified: CertifiedCandidate) -> None:
-        """Run ``test`` with the simulator seed, of ``agent_seeds`` (its own first), whose
-        agents come closest to the robot on its way; remember that encounter."""
-        if int(self.episode_config.dummy_agents or 0) == 0:
+        """Run ``test`` with the simulator seed, of its ``seed_options``, whose agents come
+        closest to the robot on its way; remember that encounter."""
+        if not test.seed_options:
             return
         assert test.environment is not None
         certificate = certified.placement.certificate
@@ -526,17 +564,18 @@ class ScreenedSearch:
         # The certificate's grid is the map's clearance at the search's origin, (0, 0).
         planner = PatrolPlanner(test.environment, self.episode_config, certificate.grid)
         path = reactive_path(certified, self.spec)
-        tries = self.config.agent_seeds * self.config.effort
-        seeds = [test.sim_seed] + [self._seed() for _ in range(tries - 1)]
         encounters = [closest_encounter(path, planner.patrols(seed), self.robot_speed.value,
-                                        self.episode_config.agents.speed) for seed in seeds]
+                                        self.episode_config.agents.speed)
+                      for seed in test.seed_options]
         best = int(np.argmin(encounters))
-        test.sim_seed, test.encounter = seeds[best], encounters[best]
+        test.sim_seed, test.encounter = test.seed_options[best], encounters[best]
 
     @staticmethod
-    def _row(test: Test) -> np.ndarray:
+    def _row(test: Test, encounter: float | None = None) -> np.ndarray:
+        """The surrogate's features of ``test`` (with ``encounter`` instead of its own)."""
         assert test.features is not None
-        return np.append(test.features, [min(test.encounter, ENCOUNTER_CAP),
+        encounter = test.encounter if encounter is None else encounter
+        return np.append(test.features, [min(encounter, ENCOUNTER_CAP),
                                          float(test.parent is not None)])
 
     # ---- tell --------------------------------------------------------------------------

@@ -101,6 +101,8 @@ def test_the_search_runs_the_seed_whose_agents_come_closest():
     assert len(set(forecasts)) > 1  # the seeds' agents walk elsewhere
     test.sim_seed = seeds[0]  # its own, tried first; the search draws the others
     search._seed = iter(seeds[1:]).__next__
+    search._draw_sim_seeds(test)
+    assert test.seed_options == seeds
     search._pick_sim_seed(test, certified)
     assert test.sim_seed == seeds[int(np.argmin(forecasts))]
     assert test.encounter == min(forecasts)
@@ -135,3 +137,43 @@ def test_the_tricycle_controller_s_search_forecasts_for_the_tricycle():
 def _route(environment):
     start, goal = environment.start, environment.goal
     return (start.x, start.y, start.yaw), (goal.x, goal.y, goal.yaw)
+
+
+def test_picking_only_candidates_that_could_win_chooses_as_picking_all_would():
+    # A trained surrogate in which a close encounter matters: the pick moves the scores.
+    search = ScreenedSearch('factory', 5, config=ScreenedConfig(
+        batch=4, reference_maps=4, fresh_candidates=6, agent_seeds=6))
+    rng = np.random.default_rng(0)
+    width = len(search._row(_any_test(search)))
+    for _ in range(40):
+        row = rng.normal(size=width)
+        row[-2] = rng.uniform(0.0, 10.0)
+        search.surrogate.add(row, bool(row[-2] < 3.0))
+    search.surrogate.fit()
+    search.told = search.config.surrogate_warmup
+    lazy = search._best
+    compared = 0
+
+    def checked(candidates):
+        nonlocal compared
+        twins = [(dataclasses.replace(test, seed_options=list(test.seed_options)), certified)
+                 for test, certified in candidates]
+        for test, certified in twins:
+            search._pick_sim_seed(test, certified)
+        scores = [search._score(test, search._novelty(certified))
+                  for test, certified in twins]
+        chosen = lazy(candidates)
+        best = twins[int(np.argmax(scores))][0]
+        assert (chosen.sim_seed, chosen.map_seed) == (best.sim_seed, best.map_seed)
+        compared += len(candidates) > 1
+        return chosen
+
+    search._best = checked
+    search.ask()
+    assert compared
+
+
+def _any_test(search: ScreenedSearch):
+    """A fresh test of ``search`` with its features (for the surrogate's row width)."""
+    search.ask()
+    return search._pending[0]

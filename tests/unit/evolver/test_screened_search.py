@@ -272,13 +272,13 @@ def test_the_screen_halves_a_candidate_per_known_fault_place_on_its_route():
     candidate = factory_candidate(3)
     test = search._fresh_test()
     test.features = route_features(candidate, search.spec)
-    plain = search._score(test, candidate)
+    plain = search._score(test, search._novelty(candidate))
     rule = search.config.rule
     for row, col in sorted(route_coarse_cells(candidate, rule))[:2]:
         from sessgan_evolver.faults import place_context
         search.archive.add(FaultKey('stuck', row, col,
                                     place_context(candidate.occupancy, row, col, rule)))
-    assert search._score(test, candidate) == pytest.approx(plain / 4)
+    assert search._score(test, search._novelty(candidate)) == pytest.approx(plain / 4)
 
 
 def test_route_features_of_a_corridor_match_its_geometry():
@@ -575,7 +575,7 @@ def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
         # again with the same start, goal and simulator seed it would most likely repeat it.
         occupancy = proposal.environment.occupancy
         candidate = certify_route(occupancy, search.spec, *parent.route)
-        assert candidate.feasible and search._repeats_lineage(sibling, candidate)
+        assert candidate.feasible and search._repeats_lineage(sibling, occupancy)
         # The same map changed in one cell around that place is worth running.
         size = search.spec.cell_size * rule.coarse_cells
         row = int(proposal.environment.start.y // size) * rule.coarse_cells
@@ -591,12 +591,11 @@ def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
         r, c = walls[0] + (max(row - rule.context_cells, 0), max(col - rule.context_cells, 0))
         changed[r, c] = 0  # a wall cell opened: the route stays certified
         candidate = certify_route(changed, search.spec, *parent.route)
-        assert candidate.feasible and not search._repeats_lineage(sibling, candidate)
+        assert candidate.feasible and not search._repeats_lineage(sibling, changed)
         changed_maps += 1
         # With another simulator seed the robot meets other agents: no prediction.
         sibling.sim_seed += 1
-        assert not search._repeats_lineage(sibling, certify_route(occupancy, search.spec,
-                                                                  *parent.route))
+        assert not search._repeats_lineage(sibling, occupancy)
     assert changed_maps
 
 

@@ -158,6 +158,11 @@ class PaceMonitor:
         told to stop, or got a new goal), not late."""
         self._last = None
 
+    def silent_for(self, sim_time: float) -> float | None:
+        """Sim seconds from the last arrival to ``sim_time`` (the gap still open); None
+        before the first arrival or after an explained gap (:meth:`restart_gap`)."""
+        return None if self._last is None else sim_time - self._last
+
     @property
     def figures(self) -> PaceFigures:
         return PaceFigures(self._period, self._declared, self._arrivals, self._measured,

@@ -150,7 +150,8 @@ class Nav2StandIn(Node):
     # ---- the 20 Hz control loop --------------------------------------------------------------
 
     def control(self) -> None:
-        if self.options.silent:
+        fall_silent_after = self.options.fall_silent_after
+        if self.options.silent or 0 < fall_silent_after < self.commands_sent:
             return
         linear = angular = 0.0
         pose = self.pose()
@@ -168,6 +169,9 @@ class Nav2StandIn(Node):
                 angular = max(-1.5, min(1.5, 2.0 * error))
                 if abs(error) < 0.5:
                     linear = max(0.0, min(0.5, 0.6 * (clearance - 0.3)))
+        if self.commands_sent + 1 == fall_silent_after:
+            linear = angular = 0.0  # its last command: a stop
+            self.get_logger().info('falling silent')
         if self.options.stamped:
             command = TwistStamped()
             command.header.stamp = self.get_clock().now().to_msg()
@@ -251,6 +255,9 @@ def main() -> None:
     parser.add_argument('--reject-goals', action='store_true',
                         help='reject navigate_to_pose goals')
     parser.add_argument('--silent', action='store_true', help='never publish a command')
+    parser.add_argument('--fall-silent-after', type=int, default=0, metavar='N',
+                        help='publish N commands, the last a stop, then none (a stack whose '
+                             'controller died)')
     args = rclpy.utilities.remove_ros_args(sys.argv)[1:]
     options = parser.parse_args(args)
     rclpy.init(args=sys.argv)

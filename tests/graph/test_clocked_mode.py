@@ -12,6 +12,7 @@ import pytest
 
 from tests.graph.test_simulator_graph import (
     environment_msg,
+    evaluate,
     evaluate_with_reruns,
     room,
     start_external,
@@ -120,6 +121,22 @@ def test_goal_reaches_subscribers_that_join_during_the_episode(node_processes, r
     result = sent.result().get_result_async()
     assert spin_until(ros_node, result.done, timeout=30)
     assert result.result().result.metrics.outcome == 'controller_unresponsive'
+
+
+def test_a_stack_that_falls_silent_mid_episode_gives_no_test_result(node_processes, ros_node):
+    # At 8x real time the stuck rule (10 sim s) ends a standing robot after 1.25 wall s, before
+    # the wall-clock silence rule (controller_timeout, 2 s) could: the stack stopped the robot
+    # and fell silent (its controller died), which must end controller_unresponsive (re-run,
+    # never a result), not stuck.
+    namespace = '/fell_silent'
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
+                    'real_time_factor:=8.0')
+    stand_in = start_stand_in(node_processes, namespace, '--fall-silent-after', '20')
+    metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'fell'),
+                          time_limit=60.0)
+    assert 'falling silent' in stand_in.output()
+    assert metrics.outcome == 'controller_unresponsive', metrics.detail
+    assert 'its stack fell silent' in metrics.detail and 'had ended stuck' in metrics.detail
 
 
 def test_free_mode_runs_an_episode_for_every_map(node_processes, ros_node, tmp_path):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from sessgan_sim import ros_messages as rm
 from sessgan_sim.command_pace import PaceFigures, PaceMonitor
-from sessgan_sim.metrics import Outcome, is_harness_outcome
+from sessgan_sim.metrics import FAILURE_OUTCOMES, Outcome, is_harness_outcome
 from sessgan_sim.simulator_settings import SimulatorSettings, StepMode
 from sessgan_sim.worker.commands import CommandReceiver
 from sessgan_sim.worker.topics import Recording, RobotTopics
@@ -213,6 +213,7 @@ class EpisodeStepper:
             channel.topics.forget_goal()
         commands: list = [None] * len(channels)
         heard = [time.monotonic()] * len(channels)
+        left: dict[int, float] = {}  # robots that ended after their stack fell silent
         # Each robot's stack keeps pace or not on its own (fed in clocked mode only).
         paces = [PaceMonitor(settings.pace_rule(), dt) for _ in channels]
         wall_origin = time.monotonic()
@@ -303,7 +304,11 @@ class EpisodeStepper:
             if lockstep:
                 commands = [None] * len(channels)  # each tick waits for fresh ones
             goals = [observation.goal for observation in observations]
-            observations = [result.observation for result in episode.step_fleet(values)]
+            results = episode.step_fleet(values)
+            observations = [result.observation for result in results]
+            if not lockstep and overridden is None:
+                self.note_left_robots(driving, results, paces, episode.config.stuck_timeout,
+                                      left)
             if new_goal is not None and not episode.done:
                 failure = self.send_new_goals(new_goal, goals, observations, clock, paces)
                 if failure:
@@ -319,6 +324,14 @@ class EpisodeStepper:
                 channel.topics.publish_tick(observation, stamp_ns, recording)
         metrics = episode.metrics()
         self.paces = [] if lockstep else [pace.figures for pace in paces]
+        if left and not is_harness_outcome(metrics.outcome):
+            return dataclasses.replace(
+                metrics, outcome=Outcome.CONTROLLER_UNRESPONSIVE, success=False,
+                detail='; '.join(f'{self.who(index)}no cmd_vel in the last {silent:.1f} sim s '
+                                 f'(real_time_factor {settings.real_time_factor:g}): its '
+                                 'stack fell silent, the robot was not driven'
+                                 for index, silent in sorted(left.items()))
+                + (f' (it had ended {metrics.outcome.value})' if metrics.outcome else ''))
         if not lockstep and not is_harness_outcome(metrics.outcome):
             # A result reached while starved (a collision, stuck, even the goal) says how busy
             # the machine was, not how the stack drives.
@@ -353,6 +366,22 @@ class EpisodeStepper:
         if received:
             commands[index], heard[index] = received[-1], time.monotonic()
             paces[index].command(sim_time)
+
+    @staticmethod
+    def note_left_robots(driving: Sequence[int], results: Sequence, paces: Sequence[PaceMonitor],
+                         stuck_timeout: float, left: dict[int, float]) -> None:
+        """Clocked mode: note in ``left`` each robot of ``driving`` that just ended stuck or
+        timed out while its stack had sent nothing for the whole stuck window. In sim time
+        the stuck rule can come before the wall-clock silence rule (at a real-time factor
+        above stuck_timeout / controller_timeout, 5 by default): a stack that died after its
+        first command would otherwise fail its test."""
+        if stuck_timeout <= 0:
+            return  # no stuck rule, no window to judge silence by in sim time
+        for index in driving:
+            if results[index].outcome in FAILURE_OUTCOMES:
+                silent = paces[index].silent_for(results[index].observation.time)
+                if silent is not None and silent >= stuck_timeout - 1e-9:
+                    left[index] = silent
 
     @staticmethod
     def send_new_goals(new_goal, goals: list, observations: list, clock: EpisodeClock,

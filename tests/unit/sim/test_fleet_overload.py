@@ -34,3 +34,26 @@ def test_a_robot_not_yet_judged_mid_episode_is_named_when_another_ends_it():
     assert 'robot r0: the stack could not keep pace' in detail
     assert 'robot r1: the stack could not keep pace' in detail
     assert 'robot r2' not in detail
+
+
+def test_only_a_robot_that_ended_after_its_stack_fell_silent_is_noted():
+    from types import SimpleNamespace
+
+    rule = PaceRule(expected_period=TICK)
+    # r0's stack fell silent at 2 s; r1's commanded to the end; r2's was told its navigation
+    # ended (an explained gap); r3 reached its goal after its stack fell silent.
+    paces = [commands(PaceMonitor(rule, TICK), [i * TICK for i in range(41)]),
+             commands(PaceMonitor(rule, TICK), [i * TICK for i in range(240)]),
+             commands(PaceMonitor(rule, TICK), [i * TICK for i in range(41)]),
+             commands(PaceMonitor(rule, TICK), [i * TICK for i in range(41)])]
+    paces[2].restart_gap()
+    assert paces[0].silent_for(12.0) == pytest.approx(10.0) and paces[2].silent_for(12.0) is None
+    ended = [SimpleNamespace(outcome=outcome, observation=SimpleNamespace(time=12.0))
+             for outcome in ('stuck', 'stuck', 'timeout', 'goal_reached')]
+    left: dict[int, float] = {}
+    EpisodeStepper.note_left_robots(range(4), ended, paces, 10.0, left)
+    assert left == {0: pytest.approx(10.0)}
+    # Without a stuck rule there is no sim-time window to judge silence by.
+    left.clear()
+    EpisodeStepper.note_left_robots(range(4), ended, paces, 0.0, left)
+    assert not left

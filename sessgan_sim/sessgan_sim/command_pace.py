@@ -21,6 +21,9 @@ Silence is not lateness: the gap still open (no command since) is never counted,
 controller that stops publishing at its goal is no overload and a silent one stays
 ``controller_unresponsive`` (wall-clock timeout). A gap the harness explains (a stack told its
 navigation ended, a mission's next goal) is forgotten with :meth:`PaceMonitor.restart_gap`.
+Nor is a pause: a gap after a stop command is not counted. Nav2 recovers with Wait (5 s in its
+default behaviour tree): behavior_server stops the robot and nothing publishes cmd_vel until
+the next behaviour. The robot stood as commanded meanwhile; it drove blind on nothing.
 Lockstep needs none of this: the simulator waits for every answer.
 """
 
@@ -124,6 +127,8 @@ class PaceMonitor:
         self._period: float | None = (max(rule.expected_period, control_period)
                                       if self._declared else None)
         self._last: float | None = None
+        self._paused = False
+        """Whether the last arrival was a stop: the gap after it is a pause, not late."""
         self._gaps: list[float] = []
         self._judged = 0  # gaps already classified against the period
         self._arrivals = 0
@@ -132,14 +137,16 @@ class PaceMonitor:
         self._late_time = 0.0
         self._longest = 0.0
 
-    def command(self, sim_time: float) -> None:
-        """Commands arrived in the tick at ``sim_time`` (episode sim s; non-decreasing)."""
+    def command(self, sim_time: float, stop: bool = False) -> None:
+        """Commands arrived in the tick at ``sim_time`` (episode sim s; non-decreasing), the
+        latest a stop or not (the gap until the next arrival is then a pause)."""
         if self._last is not None and sim_time <= self._last:
+            self._paused = stop
             return  # the same tick: one arrival
         self._arrivals += 1
-        if self._last is not None:
+        if self._last is not None and not self._paused:
             self._gaps.append(sim_time - self._last)
-        self._last = sim_time
+        self._last, self._paused = sim_time, stop
         if self._period is None and len(self._gaps) >= self.rule.observed_gaps:
             observed = statistics.median(self._gaps[:self.rule.observed_gaps])
             self._period = max(observed, self.control_period)

@@ -89,7 +89,8 @@ class SimulatorSettings:
     real_time_factor: float = 1.0
     """Clocked mode: sim seconds per wall second."""
     controller_timeout: float = 2.0
-    """Wall seconds without a cmd_vel that end an episode as controller_unresponsive."""
+    """Wall seconds without a cmd_vel that end an episode as controller_unresponsive (in
+    clocked mode after a stop command: at least the stuck window, stuck_timeout sim s)."""
     controller_startup_timeout: float = 15.0
     """Wall seconds allowed for the first cmd_vel (and for a controller to appear)."""
     expected_command_period: float = 0.0

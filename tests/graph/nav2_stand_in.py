@@ -13,6 +13,10 @@ installed on this project's machines):
   (``global_costmap/clear_entirely_global_costmap`` and ``local_costmap/...``);
   ``--reset-delay S`` makes them answer after S wall seconds.
 
+``--fall-silent-after N`` and ``--wait-after N`` stop the robot after N commands and then
+send nothing, for good (a stack whose controller died) or for ``--wait-for`` sim seconds
+(Nav2's Wait recovery: behavior_server stops the robot, waits, and no node publishes cmd_vel).
+
 It logs what a test checks: every goal with the sim time it arrived at, every costmap reset,
 a line for each backward jump of sim time (tf2 clears its buffer on one) and the number of
 commands sent by a sim time every 20 commands. Policy: turn
@@ -76,6 +80,8 @@ class Nav2StandIn(Node):
         self.goal_handle = None
         self.navigation_done = Future()
         self.commands_sent = 0
+        self.waiting_until = 0.0
+        """Sim time until which it sends nothing (--wait-after)."""
         command_type = TwistStamped if options.stamped else Twist
         self.cmd_publisher = self.create_publisher(command_type, 'cmd_vel', 10)
         self.create_subscription(LaserScan, 'scan', self.on_scan, 10)
@@ -153,6 +159,9 @@ class Nav2StandIn(Node):
         fall_silent_after = self.options.fall_silent_after
         if self.options.silent or 0 < fall_silent_after < self.commands_sent:
             return
+        now = self.get_clock().now().nanoseconds / 1e9
+        if now < self.waiting_until:
+            return
         linear = angular = 0.0
         pose = self.pose()
         if self.goal is not None and pose is not None and self.scan is not None:
@@ -172,6 +181,11 @@ class Nav2StandIn(Node):
         if self.commands_sent + 1 == fall_silent_after:
             linear = angular = 0.0  # its last command: a stop
             self.get_logger().info('falling silent')
+        if self.commands_sent + 1 == self.options.wait_after:
+            # Nav2's Wait recovery: behavior_server stops the robot, then sends nothing.
+            linear = angular = 0.0
+            self.waiting_until = now + self.options.wait_for
+            self.get_logger().info(f'waiting {self.options.wait_for:g} sim s at {now:.2f}')
         if self.options.stamped:
             command = TwistStamped()
             command.header.stamp = self.get_clock().now().to_msg()
@@ -258,6 +272,11 @@ def main() -> None:
     parser.add_argument('--fall-silent-after', type=int, default=0, metavar='N',
                         help='publish N commands, the last a stop, then none (a stack whose '
                              'controller died)')
+    parser.add_argument('--wait-after', type=int, default=0, metavar='N',
+                        help='after N commands (the last a stop) send nothing for --wait-for '
+                             "sim s, then go on: Nav2's Wait recovery")
+    parser.add_argument('--wait-for', type=float, default=5.0, metavar='S',
+                        help="sim seconds of --wait-after (Nav2's default BT waits 5 s)")
     args = rclpy.utilities.remove_ros_args(sys.argv)[1:]
     options = parser.parse_args(args)
     rclpy.init(args=sys.argv)

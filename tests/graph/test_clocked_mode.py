@@ -139,6 +139,23 @@ def test_a_stack_that_falls_silent_mid_episode_gives_no_test_result(node_process
     assert 'its stack fell silent' in metrics.detail and 'had ended stuck' in metrics.detail
 
 
+@pytest.mark.parametrize('real_time_factor', [1.0, 4.0])
+def test_a_stack_that_stops_the_robot_and_waits_is_judged_on_its_driving(
+        node_processes, ros_node, real_time_factor):
+    # Nav2's default behaviour tree recovers with Wait (5 s): behavior_server stops the robot
+    # and nothing publishes cmd_vel meanwhile. That pause is neither silence (at 1x it lasts
+    # 5 wall s, past controller_timeout) nor lateness (one gap of 100 command periods): the
+    # robot stood as commanded, and the episode goes on to its result.
+    namespace = f'/nav2_wait_{int(real_time_factor)}'
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
+                    f'real_time_factor:={real_time_factor}')
+    stand_in = start_stand_in(node_processes, namespace, '--wait-after', '30')
+    metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'wait'),
+                          time_limit=60.0)
+    assert 'waiting 5 sim s' in stand_in.output()
+    assert metrics.outcome == 'goal_reached', metrics.detail
+
+
 def test_free_mode_runs_an_episode_for_every_map(node_processes, ros_node, tmp_path):
     from nav_msgs.msg import OccupancyGrid
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy

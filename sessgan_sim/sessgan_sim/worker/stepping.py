@@ -5,7 +5,8 @@ Lockstep publishes a tick's clock, odom, tf, scan (and the flyer's range_down) f
 waits for the cmd_vel of every robot still driving and only then advances the simulation by one
 control period. Clocked advances the simulation at ``real_time_factor`` times the wall clock and
 applies the latest command received from each robot; a robot's stack whose commands come too
-late in sim time ends it as overloaded (sessgan_sim.command_pace). Either way a silent
+late in sim time ends it as overloaded (sessgan_sim.command_pace), while one that stopped its
+robot may pause as long as the stuck window (Nav2's Wait recovery). Either way a silent
 controller ends the episode as controller_unresponsive after a wall-clock timeout, an evaluate
 client's cancel or a shutdown ends it as cancelled, and nothing waits forever.
 """
@@ -40,6 +41,15 @@ real time, where feedback every 0.25 sim s cost a sixth of the simulator's messa
 action feedback message costs about 0.2 ms of CPU, tests/benchmarks/bench_simulator_node.py)
 and told a client watching progress nothing it could follow. Shorter than FEEDBACK_PERIOD, so
 a real-time (clocked) episode keeps its cadence despite jitter."""
+
+
+STOP_TOLERANCE = 1e-3
+"""m/s and rad/s: a command whose every component is within this is a stop."""
+
+
+def is_stop(command) -> bool:
+    """Whether a Twist or TwistStamped tells the robot to stand still."""
+    return all(abs(value) <= STOP_TOLERANCE for value in rm.twist_values(command))
 
 
 class FeedbackSchedule:
@@ -204,6 +214,9 @@ class EpisodeStepper:
         lockstep = settings.step_mode is StepMode.LOCKSTEP
         timeout = settings.controller_timeout
         startup_timeout = settings.controller_startup_timeout
+        # A stack that stopped its robot may pause (Nav2's Wait recovery: 5 s) as long as the
+        # stuck window; note_left_robots judges a longer silence when the robot ends.
+        pause_timeout = max(timeout, episode.config.stuck_timeout / settings.real_time_factor)
         dt = episode.config.control_period
         feedback = FeedbackSchedule()
         channels = self.channels
@@ -269,7 +282,8 @@ class EpisodeStepper:
                         pace.restart_gap()  # a stack told its navigation ended may fall silent
                 now = time.monotonic()
                 for index in driving if overridden is None else ():
-                    limit = startup_timeout if commands[index] is None else timeout
+                    limit = (startup_timeout if commands[index] is None
+                             else pause_timeout if is_stop(commands[index]) else timeout)
                     if now - heard[index] > limit:
                         silent = index
                         break
@@ -365,7 +379,7 @@ class EpisodeStepper:
         received = self.channels[index].commands.take_all()
         if received:
             commands[index], heard[index] = received[-1], time.monotonic()
-            paces[index].command(sim_time)
+            paces[index].command(sim_time, stop=is_stop(received[-1]))
 
     @staticmethod
     def note_left_robots(driving: Sequence[int], results: Sequence, paces: Sequence[PaceMonitor],

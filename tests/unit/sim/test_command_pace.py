@@ -126,6 +126,27 @@ def test_a_restarted_gap_is_not_late():
     assert monitor.overload(final=True) is None
 
 
+def test_a_pause_after_a_stop_is_not_late_a_gap_while_driving_is():
+    # Nav2's Wait recovery: a stop, 5 s of nothing, then 20 Hz again.
+    paused = PaceMonitor(PaceRule(), TICK)
+    feed(paused, ticks(0.0, 3.0))
+    paused.command(3.0, stop=True)
+    assert paused.silent_for(8.0) == pytest.approx(5.0)
+    feed(paused, ticks(8.0, 12.0))
+    assert paused.figures.late_gaps == 0 and paused.overload(final=True) is None
+    # The same gap after a command that drove the robot: it drove blind for 5 s.
+    blind = PaceMonitor(PaceRule(), TICK)
+    feed(blind, ticks(0.0, 3.05) + ticks(8.0, 12.0))
+    assert blind.figures.late_gaps == 1 and 'a gap of 5.00 sim s' in blind.overload()
+    # Only the latest command of a tick counts: a stop then a drive is no pause.
+    mixed = PaceMonitor(PaceRule(), TICK)
+    feed(mixed, ticks(0.0, 3.0))
+    mixed.command(3.0, stop=True)
+    mixed.command(3.0, stop=False)
+    feed(mixed, ticks(8.0, 12.0))
+    assert mixed.figures.late_gaps == 1
+
+
 def test_commands_in_one_tick_are_one_arrival():
     monitor = PaceMonitor(PaceRule(observed_gaps=2), TICK)
     feed(monitor, [0.0, 0.0, 0.05, 0.05, 0.1])

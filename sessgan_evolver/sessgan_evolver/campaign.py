@@ -117,7 +117,8 @@ class CampaignConfig:
     """[0: generations x population x maps per member] Episodes of the robot under test
     (the budget); sessgan runs the whole generations it pays for."""
     screening_effort: int = 0
-    """[0: 1, or 3 with --external] The screened method's work per test: candidate maps
+    """[0: 2 where the episodes have agents, else 1; 3 with --external] The screened
+    method's work per test: candidate maps
     and simulator seeds screened, times its defaults (milliseconds each; worth more where an
     episode of the robot under test costs seconds)."""
     generations: int = 30
@@ -204,7 +205,7 @@ class CampaignConfig:
             raise CampaignError(f'budget must be >= 0 (0: generations x population x maps '
                                 f'per member), got {self.budget}')
         try:
-            screening_effort(self.screening_effort, self.external)
+            screening_effort(self.screening_effort, self.external, self.scenario)
         except SearchMethodError as err:
             raise CampaignError(str(err)) from err
         if (self.method == SESSGAN_METHOD and self.budget

@@ -281,7 +281,7 @@ def plan_of(config: CampaignConfig) -> str:
         return (f'sessgan, {config.generations} generations x {config.population} members x '
                 f'{config.maps_per_member} maps')
     if config.method == 'screened':
-        effort = screening_effort(config.screening_effort, config.external)
+        effort = screening_effort(config.screening_effort, config.external, config.scenario)
         return f'screened (screening effort {effort}), {config.resolved_budget()} episodes'
     return f'{config.method}, {config.resolved_budget()} episodes'
 

@@ -90,7 +90,8 @@ class CompareConfig:
     """Episodes per run (SESS-GAN: whole generations of population x K). (default: 360)"""
     screening_effort: int = 0
     """The screened method's work per test: candidate maps and simulator seeds screened,
-    times its defaults. (default: 0: 1, or 3 with --external)"""
+    times its defaults. (default: 0: 2 where the episodes have agents, else 1; 3 with
+    --external)"""
     fresh_episodes: int = 30
     """Fresh seed pairs per final generator. (default: 30)"""
     repeats: int = 3
@@ -336,7 +337,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
                                      config.ga_config(), config.map_size(),
                                      '' if config.external else config.controller,
                                      screening_effort(config.screening_effort,
-                                                      config.external))
+                                                      config.external, config.scenario))
             origin = map_origin(checkpoint_metadata(config.scenario, config.checkpoint or None))
             run_search(searcher, evaluator, config.budget, label, origin)
             cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))

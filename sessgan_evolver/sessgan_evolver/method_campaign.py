@@ -93,7 +93,8 @@ def method_of(config: CampaignConfig) -> SearchMethod:
         return make_baseline(config.method, config.scenario, config.seed,
                              config.checkpoint or None, ga, (config.height, config.width),
                              '' if config.external else config.controller,
-                             screening_effort(config.screening_effort, config.external))
+                             screening_effort(config.screening_effort, config.external,
+                                              config.scenario))
     except SearchMethodError as err:
         raise CampaignError(f'method {config.method}: {err}') from err
 

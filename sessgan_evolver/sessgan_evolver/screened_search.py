@@ -190,7 +190,7 @@ class ScreenedConfig:
     """Screening work per test: ``fresh_candidates``, ``child_candidates`` and
     ``agent_seeds`` are each tried this many times over. A candidate or a seed costs
     milliseconds; an episode of a real stack costs seconds, so there more is nearly free
-    (``SCREENING_EFFORT``)."""
+    (the defaults: ``search_methods.screening_effort``)."""
 
     def validate(self) -> None:
         for name in ('batch', 'fresh_candidates', 'child_candidates', 'reference_maps',

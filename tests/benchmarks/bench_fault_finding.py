@@ -143,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--population', type=int, default=12)
     parser.add_argument('--maps-per-member', type=int, default=3)
     parser.add_argument('--screening-effort', type=int, default=0,
-                        help="the screened method's (0: its in-process default, 1)")
+                        help="the screened method's (0: its in-process default: 2 where the "
+                        'episodes have agents, else 1)')
     parser.add_argument('--output', type=Path, default=Path('runs/bench-fault-finding'))
     args = parser.parse_args(argv)
     torch.set_num_threads(1)

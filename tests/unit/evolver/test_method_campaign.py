@@ -199,8 +199,10 @@ def test_the_command_defaults_to_the_default_method_and_records_the_chosen_one(t
     assert (config.method, config.budget) == ('random', 5)
     assert isinstance(make_campaign(config, 'r', tmp_path, tmp_path, print, {}),
                       MethodCampaign)
-    # The screened method screens three times as much for a stack already running.
-    for arguments, effort in (([], 1), (['--external'], 3), (['--screening-effort', '2'], 2)):
+    # The screened method screens twice as much where agents walk (the factory), three times
+    # for a stack already running, once on the race track.
+    for arguments, effort in (([], 2), (['--external'], 3), (['--screening-effort', '4'], 4),
+                              (['--scenario', 'racetrack'], 1)):
         screened = config_from_args(campaign_parser().parse_args(['--method', 'screened',
                                                                   *arguments]))
         assert method_of(screened).config.effort == effort

@@ -105,11 +105,13 @@ def test_the_screening_effort_multiplies_candidates_and_simulator_seeds(monkeypa
         assert search.screened == SMALL.batch * SMALL.fresh_candidates * effort
         per_candidate = SMALL.agent_seeds * effort
         assert len(tried) % per_candidate == 0 and len(tried) >= SMALL.batch * per_candidate
-    assert (screening_effort(0, False), screening_effort(0, True)) == (1, 3)
-    assert screening_effort(2, True) == 2
+    defaults = [screening_effort(0, external, scenario) for external in (False, True)
+                for scenario in ('factory', 'drone', 'racetrack')]
+    assert defaults == [2, 2, 1, 3, 3, 3]  # in process: 2 where the episodes have agents
+    assert screening_effort(2, True, 'racetrack') == 2
     assert make_baseline('screened', 'factory', 0, screening_effort=2).config.effort == 2
     with pytest.raises(SearchMethodError, match='screening effort must be >= 0'):
-        screening_effort(-1, False)
+        screening_effort(-1, False, 'factory')
     with pytest.raises(SearchMethodError, match='effort must be >= 1'):
         ScreenedConfig(effort=0).validate()
 

@@ -157,7 +157,7 @@ class Nav2StandIn(Node):
 
     def control(self) -> None:
         fall_silent_after = self.options.fall_silent_after
-        if self.options.silent or 0 < fall_silent_after < self.commands_sent:
+        if self.options.silent or 0 < fall_silent_after <= self.commands_sent:
             return
         now = self.get_clock().now().nanoseconds / 1e9
         if now < self.waiting_until:

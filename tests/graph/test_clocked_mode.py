@@ -150,8 +150,10 @@ def test_a_stack_that_stops_the_robot_and_waits_is_judged_on_its_driving(
     start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
                     f'real_time_factor:={real_time_factor}')
     stand_in = start_stand_in(node_processes, namespace, '--wait-after', '30')
-    metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'wait'),
-                          time_limit=60.0)
+    # On a busy machine the stand-in may also be starved (overloaded: re-run at half the pace,
+    # as campaigns do); the pause itself would make every try overloaded.
+    metrics, _, _ = evaluate_with_reruns(
+        ros_node, namespace, environment_msg(room(), 'factory', 'wait'), time_limit=60.0)
     assert 'waiting 5 sim s' in stand_in.output()
     assert metrics.outcome == 'goal_reached', metrics.detail
 

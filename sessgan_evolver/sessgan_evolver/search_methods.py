@@ -447,8 +447,8 @@ running (``--external``): its episode costs 10-60 s, against which three times t
 (0.1-0.5 s a test) is a few per cent."""
 IN_PROCESS_SCREENING_EFFORT = {True: 2, False: 1}
 """Its default with a built-in controller, by whether the scenario's episodes have dummy
-agents. An episode costs 0.1-0.7 s there; effort 2 found more faults than 1 on five of the
-six robot x budget pairs measured (13 % fewer with the reference navigator on the factory,
+agents. An episode costs 0.1-0.7 s there; effort 2 found more faults than 1 on six of the
+eight robot x budget pairs measured (13 % fewer with the reference navigator on the factory,
 within the seeds' spread), at a tenth to 29 % of the search's wall time; on the race track
 (no agents) effort 3 found no more than 1 (README, *Screening effort*)."""
 

@@ -165,6 +165,11 @@ class PaceMonitor:
         told to stop, or got a new goal), not late."""
         self._last = None
 
+    @property
+    def paused(self) -> bool:
+        """Whether the latest command was a stop (the gap after it is a pause)."""
+        return self._paused
+
     def silent_for(self, sim_time: float) -> float | None:
         """Sim seconds from the last arrival to ``sim_time`` (the gap still open); None
         before the first arrival or after an explained gap (:meth:`restart_gap`)."""

@@ -283,7 +283,7 @@ class EpisodeStepper:
                 now = time.monotonic()
                 for index in driving if overridden is None else ():
                     limit = (startup_timeout if commands[index] is None
-                             else pause_timeout if is_stop(commands[index]) else timeout)
+                             else pause_timeout if paces[index].paused else timeout)
                     if now - heard[index] > limit:
                         silent = index
                         break

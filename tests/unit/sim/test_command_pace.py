@@ -131,7 +131,7 @@ def test_a_pause_after_a_stop_is_not_late_a_gap_while_driving_is():
     paused = PaceMonitor(PaceRule(), TICK)
     feed(paused, ticks(0.0, 3.0))
     paused.command(3.0, stop=True)
-    assert paused.silent_for(8.0) == pytest.approx(5.0)
+    assert paused.paused and paused.silent_for(8.0) == pytest.approx(5.0)
     feed(paused, ticks(8.0, 12.0))
     assert paused.figures.late_gaps == 0 and paused.overload(final=True) is None
     # The same gap after a command that drove the robot: it drove blind for 5 s.

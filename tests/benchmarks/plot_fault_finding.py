@@ -32,6 +32,9 @@ import numpy as np  # noqa: E402
 METHOD_COLOURS = {'random': '#9e9e9e', 'screened': '#1f77b4', 'latent': '#ff7f0e',
                   'sessgan': '#2ca02c', 'grid_ga': '#8c564b', 'cellular_automaton': '#e377c2'}
 
+COLUMNS = ('method', 'search_seed', 'confirmed_per_1000')
+"""The columns of runs.csv read."""
+
 Key = tuple[str, int, str]
 """(robot as 'scenario, controller', budget, method)"""
 
@@ -49,12 +52,18 @@ def read_runs(folders: list[Path]) -> dict[Key, dict[int, float]]:
                              f'[-effortN], got {folder.name!r}')
         robot, budget = f'{parts[0]}, {parts[1]}', int(parts[2])
         with open(table, newline='') as stream:
-            for row in csv.DictReader(stream):
+            reader = csv.DictReader(stream)
+            missing = set(COLUMNS) - set(reader.fieldnames or ())
+            if missing:
+                raise SystemExit(f'{table}: no column {", ".join(sorted(missing))}')
+            for row in reader:
                 key, seed = (robot, budget, row['method']), int(row['search_seed'])
                 if seed in values[key]:
                     print(f'{folder}: {row["method"]} seed {seed} of {robot} at {budget} '
                           "episodes replaces the earlier folder's")
                 values[key][seed] = float(row['confirmed_per_1000'])
+    if not values:
+        raise SystemExit('no runs in the folders given')
     return values
 
 

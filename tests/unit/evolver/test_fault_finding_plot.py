@@ -52,3 +52,9 @@ def test_a_folder_that_is_not_a_benchmark_report_is_refused(tmp_path):
     named_wrong = report(tmp_path / 'my-results', [('random', 0, 1.0)])
     with pytest.raises(SystemExit, match='<scenario>-<controller>-<budget>'):
         plot.read_runs([named_wrong])
+    empty = report(tmp_path / 'factory-nearness_diagram-100', [])
+    with pytest.raises(SystemExit, match='no runs'):
+        plot.read_runs([empty])
+    (empty / 'runs.csv').write_text('method,search_seed\nrandom,0\n')
+    with pytest.raises(SystemExit, match='no column confirmed_per_1000'):
+        plot.read_runs([empty])

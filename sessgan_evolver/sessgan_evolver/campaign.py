@@ -118,9 +118,8 @@ class CampaignConfig:
     (the budget); sessgan runs the whole generations it pays for."""
     screening_effort: int = 0
     """[0: 2 where the episodes have agents, else 1; 3 with --external] The screened
-    method's work per test: candidate maps
-    and simulator seeds screened, times its defaults (milliseconds each; worth more where an
-    episode of the robot under test costs seconds)."""
+    method's work per test: candidate maps and simulator seeds screened, times its defaults
+    (milliseconds each; worth more where an episode of the robot under test costs seconds)."""
     generations: int = 30
     """[30] Generations to evaluate (generation 0 is the mutated pre-trained generator)."""
     population: int = 12

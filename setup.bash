@@ -15,6 +15,10 @@ else
   export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
   # Services answer clients that are still being discovered (config/fastdds_profiles.xml).
   export FASTRTPS_DEFAULT_PROFILES_FILE="${FASTRTPS_DEFAULT_PROFILES_FILE:-$_sessgan_root/config/fastdds_profiles.xml}"
+  # UDP only, no shared memory: Fast DDS 2.14 can leave a killed process's shared-memory port
+  # broken for the processes that come after it (eProsima/Fast-DDS#5469, #5053), and workers
+  # are killed and restarted by design. Lockstep episodes measured as fast either way.
+  export FASTDDS_BUILTIN_TRANSPORTS="${FASTDDS_BUILTIN_TRANSPORTS:-UDPv4}"
   export SESSGAN_ROOT="$_sessgan_root"
 fi
 unset _sessgan_root

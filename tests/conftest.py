@@ -16,4 +16,8 @@ os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(
     os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config',
     'fastdds_profiles.xml'))
 
+# UDP only, as setup.bash: tests kill processes, and a killed process's shared-memory port
+# could leave later processes deaf to each other.
+os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+
 pytest_plugins = ['tests.ros_processes']

@@ -160,6 +160,11 @@ def ros_node(ros_workspace):
     try:
         yield node
     finally:
+        # destroy_node leaves action clients and servers up (each keeps the node, so the
+        # DDS participant, alive until garbage collection): a later test would see them.
+        for waitable in list(node.waitables):
+            if hasattr(waitable, 'destroy'):
+                waitable.destroy()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
 

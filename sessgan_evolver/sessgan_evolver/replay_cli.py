@@ -268,11 +268,11 @@ running one took over 2 s on this 2-core machine with both cores busy."""
 
 def action_present(node, name: str, wait: float) -> bool:
     """Whether discovery shows action server ``name`` within ``wait`` seconds."""
-    from rclpy.action import get_action_names_and_types
+    from sessgan_evolver.ros_evaluator import EVALUATE_TYPE, served_actions
 
     deadline = time.monotonic() + wait
     while True:
-        if any(found == name for found, _ in get_action_names_and_types(node)):
+        if name in served_actions(node, EVALUATE_TYPE):
             return True
         if time.monotonic() >= deadline:
             return False

@@ -53,6 +53,17 @@ GONE_GRACE = 2.0
 is taken back (DDS drops a host that vanished once its lease expires: 20 s in Fast DDS)."""
 
 
+def served_actions(node: Node, action_type: str) -> list[str]:
+    """Names of the actions of ``action_type`` that some node serves. The graph names an
+    action as soon as a client of it exists (the client makes the same topics and services),
+    and a client left over in another process is no simulator; only servers publish the
+    action's status topic."""
+    from rclpy.action import get_action_names_and_types
+
+    return [name for name, types in get_action_names_and_types(node)
+            if action_type in types and node.count_publishers(f'{name}/_action/status') > 0]
+
+
 @dataclass
 class CampaignOverhead:
     """Wall seconds the campaign itself spent around its episodes (what limits how many
@@ -171,10 +182,7 @@ class RosEvaluator:
 
     def evaluate_servers(self) -> list[str]:
         """Names of every ``evaluate`` action server in the graph."""
-        from rclpy.action import get_action_names_and_types
-
-        return [name for name, types in get_action_names_and_types(self.node)
-                if EVALUATE_TYPE in types]
+        return served_actions(self.node, EVALUATE_TYPE)
 
     def wait_until_absent(self, names: list[str], timeout: float) -> None:
         """Wait for workers of an earlier (killed) campaign to go away before starting ours."""
@@ -437,8 +445,10 @@ class RosEvaluator:
                 elif (state.goal_handle is None
                       and time.monotonic() - state.started > GOAL_ANSWER_TIMEOUT):
                     # A goal sent while discovery still showed a just-restarted worker's
-                    # predecessor is lost; send it again.
+                    # predecessor is lost; send it again, through a new client (new DDS
+                    # endpoints, matched afresh) made at the next discovery.
                     retry_reason = f'did not answer the goal within {GOAL_ANSWER_TIMEOUT:.0f} s'
+                    self.drop_client(name)
                 if state.result_future is not None and state.result_future.done():
                     response = state.result_future.result()
                     if response.status == GoalStatus.STATUS_SUCCEEDED:

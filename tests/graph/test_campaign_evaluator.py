@@ -255,6 +255,51 @@ def test_an_episode_whose_worker_left_the_graph_is_taken_back_and_rerun(evaluato
     assert evaluator.harness_reruns == 1
 
 
+def test_an_unanswered_goal_is_sent_again_through_a_new_client(evaluator, monkeypatch):
+    """A goal the worker never answers (lost on its way) goes again through a new client: its
+    DDS endpoints are matched afresh, where the old ones may never deliver."""
+    from sessgan_evolver import ros_evaluator
+
+    monkeypatch.setattr(ros_evaluator, 'GOAL_ANSWER_TIMEOUT', 0.3)
+    made: list[FakeClient] = []
+
+    class DeafClient(FakeClient):
+        def send_goal_async(self, job):
+            self.goals.append((job, Future()))
+            return Future()  # never answered
+
+    def client_for(node, kind, name):
+        made.append((DeafClient if not made else FakeClient)(evaluator.goals))
+        return made[-1]
+
+    evaluator.action_client_class = client_for
+
+    def script(number, result):
+        result.finish(finished('timeout'))
+
+    assert run_with(evaluator, script) == ['timeout']
+    assert len(made) == 2 and len(evaluator.goals) == 2
+    assert any('did not answer the goal' in line for line in evaluator.logs), evaluator.logs
+
+
+def test_an_action_with_only_a_client_is_no_worker(ros_node):
+    """A client of an evaluate action puts the action's name in the graph; only a server
+    makes it a worker (a client left over in another process is none)."""
+    from rclpy.action import ActionClient, ActionServer, get_action_names_and_types
+
+    from sessgan_evolver.ros_evaluator import EVALUATE_TYPE, served_actions
+    from sessgan_interfaces.action import EvaluateEnvironment
+    from tests.ros_processes import spin_until
+
+    ActionClient(ros_node, EvaluateEnvironment, '/lone_client/evaluate')
+    ActionServer(ros_node, EvaluateEnvironment, '/served/evaluate', lambda handle: None)
+    assert spin_until(ros_node, lambda: {'/lone_client/evaluate', '/served/evaluate'} <= {
+        name for name, _ in get_action_names_and_types(ros_node)}, timeout=20)
+    assert spin_until(ros_node, lambda: '/served/evaluate' in served_actions(
+        ros_node, EVALUATE_TYPE), timeout=20)
+    assert '/lone_client/evaluate' not in served_actions(ros_node, EVALUATE_TYPE)
+
+
 class Describing:
     """A worker's bags service as identity_checked sees it: up or not, and what it says."""
 

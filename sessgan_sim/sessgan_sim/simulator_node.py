@@ -345,6 +345,8 @@ class SimulatorNode(Node):
                     topics.publish_waypoints(environment.waypoints if index == 0 else [goal],
                                              stamp_ns, recording)
                 topics.publish_goal(goal, stamp_ns, recording)
+                if not fleet:  # the navigate_to_pose server serves a single robot
+                    self.stack.goal_published()
             if settings.goal_via.uses_action:
                 if not first:
                     self.stack.finish(settings.stack_timeout)
@@ -352,8 +354,9 @@ class SimulatorNode(Node):
             return None
 
         def stop_after_navigation() -> tuple[float, float, float] | None:
-            """A stack that ended its NavigateToPose goal no longer drives: stand still
-            (as a base with a command timeout does) instead of waiting for cmd_vel."""
+            """A stack that ended its goal (its NavigateToPose goal, or the one bt_navigator
+            made of goal_pose) no longer drives: stand still (as a base with a command
+            timeout does) instead of waiting for cmd_vel."""
             return (0.0, 0.0, 0.0) if self.stack.navigation_ended else None
 
         loop_start = time.monotonic()

@@ -9,6 +9,10 @@ installed on this project's machines):
 * goals on ``goal_pose`` (volatile, like bt_navigator's subscription) and, with ``--action``,
   on a ``navigate_to_pose`` action server (nav2_msgs/action/NavigateToPose) that succeeds when
   the goal is reached and aborts or cancels like bt_navigator;
+* with ``--forward-goal-pose`` (and ``--action``), a goal on ``goal_pose`` becomes a goal of its
+  own navigate_to_pose server, as bt_navigator does, so the server's status topic shows it;
+* with ``--abort-after N``, after N commands it gives up on its navigate_to_pose goal (aborted,
+  as bt_navigator when planning and its recoveries failed), stops the robot and sends nothing;
 * with ``--costmaps``, the ClearEntireCostmap services of Nav2's two costmaps
   (``global_costmap/clear_entirely_global_costmap`` and ``local_costmap/...``);
   ``--reset-delay S`` makes them answer after S wall seconds.
@@ -36,7 +40,7 @@ import time
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
@@ -80,6 +84,8 @@ class Nav2StandIn(Node):
         self.goal_handle = None
         self.navigation_done = Future()
         self.commands_sent = 0
+        self.giving_up = False
+        """Set by --abort-after: the navigate_to_pose goal is to be aborted."""
         self.waiting_until = 0.0
         """Sim time until which it sends nothing (--wait-after)."""
         command_type = TwistStamped if options.stamped else Twist
@@ -102,6 +108,7 @@ class Nav2StandIn(Node):
                 self, NavigateToPose, 'navigate_to_pose', execute_callback=self.navigate,
                 goal_callback=self.on_navigate_goal,
                 cancel_callback=lambda _: CancelResponse.ACCEPT)
+            self.self_client = ActionClient(self, NavigateToPose, 'navigate_to_pose')
         if options.costmaps:
             from nav2_msgs.srv import ClearEntireCostmap
 
@@ -127,7 +134,13 @@ class Nav2StandIn(Node):
                 t.translation.x, t.translation.y, yaw_of(t.rotation))
 
     def on_goal_pose(self, msg: PoseStamped) -> None:
-        self.set_goal(msg, 'goal_pose')
+        if self.options.forward_goal_pose:
+            from nav2_msgs.action import NavigateToPose
+
+            self.get_logger().info('goal_pose forwarded to navigate_to_pose')
+            self.self_client.send_goal_async(NavigateToPose.Goal(pose=msg))
+        else:
+            self.set_goal(msg, 'goal_pose')
 
     def set_goal(self, msg: PoseStamped, source: str) -> None:
         self.goal = (msg.pose.position.x, msg.pose.position.y)
@@ -159,6 +172,8 @@ class Nav2StandIn(Node):
         fall_silent_after = self.options.fall_silent_after
         if self.options.silent or 0 < fall_silent_after <= self.commands_sent:
             return
+        if 0 < self.options.abort_after <= self.commands_sent:
+            return  # gave up: no goal, so controller_server sends nothing
         now = self.get_clock().now().nanoseconds / 1e9
         if now < self.waiting_until:
             return
@@ -181,6 +196,10 @@ class Nav2StandIn(Node):
         if self.commands_sent + 1 == fall_silent_after:
             linear = angular = 0.0  # its last command: a stop
             self.get_logger().info('falling silent')
+        if self.commands_sent + 1 == self.options.abort_after:
+            linear = angular = 0.0  # controller_server stops the robot when its goal ends
+            self.giving_up = True
+            self.get_logger().info('giving up on the goal')
         if self.commands_sent + 1 == self.options.wait_after:
             # Nav2's Wait recovery: behavior_server stops the robot, then sends nothing.
             linear = angular = 0.0
@@ -242,6 +261,10 @@ class Nav2StandIn(Node):
             self.goal = None
             goal_handle.canceled()
             self.get_logger().info('navigate_to_pose goal canceled')
+        elif self.giving_up:
+            self.goal = None
+            goal_handle.abort()
+            self.get_logger().info('navigate_to_pose goal aborted')
         elif pose is not None and self.goal is not None and math.hypot(
                 self.goal[0] - pose[0], self.goal[1] - pose[1]) <= GOAL_TOLERANCE:
             goal_handle.succeed()
@@ -268,6 +291,12 @@ def main() -> None:
                         help='wall seconds before a reset is answered')
     parser.add_argument('--reject-goals', action='store_true',
                         help='reject navigate_to_pose goals')
+    parser.add_argument('--forward-goal-pose', action='store_true',
+                        help='make a goal_pose a goal of its own navigate_to_pose server, as '
+                             'bt_navigator does (needs --action)')
+    parser.add_argument('--abort-after', type=int, default=0, metavar='N',
+                        help='after N commands (the last a stop) abort the navigate_to_pose '
+                             'goal and send nothing: a stack that gave up')
     parser.add_argument('--silent', action='store_true', help='never publish a command')
     parser.add_argument('--fall-silent-after', type=int, default=0, metavar='N',
                         help='publish N commands, the last a stop, then none (a stack whose '

@@ -49,17 +49,42 @@ def test_each_episode_resets_costmaps_then_sends_a_navigate_to_pose_goal(node_pr
     assert steps == ['global', 'local', 'navigate_to_pose', 'canceled'] * episodes, steps
 
 
-def test_goal_on_the_topic_and_the_action(node_processes, ros_node):
-    namespace = '/ntp_both'
+@pytest.mark.parametrize('forward', [False, True])
+def test_goal_on_the_topic_and_the_action(node_processes, ros_node, forward):
+    """Forwarded (as bt_navigator does), the goal_pose makes a second goal of the stack's
+    server, and one preempts the other: the stack still drives, so the episode goes on."""
+    namespace = f'/ntp_both{int(forward)}'
     start_simulator(node_processes, namespace, *CLOCKED, 'goal_interface:=both')
-    stand_in = start_stand_in(node_processes, namespace, '--action')
+    stand_in = start_stand_in(node_processes, namespace, '--action',
+                              *(['--forward-goal-pose'] if forward else []))
     metrics, _, _ = evaluate_with_reruns(ros_node, namespace,
                                       environment_msg(room(10), 'factory', 'both'),
                                       time_limit=40.0)
     assert metrics.outcome == 'goal_reached', metrics.detail
     output = stand_in.output()
-    assert 'goal from goal_pose' in output and 'goal from navigate_to_pose' in output
+    if forward:
+        assert 'goal_pose forwarded' in output
+        assert output.count('goal from navigate_to_pose') >= 2
+    else:
+        assert 'goal from goal_pose' in output and 'goal from navigate_to_pose' in output
     assert 'cleared the' not in output  # resets are off by default
+
+
+def test_a_stack_that_gives_up_on_a_goal_pose_goal_fails_the_test(node_processes, ros_node):
+    """bt_navigator makes a goal_pose a NavigateToPose goal of its own server. When it gives
+    up on it (aborted), the robot stands and no command comes: a navigation failure, a result
+    (stuck), not a silent stack (controller_unresponsive: re-run, and never a result)."""
+    namespace = '/ntp_gave_up'
+    start_simulator(node_processes, namespace, *CLOCKED)  # goal_interface: goal_pose
+    stand_in = start_stand_in(node_processes, namespace, '--action', '--forward-goal-pose',
+                              '--abort-after', '20')
+    metrics, _, _ = evaluate_with_reruns(ros_node, namespace,
+                                      environment_msg(room(10), 'factory', 'gave_up'),
+                                      time_limit=60.0)
+    assert 'navigate_to_pose goal aborted' in stand_in.output()
+    assert metrics.outcome == 'stuck', metrics.detail
+    assert (f'{namespace}/navigate_to_pose goal aborted by the stack (seen on its status '
+            'topic)') in metrics.detail, metrics.detail
 
 
 @pytest.mark.parametrize('stand_in_options, parameters, expected', [

@@ -8,6 +8,12 @@ seconds and reports a failure as a sentence for the episode's detail (the episod
 as controller_unresponsive: the stack under test did not respond). The futures are completed
 by the node's executor in another thread while an episode runs in the evaluate callback.
 
+A goal sent on ``goal_pose`` alone has no answer, but Nav2's bt_navigator makes each one a
+NavigateToPose goal of its own server, so the server's status topic
+(``navigate_to_pose/_action/status``) says when the stack gave up on it (aborted: no path, a
+failed recovery) or reached it. A stack that gave up stands still and sends nothing, which
+must read as a navigation failure, not as a silent (dead) stack.
+
 nav2_msgs is imported when first needed: a worker that never drives Nav2 runs without it.
 """
 
@@ -17,8 +23,9 @@ import threading
 import time
 from typing import Any
 
-from action_msgs.msg import GoalStatus
+from action_msgs.msg import GoalStatus, GoalStatusArray
 from rclpy.action import ActionClient
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from sessgan_sim import ros_messages as rm
 from sessgan_sim.worker.topics import time_of
@@ -31,6 +38,9 @@ POLL = 0.005
 
 TERMINAL = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
             GoalStatus.STATUS_CANCELED: 'canceled'}
+STATUS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""An action server's status topic (rcl_action's default status QoS)."""
 
 
 class Nav2Stack:
@@ -45,6 +55,12 @@ class Nav2Stack:
         self._reset_clients: dict[str, Any] = {}
         self._goal_handle: Any = None
         self._result_future: Any = None
+        self._status_subscription: Any = None
+        self._statuses: GoalStatusArray | None = None
+        """The latest status of the stack's navigate_to_pose server (None: none seen)."""
+        self._known_goals: set[bytes] | None = None
+        """Ids of the server's goals when this episode's goal went out on goal_pose (None:
+        no goal_pose goal is watched)."""
 
     # ---- resets ----------------------------------------------------------------------------
 
@@ -98,17 +114,57 @@ class Nav2Stack:
         self._result_future = handle.get_result_async()
         return None
 
+    def goal_published(self) -> None:
+        """A goal went out on goal_pose: from now on the stack's server's status says how
+        the goal that bt_navigator makes of it ends."""
+        if self._status_subscription is None:
+            self._status_subscription = self.node.create_subscription(
+                GoalStatusArray, f'{NAVIGATE_ACTION}/_action/status', self._on_status,
+                STATUS_QOS, callback_group=self.callback_group)
+        statuses = self._statuses
+        self._known_goals = set() if statuses is None else {
+            bytes(status.goal_info.goal_id.uuid) for status in statuses.status_list}
+
+    def _on_status(self, statuses: GoalStatusArray) -> None:
+        self._statuses = statuses
+
+    def _status_of_new_goal(self) -> int | None:
+        """The status of the newest goal the server took since the last goal_published (a
+        goal_pose's; a newer one preempts it, as bt_navigator does), or None."""
+        statuses, known = self._statuses, self._known_goals
+        if statuses is None or known is None:
+            return None
+        new = [status for status in statuses.status_list
+               if bytes(status.goal_info.goal_id.uuid) not in known]
+        if not new:
+            return None
+        newest = max(new, key=lambda status: (status.goal_info.stamp.sec,
+                                              status.goal_info.stamp.nanosec))
+        return newest.status
+
     @property
     def navigation_ended(self) -> bool:
-        """True when the stack ended the current NavigateToPose goal itself (succeeded,
-        aborted or canceled): it no longer drives the robot."""
-        return self._result_future is not None and self._result_future.done()
+        """True when the stack ended the current goal itself (succeeded, aborted or
+        canceled): it no longer drives the robot. A NavigateToPose goal of ours ends with its
+        result; a goal_pose one when the goal bt_navigator made of it ended, unless a newer
+        one is under way (which also covers our action goal preempted by that one)."""
+        watched = self._status_of_new_goal()
+        if watched is not None and watched not in TERMINAL:
+            return False
+        if self._result_future is not None:
+            return self._result_future.done()
+        return watched is not None
 
     def finish(self, timeout: float) -> str:
         """End the episode's NavigateToPose goal: cancel it if the stack still pursues it.
-        Returns a note on how the navigation ended ('' without an action goal)."""
+        Returns a note on how the navigation ended ('' when nothing says)."""
         if self._goal_handle is None:
-            return ''
+            watched = self._status_of_new_goal()
+            self._known_goals = None
+            if watched not in TERMINAL:
+                return ''
+            name = self.node.resolve_topic_name(NAVIGATE_ACTION)
+            return f'{name} goal {TERMINAL[watched]} by the stack (seen on its status topic)'
         name = self.node.resolve_topic_name(NAVIGATE_ACTION)
         try:
             if not self.navigation_ended:
@@ -131,6 +187,7 @@ class Nav2Stack:
             return note
         finally:
             self._goal_handle = self._result_future = None
+            self._known_goals = None
 
     # ---- helpers ---------------------------------------------------------------------------
 

@@ -108,3 +108,31 @@ def test_a_stack_that_does_not_respond_ends_the_episode_with_the_reason(
                           time_limit=40.0)
     assert metrics.outcome == 'controller_unresponsive'
     assert re.search(expected, metrics.detail), metrics.detail
+
+
+def test_an_old_goal_s_end_does_not_stop_the_robot(node_processes, ros_node):
+    """The stack's server still lists a goal that ended before the episode (here one a user
+    sent and cancelled); the transient-local status topic delivers it when the simulator
+    starts reading. It is not the episode's goal: the robot must not be stood still."""
+    from nav2_msgs.action import NavigateToPose
+    from rclpy.action import ActionClient
+
+    from tests.ros_processes import spin_until
+
+    namespace = '/ntp_old_goal'
+    start_simulator(node_processes, namespace, *CLOCKED)  # goal_interface: goal_pose
+    stand_in = start_stand_in(node_processes, namespace, '--action')
+    client = ActionClient(ros_node, NavigateToPose, f'{namespace}/navigate_to_pose')
+    assert client.wait_for_server(timeout_sec=30)
+    sent = client.send_goal_async(NavigateToPose.Goal())
+    assert spin_until(ros_node, sent.done, timeout=30) and sent.result().accepted
+    cancelled = sent.result().cancel_goal_async()
+    assert spin_until(ros_node, cancelled.done, timeout=30)
+    assert spin_until(ros_node, lambda: 'navigate_to_pose goal canceled' in stand_in.output(),
+                      timeout=30)
+    metrics, _, _ = evaluate_with_reruns(ros_node, namespace,
+                                      environment_msg(room(10), 'factory', 'old_goal'),
+                                      time_limit=40.0)
+    assert metrics.outcome == 'goal_reached', metrics.detail
+    assert 'by the stack' not in metrics.detail, metrics.detail
+

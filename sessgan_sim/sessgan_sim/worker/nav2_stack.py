@@ -38,9 +38,10 @@ POLL = 0.005
 
 TERMINAL = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
             GoalStatus.STATUS_CANCELED: 'canceled'}
-STATUS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+STATUS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-"""An action server's status topic (rcl_action's default status QoS)."""
+"""An action server's status topic (rcl_action's default status QoS; a deeper reader queue,
+so a goal's short-lived states are not overwritten before they are read)."""
 
 
 class Nav2Stack:
@@ -61,6 +62,9 @@ class Nav2Stack:
         self._known_goals: set[bytes] | None = None
         """Ids of the server's goals when this episode's goal went out on goal_pose (None:
         no goal_pose goal is watched)."""
+        self._seen_active: set[bytes] = set()
+        """Goals not known then that were seen pursued since: only these can be ours (an old
+        goal's end, delivered late by the transient-local topic, is not)."""
 
     # ---- resets ----------------------------------------------------------------------------
 
@@ -122,10 +126,15 @@ class Nav2Stack:
                 GoalStatusArray, f'{NAVIGATE_ACTION}/_action/status', self._on_status,
                 STATUS_QOS, callback_group=self.callback_group)
         statuses = self._statuses
+        self._seen_active = set()
         self._known_goals = set() if statuses is None else {
             bytes(status.goal_info.goal_id.uuid) for status in statuses.status_list}
 
     def _on_status(self, statuses: GoalStatusArray) -> None:
+        if self._known_goals is not None:
+            self._seen_active |= {bytes(status.goal_info.goal_id.uuid)
+                                  for status in statuses.status_list
+                                  if status.status not in TERMINAL}
         self._statuses = statuses
 
     def _status_of_new_goal(self) -> int | None:
@@ -135,7 +144,8 @@ class Nav2Stack:
         if statuses is None or known is None:
             return None
         new = [status for status in statuses.status_list
-               if bytes(status.goal_info.goal_id.uuid) not in known]
+               if bytes(status.goal_info.goal_id.uuid) not in known
+               and bytes(status.goal_info.goal_id.uuid) in self._seen_active]
         if not new:
             return None
         newest = max(new, key=lambda status: (status.goal_info.stamp.sec,

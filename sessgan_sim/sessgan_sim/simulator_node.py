@@ -344,9 +344,9 @@ class SimulatorNode(Node):
                 if first:
                     topics.publish_waypoints(environment.waypoints if index == 0 else [goal],
                                              stamp_ns, recording)
-                topics.publish_goal(goal, stamp_ns, recording)
                 if not fleet:  # the navigate_to_pose server serves a single robot
-                    self.stack.goal_published()
+                    self.stack.watch_goal()  # before the goal goes out: its answer may be quick
+                topics.publish_goal(goal, stamp_ns, recording)
             if settings.goal_via.uses_action:
                 if not first:
                     self.stack.finish(settings.stack_timeout)

@@ -118,9 +118,9 @@ class Nav2Stack:
         self._result_future = handle.get_result_async()
         return None
 
-    def goal_published(self) -> None:
-        """A goal went out on goal_pose: from now on the stack's server's status says how
-        the goal that bt_navigator makes of it ends."""
+    def watch_goal(self) -> None:
+        """A goal goes out on goal_pose: from now on the stack's server's status says how the
+        goal that bt_navigator makes of it ends."""
         if self._status_subscription is None:
             self._status_subscription = self.node.create_subscription(
                 GoalStatusArray, f'{NAVIGATE_ACTION}/_action/status', self._on_status,
@@ -138,7 +138,7 @@ class Nav2Stack:
         self._statuses = statuses
 
     def _status_of_new_goal(self) -> int | None:
-        """The status of the newest goal the server took since the last goal_published (a
+        """The status of the newest goal the server took since the last watch_goal (a
         goal_pose's; a newer one preempts it, as bt_navigator does), or None."""
         statuses, known = self._statuses, self._known_goals
         if statuses is None or known is None:

@@ -29,7 +29,7 @@ LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """map, tf_static and goal_pose: a reader that joins late still gets the latest message."""
 SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-GOAL_ACK_TIMEOUT = Duration(seconds=1.0)
+ACK_TIMEOUT = Duration(seconds=1.0)
 
 MESSAGE_TYPES = {
     'waypoints': 'nav_msgs/msg/Path',
@@ -105,12 +105,18 @@ class RobotTopics:
                       stamp_ns: int, recording: Recording | None,
                       range_down: bool = False) -> None:
         """The episode's map and static transforms (both latched; ``range_down``: the robot
-        has the downward range sensor, base_range_down)."""
+        has the downward range sensor, base_range_down), acknowledged by every reliable
+        reader before this returns, as the goal is (:meth:`publish_goal`): a controller that
+        plans on the map gets it before the first scan. Unacknowledged, a map delivered 66 ms
+        late under load left the reference navigator standing for its first ticks, and the
+        lockstep episode differed from its unloaded run."""
         stamp = time_of(stamp_ns)
         self.publish('map', occupancy_grid_msg(environment, stamp=stamp), stamp_ns, recording)
         self.publish('tf_static', rm.static_tf_msg(stamp, ride_height, sensor_height,
                                                    range_down, self.frame_prefix),
                      stamp_ns, recording)
+        for name in ('map', 'tf_static'):
+            self.publishers[name].wait_for_all_acked(ACK_TIMEOUT)
 
     def publish_goal(self, goal: Pose2D, stamp_ns: int, recording: Recording | None) -> None:
         """The goal on goal_pose (latched: a transient-local reader that joins later gets
@@ -127,7 +133,7 @@ class RobotTopics:
         readers = self.readers('goal_pose')
         self.publish('goal_pose', rm.goal_msg(time_of(stamp_ns), goal.x, goal.y, goal.yaw),
                      stamp_ns, recording)
-        self.publishers['goal_pose'].wait_for_all_acked(GOAL_ACK_TIMEOUT)
+        self.publishers['goal_pose'].wait_for_all_acked(ACK_TIMEOUT)
         self._goal = (goal, stamp_ns)
         self._goal_readers_told = readers
 

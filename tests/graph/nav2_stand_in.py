@@ -308,6 +308,8 @@ def main() -> None:
                         help="sim seconds of --wait-after (Nav2's default BT waits 5 s)")
     args = rclpy.utilities.remove_ros_args(sys.argv)[1:]
     options = parser.parse_args(args)
+    if options.forward_goal_pose and not options.action:
+        parser.error('--forward-goal-pose needs --action (the server it forwards to)')
     rclpy.init(args=sys.argv)
     node = Nav2StandIn(options)
     # One thread with rclpy's events executor, as the built-in controllers spin: at 80 ticks

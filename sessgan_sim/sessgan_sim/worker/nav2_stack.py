@@ -65,6 +65,8 @@ class Nav2Stack:
         self._seen_active: set[bytes] = set()
         """Goals not known then that were seen pursued since: only these can be ours (an old
         goal's end, delivered late by the transient-local topic, is not)."""
+        self._watched_status: int | None = None
+        """The status of the newest of those, updated as statuses arrive (read every tick)."""
 
     # ---- resets ----------------------------------------------------------------------------
 
@@ -127,30 +129,29 @@ class Nav2Stack:
                 STATUS_QOS, callback_group=self.callback_group)
         statuses = self._statuses
         self._seen_active = set()
+        self._watched_status = None
         self._known_goals = set() if statuses is None else {
             bytes(status.goal_info.goal_id.uuid) for status in statuses.status_list}
 
     def _on_status(self, statuses: GoalStatusArray) -> None:
-        if self._known_goals is not None:
-            self._seen_active |= {bytes(status.goal_info.goal_id.uuid)
-                                  for status in statuses.status_list
+        """Keep the latest status; while a goal_pose goal is watched, the status of the newest
+        goal the server took since (a goal_pose's; a newer one preempts it, as bt_navigator
+        does)."""
+        known = self._known_goals
+        if known is not None:
+            ids = [bytes(status.goal_info.goal_id.uuid) for status in statuses.status_list]
+            self._seen_active |= {goal for goal, status in zip(ids, statuses.status_list)
                                   if status.status not in TERMINAL}
+            new = [status for goal, status in zip(ids, statuses.status_list)
+                   if goal not in known and goal in self._seen_active]
+            if new:
+                self._watched_status = max(new, key=lambda status: (
+                    status.goal_info.stamp.sec, status.goal_info.stamp.nanosec)).status
         self._statuses = statuses
 
     def _status_of_new_goal(self) -> int | None:
-        """The status of the newest goal the server took since the last watch_goal (a
-        goal_pose's; a newer one preempts it, as bt_navigator does), or None."""
-        statuses, known = self._statuses, self._known_goals
-        if statuses is None or known is None:
-            return None
-        new = [status for status in statuses.status_list
-               if bytes(status.goal_info.goal_id.uuid) not in known
-               and bytes(status.goal_info.goal_id.uuid) in self._seen_active]
-        if not new:
-            return None
-        newest = max(new, key=lambda status: (status.goal_info.stamp.sec,
-                                              status.goal_info.stamp.nanosec))
-        return newest.status
+        """The watched goal_pose goal's status (_on_status), or None."""
+        return None if self._known_goals is None else self._watched_status
 
     @property
     def navigation_ended(self) -> bool:

@@ -487,11 +487,24 @@ def import_map_server(yaml_path: str | os.PathLike, scenario: ScenarioLike,
 
 def cells_at_cell_size(pixels: tuple[int, int], resolution: float,
                        cell_size: float) -> tuple[int, int]:
-    """(height, width) in cells of ``cell_size`` metres of an image of ``pixels`` (height,
-    width) at ``resolution`` metres per pixel: the nearest whole number, at least one."""
+    """(height, width) in cells of ``cell_size`` metres that cover an image of ``pixels``
+    (height, width) at ``resolution`` metres per pixel: rounded up, at least one."""
     require_positive('cell size', cell_size, MapFormatError, ' m')
-    height, width = (max(1, round(count * resolution / cell_size)) for count in pixels)
+    # The tolerance keeps 120 px x 0.05 m / 0.5 m (11.999999999999998 or 12.000000000000002
+    # in floating point) at 12 cells.
+    height, width = (max(1, math.ceil(count * resolution / cell_size - 1e-9))
+                     for count in pixels)
     return height, width
+
+
+def pad_to_cells(occupancy: np.ndarray, size: tuple[int, int], resolution: float,
+                 cell_size: float) -> np.ndarray:
+    """``occupancy`` with unknown pixels added after its last row and column so that it spans
+    ``size`` (height, width) cells of ``cell_size`` metres (to the nearest pixel): resampled
+    to those cells, every cell then covers its own square of the map, not a stretched one."""
+    height, width = (round(cells * cell_size / resolution) for cells in size)
+    pad_rows, pad_cols = max(0, height - occupancy.shape[0]), max(0, width - occupancy.shape[1])
+    return np.pad(occupancy, ((0, pad_rows), (0, pad_cols)), constant_values=UNKNOWN)
 
 
 LOW_FREE_FRACTION = 0.2
@@ -581,9 +594,10 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     pixels that remain inside the box count as walls (a test map must not invent floor).
     map_saver's unknown grey stays unknown where its old free_thresh would read it as free
     (:func:`map_saver_unknown`). Then :func:`import_map_server`'s conversion with the size
-    that keeps the map's metres: an image of h x w pixels at r m/px becomes round(h*r/cell)
-    x round(w*r/cell) cells of the scenario's ``cell_size``. MapFormatError when the result
-    exceeds the grid limits or holds no known pixel.
+    that keeps the map's metres: an image of h x w pixels at r m/px becomes ceil(h*r/cell)
+    x ceil(w*r/cell) cells of the scenario's ``cell_size``, the last row and column filled up
+    with wall (:func:`pad_to_cells`). MapFormatError when the result exceeds the grid limits
+    or holds no known pixel.
     """
     spec = resolve_scenario(scenario)
     metadata = read_map_yaml(yaml_path)
@@ -603,7 +617,10 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
             f'{yaml_path}: {cropped.shape[1]}x{cropped.shape[0]} known pixels at '
             f'{loaded.resolution} m/px make {size[1]}x{size[0]} cells of {spec.cell_size} m, '
             f'more than {MAX_CELLS_PER_SIDE} per side')
-    cells = resample_tokens(occupancy_to_tokens(cropped, spec), spec, size)
+    # Walls (unknown) fill the last cell row and column, rather than the map being stretched
+    # to whole cells: the learned map then overlays the original to the pixel.
+    padded = pad_to_cells(cropped, size, loaded.resolution, spec.cell_size)
+    cells = resample_tokens(occupancy_to_tokens(padded, spec), spec, size)
     x, y, yaw = loaded.origin
     # The origin is the pose of the corner of pixel (0, 0): move it along the map's own axes.
     dx, dy = left * loaded.resolution, top * loaded.resolution

@@ -54,6 +54,25 @@ def test_a_slam_map_is_cropped_to_its_known_region(tmp_path):
     assert 'cropped to its known region of 160x120 px' in imported.summary()
 
 
+def test_a_map_of_no_whole_cells_is_filled_up_with_wall_not_stretched(tmp_path):
+    """9.75 m x 6 m of map (195 x 120 px) makes 20 x 12 cells of 0.5 m: the last column's
+    missing 0.25 m is wall, and a wall 7.0-7.5 m from the map's left edge lies in cell 14
+    alone (stretched to 10 m, it would reach into cell 13 as well)."""
+    pixels = np.full((120, 195), FREE, dtype=np.uint8)
+    pixels[:, 140:150] = WALL
+    Image.fromarray(pixels, mode='L').save(tmp_path / 'hall.pgm')
+    document = {'image': 'hall.pgm', 'resolution': 0.05, 'origin': [1.0, 2.0, 0.0],
+                'negate': 0, 'occupied_thresh': 0.65, 'free_thresh': 0.196}
+    (tmp_path / 'hall.yaml').write_text(yaml.safe_dump(document))
+    imported = import_facility_map(tmp_path / 'hall.yaml', 'factory')
+    cells = imported.token_map.cells
+    assert cells.shape == (12, 20)
+    walls = sorted({int(col) for col in np.flatnonzero((cells == 1).all(axis=0))})
+    assert walls == [14, 19]
+    assert (cells[:, :14] == 0).all() and (cells[:, 15:19] == 0).all()
+    assert imported.origin == (1.0, 2.0, 0.0)
+
+
 def test_map_savers_unknown_grey_stays_unknown_under_its_old_free_thresh(tmp_path):
     """Nav2's map_saver wrote free_thresh 0.25 until mid-2025, under which its unknown grey
     205 reads as free in map_server: the import still crops to the known region and says so."""

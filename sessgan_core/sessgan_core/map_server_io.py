@@ -13,8 +13,8 @@ Image rows are stored top row first; the returned arrays are in OccupancyGrid
 order (row 0 = lowest y). PGM images (P5 binary or P2 ASCII, 8 or 16 bit) are read
 exactly; other images map_server loads (PNG, BMP, ...) through Pillow, the shade
 being the mean of the colour channels as map_server computes it. ``image``,
-``resolution`` and ``origin`` are required; a missing ``negate`` reads as 0,
-missing thresholds as map_saver's defaults (0.65, 0.25).
+``resolution`` and ``origin`` (3 elements, as map_server insists) are required; a
+missing ``negate`` reads as 0, missing thresholds as map_saver's defaults (0.65, 0.25).
 
 Importing for training (:func:`import_facility_map`) crops a SLAM map to its known
 region first: the unknown margin a SLAM map has around the mapped area is outside the
@@ -46,6 +46,7 @@ from PIL import Image
 from sessgan_core.atomic_files import atomic_write_bytes
 from sessgan_core.environment import MAX_CELLS_PER_SIDE, Environment
 from sessgan_core.errors import MapFormatError
+from sessgan_core.grid_search import flat_grid, label_regions
 from sessgan_core.scenarios import BLOCKED, FREE
 from sessgan_core.token_map import (
     UNKNOWN,
@@ -243,12 +244,16 @@ def read_map_yaml(yaml_path: str | os.PathLike) -> MapMetadata:
     if 'origin' not in document:
         raise MapFormatError(f"{source}: required key 'origin' is missing")
     origin = document['origin']
-    if (not isinstance(origin, (list, tuple)) or len(origin) not in (2, 3)
+    if (not isinstance(origin, (list, tuple))
             or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                        and math.isfinite(v) for v in origin)):
         raise MapFormatError(
             f"{source}: 'origin' must be a list [x, y, yaw] of finite numbers, got {origin!r}")
-    origin3 = (float(origin[0]), float(origin[1]), float(origin[2]) if len(origin) == 3 else 0.0)
+    if len(origin) != 3:  # map_server's loadMapYaml refuses any other count, [x, y] too
+        raise MapFormatError(
+            f"{source}: 'origin' must be a list [x, y, yaw] of 3 numbers, as map_server "
+            f'requires; got {len(origin)} elements {origin!r}')
+    origin3 = (float(origin[0]), float(origin[1]), float(origin[2]))
 
     negate_value = document.get('negate', 0)
     if isinstance(negate_value, bool) or negate_value in (0, 1):
@@ -513,6 +518,13 @@ example maps have 40 % (race track) to 74 % (drone), and a robot needs room for 
 LOW_KNOWN_FRACTION = 0.75
 """An imported map whose known region is less than this share of its cells (after cropping)
 gets a warning: the unknown cells inside count as walls."""
+SPECK_CELL_FRACTION = 0.25
+"""An unknown speck inside free floor (:func:`unknown_specks`) smaller than this share of one
+cell's area is floor that SLAM did not observe (a gap between laser rays), taken as free:
+resampling would make each such speck a whole wall cell, four or more times its size, that
+the generator learns as a pillar. A region of a quarter cell or more (0.25 m x 0.25 m for
+0.5 m cells, 25 px at 0.05 m/px) is the size of an object the scan may have missed, so it
+stays wall; at a resolution of half a cell or coarser no pixel is small enough."""
 
 
 class FacilityImport(NamedTuple):
@@ -532,12 +544,17 @@ class FacilityImport(NamedTuple):
     resolution: float
     """Metres per pixel of the original."""
     known_fraction: float
-    """Share of the kept pixels that are known (the rest count as walls)."""
+    """Share of the kept pixels that are known (the rest count as walls), after the specks of
+    unknown inside free floor were taken as floor: what the generator learns from."""
     free_fraction: float
     """Share of the token map's cells that are free floor."""
     saver_unknown: int = 0
     """Pixels of map_saver's unknown grey taken as unknown where map_server would read them
     as free (:func:`map_saver_unknown`)."""
+    floor_specks: int = 0
+    """Specks of unknown inside free floor taken as floor (:func:`unknown_specks`)."""
+    floor_speck_pixels: int = 0
+    """Their pixels, all together."""
 
     def warnings(self) -> list[str]:
         """What a user should hear about this import (empty when nothing is odd)."""
@@ -568,9 +585,13 @@ class FacilityImport(NamedTuple):
                    f', cropped to its known region of {right - left}x{bottom - top} px '
                    '(unknown outside the mapped area is outside the map)')
         spec = resolve_scenario(self.token_map.scenario)
+        specks = ('' if not self.floor_specks else
+                  f'; {self.floor_specks} specks of unknown inside free floor '
+                  f'({self.floor_speck_pixels} px in all, each under '
+                  f'{SPECK_CELL_FRACTION:.0%} of a cell) taken as floor')
         return (f'{width}x{height} px at {self.resolution} m/px{cropped} -> '
                 f'{self.token_map.width}x{self.token_map.height} cells of {spec.cell_size} m, '
-                f'{self.free_fraction:.0%} free')
+                f'{self.free_fraction:.0%} free{specks}')
 
 
 def known_bounding_box(occupancy: np.ndarray) -> tuple[int, int, int, int]:
@@ -584,6 +605,49 @@ def known_bounding_box(occupancy: np.ndarray) -> tuple[int, int, int, int]:
     return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
 
 
+def _regions_8(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(label of each pixel of ``mask``, -1 elsewhere; pixel count of each label): its
+    8-connected regions, :func:`label_regions`' 4-connected ones joined where two touch at a
+    corner (each taking the smallest of their labels, so some labels count no pixel)."""
+    grid = flat_grid(mask)
+    regions = label_regions(grid)
+    labels = regions.labels.reshape(-1, grid.stride)[1:-1, 1:-1]
+    root = np.arange(len(regions.sizes))
+    if not len(root):
+        return labels, regions.sizes
+    corners = [(labels[:-1, :-1], labels[1:, 1:]), (labels[:-1, 1:], labels[1:, :-1])]
+    a = np.concatenate([x[(x >= 0) & (y >= 0)] for x, y in corners])
+    b = np.concatenate([y[(x >= 0) & (y >= 0)] for x, y in corners])
+    while True:  # label_regions' union-find: hook under the smaller root, then compress
+        root_a, root_b = root[a], root[b]
+        if np.array_equal(root_a, root_b):
+            break
+        low = np.minimum(root_a, root_b)
+        np.minimum.at(root, root_a, low)
+        np.minimum.at(root, root_b, low)
+        while not np.array_equal(root[root], root):
+            root = root[root]
+    merged = np.where(labels >= 0, root[labels], -1)
+    return merged, np.bincount(root, weights=regions.sizes, minlength=len(root)).astype(np.int64)
+
+
+def unknown_specks(occupancy: np.ndarray, max_pixels: float) -> tuple[np.ndarray, int]:
+    """(mask, count) of the specks of unknown inside free floor: 8-connected regions of
+    unknown of fewer than ``max_pixels`` pixels whose every 8-neighbour is free (0). One
+    touching a wall, a low obstacle or the array's edge, even at a corner, is not one.
+    8-connected, so that a diagonal chain of unknown (a gap between laser rays) is one
+    region, measured as a whole, and a corner contact with a wall keeps it wall."""
+    occupancy = np.asarray(occupancy)
+    # Everything not free, in a ring for the array's edge: a speck is a region of it that
+    # holds unknown pixels only.
+    not_free = np.pad(occupancy != FREE, 1, constant_values=True)
+    labels, sizes = _regions_8(not_free)
+    known = np.pad(occupancy != UNKNOWN, 1, constant_values=True) & not_free
+    speck = (sizes < max_pixels) & (np.bincount(labels[known], minlength=len(sizes)) == 0)
+    mask = (labels >= 0) & speck[labels]  # the ring makes one region at least
+    return mask[1:-1, 1:-1], int(np.count_nonzero(speck & (sizes > 0)))
+
+
 def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) -> FacilityImport:
     """A map_server map as a token map of ``scenario`` at the scenario's cell size, for
     training on a facility's own map.
@@ -591,7 +655,10 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     A SLAM map (map_saver's output) is a rectangle of unknown space with the mapped area
     somewhere inside: the image is first cropped to the bounding box of its known pixels, since
     unknown space outside the mapped area is outside the facility, not part of it. Unknown
-    pixels that remain inside the box count as walls (a test map must not invent floor).
+    pixels that remain inside the box count as walls (a test map must not invent floor), but
+    specks inside free floor smaller than :data:`SPECK_CELL_FRACTION` of a cell
+    (:func:`unknown_specks`) are floor that SLAM missed, taken as free: each would otherwise
+    become a whole wall cell. ``known_fraction`` is measured after that.
     map_saver's unknown grey stays unknown where its old free_thresh would read it as free
     (:func:`map_saver_unknown`). Then :func:`import_map_server`'s conversion with the size
     that keeps the map's metres: an image of h x w pixels at r m/px becomes ceil(h*r/cell)
@@ -610,13 +677,16 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
         top, bottom, left, right = known_bounding_box(loaded.occupancy)
     except MapFormatError as err:
         raise MapFormatError(f'{yaml_path}: {err}') from err
-    cropped = loaded.occupancy[top:bottom, left:right]
+    cropped = loaded.occupancy[top:bottom, left:right].copy()
     size = cells_at_cell_size(cropped.shape, loaded.resolution, spec.cell_size)
     if max(size) > MAX_CELLS_PER_SIDE:
         raise MapFormatError(
             f'{yaml_path}: {cropped.shape[1]}x{cropped.shape[0]} known pixels at '
             f'{loaded.resolution} m/px make {size[1]}x{size[0]} cells of {spec.cell_size} m, '
             f'more than {MAX_CELLS_PER_SIDE} per side')
+    specks, speck_count = unknown_specks(
+        cropped, SPECK_CELL_FRACTION * (spec.cell_size / loaded.resolution) ** 2)
+    cropped[specks] = FREE
     # Walls (unknown) fill the last cell row and column, rather than the map being stretched
     # to whole cells: the learned map then overlays the original to the pixel.
     padded = pad_to_cells(cropped, size, loaded.resolution, spec.cell_size)
@@ -632,7 +702,8 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     return FacilityImport(TokenMap(scenario=spec.name, cells=cells), origin,
                           (int(loaded.occupancy.shape[0]), int(loaded.occupancy.shape[1])),
                           (top, bottom, left, right), loaded.resolution, known, free,
-                          int(np.count_nonzero(saver_unknown)))
+                          int(np.count_nonzero(saver_unknown)), speck_count,
+                          int(np.count_nonzero(specks)))
 
 
 def import_map_server_for_scenario(yaml_path: str | os.PathLike,

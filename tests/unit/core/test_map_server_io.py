@@ -15,6 +15,7 @@ from sessgan_core.map_server_io import (
     read_map_server,
     read_pgm,
     resample_tokens,
+    unknown_specks,
     write_map_server,
 )
 from sessgan_core.token_map import TokenMap
@@ -109,13 +110,48 @@ def test_scale_and_raw_modes(tmp_path):
     assert read_map_server(tmp_path / 'map.yaml').occupancy.tolist() == [[-1, 0, -1, 30, -1]]
 
 
-def test_optional_keys_default_and_two_element_origin(tmp_path):
+def test_optional_keys_default(tmp_path):
     write_pgm_p5(tmp_path / 'map.pgm', [[254, 0]])
     write_yaml(tmp_path / 'map.yaml', negate=None, occupied_thresh=None, free_thresh=None,
-               origin=[3, 4])
+               mode=None, origin=[3, 4, 0])
     loaded = read_map_server(tmp_path / 'map.yaml')
     assert loaded.occupancy.tolist() == [[0, 100]]
     assert loaded.origin == (3.0, 4.0, 0.0)
+
+
+@pytest.mark.parametrize('origin', [[3, 4], [3, 4, 0, 0]])
+def test_an_origin_of_other_than_3_elements_is_refused_as_map_server_does(tmp_path, origin):
+    """nav2_map_server's loadMapYaml: "value of the 'origin' tag should have 3 elements"."""
+    write_pgm_p5(tmp_path / 'map.pgm', [[254, 0]])
+    path = write_yaml(tmp_path / 'map.yaml', origin=origin)
+    with pytest.raises(MapFormatError) as raised:
+        read_map_server(path)
+    assert str(path) in str(raised.value) and "'origin'" in str(raised.value)
+    assert f'got {len(origin)} elements' in str(raised.value)
+    # Our writer takes (x, y) from Python but writes the 3 elements map_server needs.
+    write_map_server(tmp_path / 'w.yaml', np.zeros((1, 1), dtype=np.int8), 0.5, (3.0, 4.0))
+    assert yaml.safe_load((tmp_path / 'w.yaml').read_text())['origin'] == [3.0, 4.0, 0.0]
+
+
+def test_unknown_specks_are_small_8_connected_unknown_inside_free_floor():
+    grid = np.zeros((10, 14), dtype=np.int8)
+    grid[1, 1] = -1                            # a lone pixel: a speck
+    grid[5, 1] = grid[6, 2] = grid[7, 1] = -1  # a diagonal chain: one speck of 3 px
+    grid[3:5, 5:7] = -1                        # 4 px inside free floor: a speck under 5
+    grid[1, 10], grid[2, 11] = -1, 100         # a wall at its corner: not a speck
+    grid[0, 6] = -1                            # on the edge: not a speck
+    grid[8, 5], grid[8, 6] = -1, 50            # next to a low obstacle: not a speck
+    grid[5, 10], grid[5, 11] = -1, 100         # next to an occupied speck: not a speck
+    mask, count = unknown_specks(grid, 5)
+    expected = np.zeros(grid.shape, dtype=bool)
+    expected[1, 1] = expected[5, 1] = expected[6, 2] = expected[7, 1] = True
+    expected[3:5, 5:7] = True
+    assert count == 3 and np.array_equal(mask, expected)
+    # Fewer pixels than max_pixels only: the chain of 3 and the square of 4 are too big for 3.
+    mask, count = unknown_specks(grid, 3)
+    assert count == 1 and mask.sum() == 1 and mask[1, 1]
+    assert unknown_specks(np.zeros((3, 3), dtype=np.int8), 5)[1] == 0
+    assert unknown_specks(np.full((3, 3), -1, dtype=np.int8), 50)[1] == 0
 
 
 def test_p2_and_16_bit_and_absolute_image_path(tmp_path):

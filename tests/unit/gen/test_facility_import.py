@@ -86,6 +86,34 @@ def test_map_savers_unknown_grey_stays_unknown_under_its_old_free_thresh(tmp_pat
     assert (read_map_server(tmp_path / 'old.yaml').occupancy == 0).mean() > 0.9
 
 
+def test_specks_of_unknown_inside_free_floor_are_floor_not_pillars(tmp_path):
+    """A SLAM map's single unobserved pixels inside free floor would each become a whole
+    0.5 m wall cell: they are taken as floor and counted. Unknown of a quarter cell or more
+    (25 px at 0.05 m/px), or touching a wall, still counts as wall."""
+    clean = import_facility_map(slam_map(tmp_path, 'clean'), 'factory')
+    path = slam_map(tmp_path, 'specks')
+    pixels = np.asarray(Image.open(tmp_path / 'specks.pgm')).copy()
+    # The room's cells start at image row 50 and column 70, 10 px each; (a, b) counts cells
+    # from the top left.
+    for a in (2, 4, 6, 8):
+        for b in range(1, 11):
+            pixels[50 + 10 * a + 5, 70 + 10 * b + 5] = UNKNOWN
+    pixels[82:87, 192:197] = UNKNOWN  # 25 px of cell (3, 12): not a speck
+    pixels[105, 199], pixels[105, 200] = WALL, UNKNOWN  # a table leg ends cell (5, 12)
+    Image.fromarray(pixels, mode='L').save(tmp_path / 'specks.pgm')
+    imported = import_facility_map(path, 'factory')
+    assert (imported.floor_specks, imported.floor_speck_pixels) == (40, 40)
+    expected = clean.token_map.cells.copy()
+    for a, b in ((3, 12), (5, 12), (5, 13)):  # token rows count from the bottom
+        expected[11 - a, b] = 1
+    assert np.array_equal(imported.token_map.cells, expected)
+    assert imported.free_fraction == pytest.approx((10 * 14 - 3) / (12 * 16))
+    # known_fraction is of the map as learned: the specks are known floor now.
+    assert imported.known_fraction == pytest.approx(1 - 26 / (120 * 160))
+    assert '; 40 specks of unknown inside free floor (40 px in all' in imported.summary()
+    assert imported.warnings() == [] and 'specks' not in clean.summary()
+
+
 def test_a_rotated_origin_moves_along_the_maps_axes(tmp_path):
     imported = import_facility_map(slam_map(tmp_path, origin=(1.0, 2.0, np.pi / 2)), 'factory')
     x, y, yaw = imported.origin

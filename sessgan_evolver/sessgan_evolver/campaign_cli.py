@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -237,7 +238,15 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
         supervisor.stop_all()
         node.destroy_node()
         rclpy.try_shutdown()
-    return report_result(result, log)
+        remove_if_empty(campaign.store.run_dir)  # e.g. no worker answered
+    return report_result(result, log, config.external)
+
+
+def remove_if_empty(directory: Path) -> None:
+    """Remove ``directory`` when nothing but empty folders is below it (the run directory,
+    checkpoints/ and logs/ are made up front): a campaign that wrote nothing leaves nothing."""
+    if directory.is_dir() and all(path.is_dir() for path in directory.rglob('*')):
+        shutil.rmtree(directory, ignore_errors=True)
 
 
 def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
@@ -286,9 +295,11 @@ def plan_of(config: CampaignConfig) -> str:
     return f'{config.method}, {config.resolved_budget()} episodes'
 
 
-def report_result(result: Any, log: Callable[[str], None]) -> int:
+def report_result(result: Any, log: Callable[[str], None], external: bool = False) -> int:
     """Print where the results are; the exit status: 1 when no map of the whole campaign was a
-    valid test (its figures measure nothing), else 0."""
+    valid test (its figures measure nothing), else 0. ``external``: the robot ran in its own
+    processes, so the suite's re-run needs --external too (its bags name no built-in
+    controller)."""
     first, last = result.generations[0], result.generations[-1]
     episodes = int(last.get('episodes_so_far') or 0)
     failures = int(last.get('valid_failures_so_far') or 0)
@@ -297,6 +308,8 @@ def report_result(result: Any, log: Callable[[str], None]) -> int:
     per = 1.0 / episodes if episodes else 0.0
     log(f'done in {result.wall_time / 60:.1f} min: {failures} valid failures '
         f'({failures * per:.3f}/episode), {faults} distinct faults ({faults * per:.3f}/episode)'
+        + (f', {last["fault_situations_so_far"]} fault situations'
+           if 'fault_situations_so_far' in last else '')
         + (f' + {unplaced} unplaced' if unplaced else '') + f' in {episodes} episodes; '
         f'fault risk {first.get("mean_fault_risk_score") or 0:.3f} (generation 0) -> '
         f'{last.get("mean_fault_risk_score") or 0:.3f} (generation {last["generation"]}); '
@@ -307,12 +320,12 @@ def report_result(result: Any, log: Callable[[str], None]) -> int:
         print(f'failure bags: {result.bags_dir}')
     else:
         print('failure bags: none (no failure was recorded)')
-    from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
+    from sessgan_evolver.regression_suite import SUITE_FILE, suite_line, write_suite_of_bags_below
 
     suite = write_suite_of_bags_below(result.run_dir / SUITE_FILE, result.run_dir.name,
                                       result.bags_dir, {'source': 'campaign failure bags'})
     if suite is not None:
-        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
+        print(suite_line(suite, external))
     if not any(row.get('feasible_fraction') for row in result.generations):
         log('error: no map of this campaign was a valid test (none held a route for the '
             'robot), so it could find no fault: check the map the generator learned')

@@ -22,7 +22,7 @@ from sessgan_core.errors import SessganCoreError
 from sessgan_core.ros_spin import INTERRUPTED_STATUS, run_command
 from sessgan_evolver.comparison import CompareConfig, run_comparison
 from sessgan_evolver.errors import SessganEvolverError, usage_errors
-from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
+from sessgan_evolver.regression_suite import SUITE_FILE, suite_line, write_suite_of_bags_below
 from sessgan_gen.errors import SessganGenError
 
 
@@ -81,7 +81,7 @@ def compare(arguments: list[str]) -> int:
     suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
                                       {'source': 'compare: confirmed distinct faults'})
     if suite is not None:
-        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
+        print(suite_line(suite, config.external))
     return 0
 
 

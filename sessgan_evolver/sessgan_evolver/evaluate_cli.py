@@ -34,7 +34,7 @@ from sessgan_core.scenarios import get_scenario
 from sessgan_evolver.campaign import check_controller
 from sessgan_evolver.errors import FreshSeedError, SessganEvolverError, usage_errors
 from sessgan_evolver.fault_records import confirm_faults
-from sessgan_evolver.faults import FaultRule
+from sessgan_evolver.faults import FaultEntry, FaultRule
 from sessgan_evolver.fresh_seed import (
     EPISODE_COLUMNS,
     AutomatonSource,
@@ -52,7 +52,7 @@ from sessgan_evolver.fresh_seed import (
     write_csv,
 )
 from sessgan_evolver.in_process import InProcessEvaluator
-from sessgan_evolver.regression_suite import SUITE_FILE, write_suite_of_bags_below
+from sessgan_evolver.regression_suite import SUITE_FILE, suite_line, write_suite_of_bags_below
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.checkpoint import incomplete_warning
 from sessgan_gen.errors import SessganGenError
@@ -136,6 +136,9 @@ class EvaluateConfig:
         if self.width < 0 or self.height < 0:
             raise FreshSeedError("--width and --height must be >= 0 (0: the generator's map "
                                  'size)')
+        if self.member != 'best' and not (self.run or self.run_dir):
+            raise FreshSeedError(f"--member {self.member} picks a member of a --run's last "
+                                 'population: give --run (or --run-dir) with it')
         if self.adaptive_rtf and not self.external:
             raise FreshSeedError('--adaptive-rtf needs --external: in process, episodes run '
                                  'in lockstep')
@@ -209,6 +212,19 @@ def build_sources(args: EvaluateConfig, scenario: str,
     return every
 
 
+def confirmation_line(label: str, faults: Sequence[FaultEntry], repeats: int,
+                      kept: Sequence[Path]) -> str:
+    """How many of a generator's distinct faults their re-runs confirmed, and where the
+    records of the confirmed ones are (an unconfirmed fault gets no record)."""
+    confirmed = sum(entry.confirmation is not None and entry.confirmation.confirmed
+                    for entry in faults)
+    line = (f'{label}: {confirmed} of {len(faults)} distinct faults confirmed ({repeats} '
+            f're-runs each showed the same kind at the same place)')
+    if kept:
+        return line + f'; {len(kept)} kept as bag + picture in {Path(kept[0]).parent}'
+    return line + '; none kept' + (' (only confirmed faults are)' if faults else '')
+
+
 def open_evaluator(args: EvaluateConfig, scenario: str, mission: MissionSpec,
                    fleet: FleetSpec, output: Path) -> AbstractContextManager[Any]:
     """In process, or with --external on the graph's workers (sessgan_evolver
@@ -262,7 +278,7 @@ def evaluate(arguments: list[str]) -> int:
     print(f'{len(plan.pairs)} fresh seed pairs (evaluation seed {args.evaluation_seed}); '
           f'{len(map_seeds)} map and {len(sim_seeds)} simulator seeds of {len(runs)} runs '
           f'excluded, {plan.skipped} drawn seeds skipped', file=sys.stderr)
-    summaries, rows = [], []
+    summaries, rows, confirmations = [], [], []
     progress = ProgressPrinter()
     try:
         with open_evaluator(args, scenario, mission, fleet, output) as evaluator:
@@ -275,9 +291,12 @@ def evaluate(arguments: list[str]) -> int:
                 if args.max_fault_records:
                     safe = ''.join(c if c.isalnum() or c in '-_.' else '_'
                                    for c in source.label)
-                    confirm_faults(result.faults, result.records, evaluator, rule,
-                                   args.repeats, output / 'faults' / safe, args.max_fault_records,
-                                   {'generator': source.label})
+                    kept = confirm_faults(result.faults, result.records, evaluator, rule,
+                                          args.repeats, output / 'faults' / safe,
+                                          args.max_fault_records, {'generator': source.label})
+                    confirmations.append(confirmation_line(source.label, result.faults,
+                                                           args.repeats, kept))
+                    print(confirmations[-1], file=sys.stderr)
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
         return INTERRUPTED_STATUS
@@ -297,14 +316,14 @@ def evaluate(arguments: list[str]) -> int:
         + ('on the external workers' if args.external else 'in process (lockstep)')
         + '; failure rate = valid '
         'failures / valid maps; collisions and risk: means over valid maps.\n\n'
-        f'{table}\n', encoding='utf-8')
+        f'{table}\n' + ''.join(f'\n{line}\n' for line in confirmations), encoding='utf-8')
     print(table)
     print(f'summary: {output / "summary.md"}')
     suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
                                       {'source': 'evaluate: confirmed distinct faults',
                                        'controller': controller})
     if suite is not None:
-        print(f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite})')
+        print(suite_line(suite, args.external))
     return 0
 
 

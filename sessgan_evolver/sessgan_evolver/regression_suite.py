@@ -303,6 +303,13 @@ def write_suite_file(path: Path, name: str, bags: Sequence[Path],
     return path
 
 
+def suite_line(suite: Path, external: bool) -> str:
+    """Where a command's regression suite is and the command that re-runs it (an external
+    stack's bags name no built-in controller: the re-run needs --external too)."""
+    return (f'regression suite: {suite} (re-run: ros2 run sessgan_evolver suite {suite}'
+            f'{" --external" if external else ""})')
+
+
 def write_suite_of_bags_below(path: Path, name: str, directory: Path,
                               metadata: Mapping[str, Any] | None = None) -> Path | None:
     """Write the suite of every failure bag below ``directory`` to ``path`` (what ``campaign``,

@@ -268,8 +268,27 @@ class RosEvaluator:
                 announce = None
             self.check_children()
             self.spin(0.1)
-        raise CampaignError(f'only {len(ready)} of {count} simulator workers answered within '
-                            f'{timeout:.0f} s')
+        raise CampaignError(self.missing_workers(count, ready, timeout))
+
+    def missing_workers(self, count: int, ready: Sequence[str], timeout: float) -> str:
+        """Why too few workers answered: what was looked for and found and, for workers this
+        process did not start (a user's stack, --external), what to check."""
+        wanted = (', '.join(sorted(self.allowed)) if self.allowed is not None
+                  else 'any <namespace>/evaluate, e.g. /w0/evaluate')
+        unused = sorted(name for name in self.evaluate_servers() if name not in ready
+                        and (self.allowed is None or name in self.allowed))
+        text = (f'only {len(ready)} of {count} simulator workers answered within '
+                f'{timeout:.0f} s (looked for {EVALUATE_TYPE} action servers: {wanted}; '
+                + (f'found but not ready or refused: {", ".join(unused)})' if unused
+                   else 'found none)'))
+        if self.pool.pairs:  # workers we started: their logs say why
+            return text
+        return (f'{text}. Start a simulator beside your controller, e.g. `ros2 run sessgan_sim '
+                'simulator --ros-args -r __ns:=/w0`, with the same ROS_DOMAIN_ID (here '
+                f'{os.environ.get("ROS_DOMAIN_ID") or "unset: 0"}) and '
+                'ROS_AUTOMATIC_DISCOVERY_RANGE (here '
+                f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "unset: SUBNET"}) as this '
+                'command')
 
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:

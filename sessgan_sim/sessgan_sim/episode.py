@@ -56,6 +56,7 @@ from sessgan_sim.episode_config import (  # noqa: F401 (also imported from here)
 )
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import (
+    STANDING_SPEED,
     EpisodeMetrics,
     MetricsRecorder,
     Outcome,
@@ -723,9 +724,13 @@ class Episode:
         elif progress.stuck_timeout > 0 and progress.stuck(
                 now, *live.robot.position,
                 lambda: self._agent_nearby(live)):  # an agent or a robot in the way
+            # A robot circling or oscillating is stuck too, but not "stopped": say which.
+            speed = math.hypot(*live.velocity)
+            where = f'{self._distance_to_goal(record):.2f} m from it at {now:.2f} s'
             self._end(record, Outcome.STUCK,
-                      f'no progress toward the goal for {config.stuck_timeout:.2f} s; '
-                      f'stopped {self._distance_to_goal(record):.2f} m from it at {now:.2f} s')
+                      f'no progress toward the goal for {config.stuck_timeout:.2f} s; ' + (
+                          f'stopped {where}' if speed <= STANDING_SPEED
+                          else f'{where}, moving at {speed:.2f} m/s'))
 
     def _robot_at(self, body_id: int) -> tuple[int, tuple[float, float]] | None:
         """Index and position of the robot under test whose body is ``body_id``; None for any

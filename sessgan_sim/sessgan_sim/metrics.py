@@ -110,7 +110,9 @@ class ContactEvent(NamedTuple):
     y: float
     kind: ContactKind
     agent: int
-    """Index of the agent touched; -1 for static obstacles and robots under test."""
+    """Index of the agent touched; -1: no agent was touched, but a static obstacle (an
+    agent_into_robot event with -1: an agent shoved the robot into it) or another robot under
+    test (``other_robot``)."""
     robot: int = 0
     """Fleets: index of the robot under test the event belongs to (r0, r1, ...)."""
     other_robot: int = -1
@@ -122,9 +124,16 @@ class ContactEvent(NamedTuple):
         return self.kind not in NOT_FAULT_KINDS
 
     def to_dict(self) -> dict[str, Any]:
-        return {'time': self.time, 'x': self.x, 'y': self.y, 'kind': self.kind.value,
+        data = {'time': self.time, 'x': self.x, 'y': self.y, 'kind': self.kind.value,
                 'agent': self.agent, 'fault': self.fault, 'robot': self.robot,
                 'other_robot': self.other_robot}
+        # Shoved into a wall: the kind names the shover and agent is -1 (the wall was touched),
+        # which reads like a bug in episode.json without a word.
+        if self.agent < 0 and self.other_robot < 0 and self.kind in NOT_FAULT_KINDS:
+            data['note'] = ('shoved into a static obstacle by '
+                            + ('an agent' if self.kind is ContactKind.AGENT_INTO_ROBOT
+                               else 'another robot under test'))
+        return data
 
 
 def risk_score(collisions: int, proximity_time: float, simulation_time: float) -> float:

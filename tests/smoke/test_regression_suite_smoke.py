@@ -39,6 +39,10 @@ def test_confirmed_faults_fail_the_suite_and_a_controller_that_avoids_them_passe
     suite_file = tmp_path / 'found' / 'suite.yaml'
     scenarios = yaml.safe_load(suite_file.read_text())['scenarios']
     assert scenarios, 'no confirmed fault to keep'
+    confirmed = (f'shipped generator: {len(scenarios)} of ')
+    assert confirmed in evaluate.stderr and 'distinct faults confirmed (1 re-runs' \
+        in evaluate.stderr, evaluate.stderr[-3000:]
+    assert confirmed in (tmp_path / 'found' / 'summary.md').read_text()
     assert all(entry['controller'] == 'nearness_diagram' for entry in scenarios)
 
     failing = run(['suite', str(suite_file), '--output-dir', 'ci-nd'], tmp_path)

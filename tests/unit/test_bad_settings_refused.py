@@ -62,7 +62,9 @@ def test_the_time_limit_bound_is_documented_and_inclusive():
     (['--repeats', '-1'], '--repeats'), (['--max-fault-records', '-2'], '--max-fault-records'),
     (['--coarse-cells', '0'], 'coarse_cells'), (['--evaluation-seed', '-1'], '--evaluation-seed'),
     # The spellings before the rename, accepted for one release: the new name is reported.
-    (['--seed', '-1'], '--evaluation-seed'), (['--fault-records', '-2'], '--max-fault-records')])
+    (['--seed', '-1'], '--evaluation-seed'), (['--fault-records', '-2'], '--max-fault-records'),
+    # A member of a run's population, with no --run to pick it from.
+    (['--member', '3'], '--member')])
 def test_evaluate_refuses_a_bad_setting_before_its_output(tmp_path, capsys, arguments, named):
     status = evaluate_cli.main(['--fresh-episodes', '1', '--output-dir', str(tmp_path / 'out'),
                                 *arguments])

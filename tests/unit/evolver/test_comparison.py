@@ -71,3 +71,21 @@ def test_bad_settings_and_the_spread():
         CompareConfig(methods=('screened',), screening_effort=-1).validate()
     assert spread([1.0, 3.0, None]) == (2.0, pytest.approx(2 ** 0.5), 2)
     assert spread([None]) == (None, None, 0)
+
+
+def test_evaluate_says_how_many_faults_their_re_runs_confirmed(tmp_path):
+    """A fault whose re-runs ended elsewhere gets no record: evaluate says so, rather than
+    leaving the user to wonder why faults/ is empty."""
+    from sessgan_evolver.evaluate_cli import confirmation_line
+    from sessgan_evolver.faults import Confirmation, FaultEntry, FaultKey
+
+    fault = FaultEntry(FaultKey('stuck', 1, 2, 'ab'), [0])
+    fault.confirmation = Confirmation(repeats=3, reproduced=2, exact=0, wall_time=1.0)
+    assert confirmation_line('mine', [fault], 3, []) == (
+        'mine: 0 of 1 distinct faults confirmed (3 re-runs each showed the same kind at the '
+        'same place); none kept (only confirmed faults are)')
+    fault.confirmation = Confirmation(repeats=3, reproduced=3, exact=3, wall_time=1.0)
+    record = tmp_path / 'faults' / 'mine' / '000-stuck'
+    assert confirmation_line('mine', [fault], 3, [record]).endswith(
+        f'1 of 1 distinct faults confirmed (3 re-runs each showed the same kind at the same '
+        f'place); 1 kept as bag + picture in {record.parent}')

@@ -315,7 +315,12 @@ def test_a_campaign_keeps_its_failure_bags_as_a_suite(failure_bag, tmp_path, cap
                   print)
     suite = load_suite(run_dir / 'suite.yaml')
     assert [entry.bag.resolve() for entry in suite.entries] == [(bags_dir / 'g0-m0-k0').resolve()]
-    assert 'regression suite:' in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f're-run: ros2 run sessgan_evolver suite {run_dir / "suite.yaml"})' in out
+    # An external campaign's bags name no built-in controller: its re-run needs --external.
+    report_result(CampaignResult(run_dir, bags_dir, run_dir / 'report.md', generations, 1.0),
+                  print, external=True)
+    assert f'suite {run_dir / "suite.yaml"} --external)' in capsys.readouterr().out
     assert load_suite_source(run_dir).entries == suite.entries  # the run folder names it
     # Relative to the file, so the run and bag folders can move together.
     document = yaml.safe_load((run_dir / 'suite.yaml').read_text())

@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -95,12 +96,22 @@ def test_standing_still_ends_stuck_or_at_the_time_limit(episode):
     metrics = run(episode, BodyCommand())
     assert metrics.outcome is Outcome.STUCK
     assert metrics.simulation_time == pytest.approx(2.0)
-    assert 'no progress' in metrics.detail
+    assert 'no progress' in metrics.detail and '; stopped 6.00 m from it at 2.00 s' in \
+        metrics.detail
     episode.reset(corridor(), config(stuck_timeout=0.0, time_limit=3.0))
     metrics = run(episode, BodyCommand())
     assert metrics.outcome is Outcome.TIMEOUT
     assert metrics.simulation_time == pytest.approx(3.0)
     assert metrics.ticks == 60
+
+
+def test_a_robot_circling_in_place_is_stuck_but_not_stopped(episode):
+    episode.reset(corridor(), config(stuck_timeout=2.0))
+    metrics = run(episode, BodyCommand(0.2, 0.0, 2.0))  # a circle of 0.1 m radius
+    assert metrics.outcome is Outcome.STUCK
+    assert 'stopped' not in metrics.detail, metrics.detail
+    assert re.search(r'; [\d.]+ m from it at [\d.]+ s, moving at 0\.[12]\d m/s$',
+                     metrics.detail), metrics.detail
 
 
 def test_the_wait_for_a_first_command_is_not_judged(episode):

@@ -47,6 +47,18 @@ def test_contact_events_are_debounced_per_partner():
                                               'other_robot': -1}
 
 
+def test_a_shove_into_a_wall_says_so_in_the_record():
+    recorder = MetricsRecorder(clearance_range=1.0)
+    recorder.record_contact(1.0, 2, ContactKind.AGENT_INTO_ROBOT, 0.0, 0.0)  # agent 2 drives in
+    recorder.record_contact(1.2, -1, ContactKind.AGENT_INTO_ROBOT, 0.0, 0.0)  # into the wall
+    recorder.record_contact(3.0, -1, ContactKind.ROBOT_HIT_BY_ROBOT, 0.0, 0.0)  # by a robot
+    recorder.record_contact(5.0, -1, ContactKind.STATIC, 0.0, 0.0)
+    agent, wall, robot_wall, static = (event.to_dict() for event in recorder.contacts)
+    assert 'note' not in agent and 'note' not in static
+    assert (wall['agent'], wall['note']) == (-1, 'shoved into a static obstacle by an agent')
+    assert robot_wall['note'] == 'shoved into a static obstacle by another robot under test'
+
+
 def test_proximity_time_counts_only_close_ticks_without_contact():
     recorder = MetricsRecorder(clearance_range=1.0)
     recorder.record_tick(0.05, clearance=0.1, touching=False, proximity_distance=0.25)

@@ -1,0 +1,43 @@
+"""campaign --external with no simulator up: an error that says what to check, and no empty
+run directory left behind."""
+
+from __future__ import annotations
+
+import pytest
+
+pytest.importorskip('rclpy')
+
+from sessgan_evolver import campaign_cli  # noqa: E402
+from sessgan_evolver.ros_evaluator import RosEvaluator  # noqa: E402
+
+pytestmark = pytest.mark.unit
+
+
+def test_no_external_worker_says_what_to_check_and_leaves_no_run(tmp_path, monkeypatch,
+                                                                  capsys):
+    wait = RosEvaluator.wait_for_workers
+    monkeypatch.setattr(RosEvaluator, 'wait_for_workers',
+                        lambda self, count, timeout: wait(self, count, 0.3))
+    runs = tmp_path / 'runs'
+    status = campaign_cli.run_campaign([
+        '--external', '--method', 'random', '--budget', '2', '--run', 'nobody',
+        '--runs-root', str(runs), '--bags-root', str(tmp_path / 'bags')])
+    error = capsys.readouterr().err
+    assert status == 1
+    assert not (runs / 'nobody').exists() and not (tmp_path / 'bags').exists()
+    assert 'only 0 of 1 simulator workers answered' in error
+    assert 'any <namespace>/evaluate, e.g. /w0/evaluate; found none' in error
+    assert 'ros2 run sessgan_sim simulator --ros-args -r __ns:=/w0' in error
+    assert 'ROS_DOMAIN_ID' in error and 'ROS_AUTOMATIC_DISCOVERY_RANGE' in error
+
+
+def test_a_run_directory_with_a_file_is_kept(tmp_path):
+    run = tmp_path / 'run'
+    (run / 'checkpoints').mkdir(parents=True)
+    (run / 'logs').mkdir()
+    (run / 'logs' / 'generator.log').write_text('started')
+    campaign_cli.remove_if_empty(run)
+    assert (run / 'logs' / 'generator.log').exists()
+    (run / 'logs' / 'generator.log').unlink()
+    campaign_cli.remove_if_empty(run)
+    assert not run.exists()

@@ -33,7 +33,7 @@ from sessgan_core.token_map import occupancy_to_tokens
 from sessgan_evolver import __version__
 from sessgan_evolver.algorithm import GeneticAlgorithm, GeneticAlgorithmConfig
 from sessgan_evolver.errors import CampaignError, SearchMethodError
-from sessgan_evolver.fault_tally import FaultTally, FaultTracker
+from sessgan_evolver.fault_tally import FaultTally, FaultTracker, fault_label
 from sessgan_evolver.fitness import (
     FitnessConfig,
     generation_summary,
@@ -448,7 +448,7 @@ class Campaign:
         first_generation = algorithm.generation
         tracker = FaultTracker()
         tracker.attach(evaluator)
-        tally = FaultTally.from_rows(self.store.read_rows('episode'))
+        tally = FaultTally.from_rows(self.store.read_rows('episode'), self.store.situations_path)
         while algorithm.generation < config.generations:
             generation = algorithm.generation
             self.store.save_checkpoint(generation, algorithm.state_dict(),
@@ -496,12 +496,14 @@ class Campaign:
                 episodes = [results[(member, k)] for k in range(config.maps_per_member)]
                 for job in jobs[member * config.maps_per_member:(member + 1) *
                                 config.maps_per_member]:
-                    fault = tracker.label_of(job.environment, results[job.key])
-                    tally.add(fault)
+                    key = tracker.key_of(job.environment, results[job.key])
+                    fault = fault_label(results[job.key], key)
+                    new_situation = tally.add(fault, key, job.environment)
                     self.store.append_episode({
                         'generation': generation, 'member': member, 'map': job.index,
                         'environment_id': job.environment.id, 'map_seed': job.environment.seed,
-                        'sim_seed': job.seed, **results[job.key], 'fault': fault})
+                        'sim_seed': job.seed, **results[job.key], 'fault': fault,
+                        'situation': new_situation})
                 breakdown = member_fitness(
                     episodes, tpkls[member], tpkl_reference,
                     map_diversity(token_maps[member]), config.fitness)
@@ -520,6 +522,7 @@ class Campaign:
             survivors = {genome.digest() for genome in algorithm.ask()}
             history = {digest: values for digest, values in history.items()
                        if digest in survivors}
+            tally.save_situations(self.store.situations_path)
             summary = {**generation_summary(generation, fitnesses), **tally.columns(),
                        'harness_reruns': harness_reruns, 'lost_bags': lost_bags}
             self.store.append_generation(summary)

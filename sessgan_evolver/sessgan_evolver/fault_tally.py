@@ -8,11 +8,19 @@ worker comes back as a metrics message without contact places, so its key is rea
 episode's failure bag (contacts from episode.json, where the robot ended from its odometry).
 A valid failure with neither (failure bags off, or written on another machine) still counts
 as a failure; its fault is *unplaced* and counted apart.
+
+Distinct faults alone overstate what a search found: a small variant of a failing map that
+fails at the same place is a new distinct fault. So the tally also counts *fault situations*
+(sessgan_evolver.faults.same_situation: the same kind and place on maps that differ in fewer
+than 10 % of their cells are one), the count the screened search's novelty and ``compare``
+use. Each situation's first map is kept in the run (``situations.npz``), so a resumed
+campaign goes on comparing against them.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from sessgan_core.atomic_files import atomic_write_bytes
 from sessgan_core.environment import Environment
 from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
@@ -27,6 +36,7 @@ from sessgan_evolver.errors import BagReadError, FaultError
 from sessgan_evolver.faults import (
     FaultKey,
     FaultRule,
+    SituationArchive,
     fault_key,
     first_fault_event,
     is_valid_failure,
@@ -161,31 +171,74 @@ class FaultTally:
     """Distinct fault label -> 1-based episode that first showed it."""
     first_failure: int | None = None
     """1-based episode of the first valid failure."""
+    fault_situations: int = 0
+    situations: SituationArchive = field(default_factory=SituationArchive)
+    """The first fault and map of each situation, to compare new faults against."""
+    situation_ids: list[str] = field(default_factory=list)
+    """The environment id of each situation's first episode."""
+    situations_counted: bool = True
+    """False for a run recorded before situations were (no 'situation' column)."""
 
-    def add(self, label: str) -> None:
-        """One more episode with its fault label ('' for no valid failure)."""
+    def add(self, label: str, key: FaultKey | None = None,
+            environment: Environment | None = None) -> bool:
+        """One more episode with its fault label ('' for no valid failure) and, for a placed
+        fault, its key and environment; True when it is a new fault situation."""
         self.episodes += 1
         if not label:
-            return
+            return False
         self.valid_failures += 1
         if self.first_failure is None:
             self.first_failure = self.episodes
         if label == UNPLACED:
             self.unplaced += 1
-        else:
-            self.faults.setdefault(label, self.episodes)
+            return False
+        self.faults.setdefault(label, self.episodes)
+        if key is None or environment is None \
+                or not self.situations.add(key, environment.occupancy):
+            return False
+        self.situation_ids.append(environment.id)
+        self.fault_situations += 1
+        return True
 
     @classmethod
-    def from_rows(cls, rows: Iterable[Mapping[str, Any]]) -> FaultTally:
-        """The tally of recorded episode rows (their 'fault' column), e.g. on resume."""
+    def from_rows(cls, rows: Iterable[Mapping[str, Any]],
+                  situations: str | Path | None = None) -> FaultTally:
+        """The tally of recorded episode rows (their 'fault' and 'situation' columns), e.g.
+        on resume, with the situations' maps kept in ``situations`` (:meth:`save_situations`;
+        None: not needed, as for a report)."""
         tally = cls()
+        rows = list(rows)
+        firsts = set()
         for row in rows:
             tally.add(str(row.get('fault') or ''))
+            if row.get('situation') is True:
+                firsts.add(str(row.get('environment_id')))
+        tally.fault_situations = len(firsts)
+        tally.situations_counted = not rows or 'situation' in rows[0]
+        if situations is not None and Path(situations).exists():
+            # Only those of rows still recorded: a resume drops the rows of a batch it re-runs.
+            for environment_id, key, occupancy in load_situations(situations):
+                if environment_id in firsts:
+                    tally.situations.known.append((key, occupancy))
+                    tally.situation_ids.append(environment_id)
         return tally
 
     @property
     def distinct_faults(self) -> int:
         return len(self.faults)
+
+    def save_situations(self, path: str | Path) -> None:
+        """Each situation's fault and first map, for a resumed run (:func:`load_situations`)."""
+        known = self.situations.known
+        arrays = {'ids': np.array(self.situation_ids, dtype=str),
+                  'kinds': np.array([key.kind for key, _ in known], dtype=str),
+                  'places': np.array([(key.row, key.col) for key, _ in known],
+                                     dtype=np.int64).reshape(-1, 2),
+                  'contexts': np.array([key.context for key, _ in known], dtype=str)}
+        arrays.update({f'map_{index}': occupancy for index, (_, occupancy) in enumerate(known)})
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)  # type: ignore[arg-type]  # numpy's stub types allow_pickle
+        atomic_write_bytes(path, buffer.getvalue())
 
     def per_episode(self, count: int) -> float:
         return count / self.episodes if self.episodes else 0.0
@@ -194,6 +247,7 @@ class FaultTally:
         """The cumulative counts as columns of a generation row."""
         return {'episodes_so_far': self.episodes, 'valid_failures_so_far': self.valid_failures,
                 'distinct_faults_so_far': self.distinct_faults,
+                'fault_situations_so_far': self.fault_situations,
                 'unplaced_failures_so_far': self.unplaced}
 
     def line(self) -> str:
@@ -202,9 +256,24 @@ class FaultTally:
                 f'({self.per_episode(self.valid_failures):.3f}/episode), '
                 f'{self.distinct_faults} distinct faults '
                 f'({self.per_episode(self.distinct_faults):.3f}/episode)')
+        if self.situations_counted:
+            text += f', {self.fault_situations} fault situations'
         if self.unplaced:
             text += f' + {self.unplaced} unplaced'
         return text + f' in {self.episodes} episodes'
+
+
+def load_situations(path: str | Path) -> list[tuple[str, FaultKey, np.ndarray]]:
+    """(environment id, fault key, map) of each situation :meth:`FaultTally.save_situations`
+    kept; FaultError if the file is unreadable."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return [(str(environment_id), FaultKey(str(kind), int(row), int(col), str(context)),
+                     np.array(data[f'map_{index}']))
+                    for index, (environment_id, kind, (row, col), context) in enumerate(zip(
+                        data['ids'], data['kinds'], data['places'], data['contexts']))]
+    except (OSError, ValueError, KeyError) as err:
+        raise FaultError(f'cannot read the fault situations {str(path)!r}: {err}') from err
 
 
 def map_digest(cells: np.ndarray) -> str:

@@ -202,7 +202,7 @@ class MethodCampaign:
         budget = config.resolved_budget()
         tracker = FaultTracker()
         tracker.attach(evaluator)
-        tally = FaultTally.from_rows(self.store.read_rows('episode'))
+        tally = FaultTally.from_rows(self.store.read_rows('episode'), self.store.situations_path)
         first_episode = tally.episodes
         progress = ProgressPrinter()
         last_maps: list[np.ndarray] = []
@@ -244,13 +244,13 @@ class MethodCampaign:
                 metrics = results[job.key]
                 key = tracker.key_of(job.environment, metrics)
                 fault = fault_label(metrics, key)
-                tally.add(fault)
+                new_situation = tally.add(fault, key, job.environment)
                 self.store.append_episode({
                     'generation': batch, 'member': job.member, 'map': 0,
                     'episode': tally.episodes, 'environment_id': job.environment.id,
                     'map_seed': job.environment.seed, 'sim_seed': job.seed,
                     'map_digest': map_digest(proposal.cells), 'origin': proposal.origin,
-                    'tpkl': tpkl, **metrics, 'fault': fault})
+                    'tpkl': tpkl, **metrics, 'fault': fault, 'situation': new_situation})
                 told.append(Evaluated(proposal, job.environment, metrics, fault_key=key))
                 breakdowns.append(member_fitness([metrics], tpkl, tpkl_reference, None,
                                                  config.fitness))
@@ -259,6 +259,7 @@ class MethodCampaign:
                 self.method.tell(told)
             cheap += time.perf_counter() - tell_start
             cheap_total += cheap
+            tally.save_situations(self.store.situations_path)
             summary = {**generation_summary(batch, breakdowns), **tally.columns(),
                        'cheap_wall_time': cheap, 'episodes_wall_time': episodes_wall}
             self.store.append_generation(summary)

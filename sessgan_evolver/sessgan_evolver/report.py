@@ -287,6 +287,11 @@ def faults_found_lines(episode_rows: Sequence[Mapping[str, Any]],
              'Distinct faults as `compare` counts them (sessgan_evolver.faults: same kind, '
              'same coarse cell, same map around it); a campaign re-runs nothing, so they are '
              'not confirmed.']
+    if tally.situations_counted:
+        lines[-1] += (f' They are **{tally.fault_situations} fault situations**: a small '
+                      'variant of a failing map that fails at the same place is a new distinct '
+                      'fault but the same situation (same kind and coarse cell on maps that '
+                      'differ in fewer than 10 % of their cells).')
     if tally.unplaced:
         lines[-1] += (f' {tally.unplaced} valid failures could not be placed (no failure '
                       'bag to read their contacts from) and are not among the distinct '
@@ -305,6 +310,9 @@ def plot_faults_found(generation_rows: Sequence[Mapping[str, Any]], path: str | 
                  markersize=3, label='valid failures')
     axes[0].plot(episodes, [0.0] + _column(rows, 'distinct_faults_so_far'), marker='o',
                  markersize=3, label='distinct faults')
+    if all('fault_situations_so_far' in row for row in rows):
+        axes[0].plot(episodes, [0.0] + _column(rows, 'fault_situations_so_far'), marker='o',
+                     markersize=3, label='fault situations')
     axes[0].set_xlabel('Episodes of the robot under test')
     axes[0].set_ylabel('Found so far')
     axes[0].legend(fontsize='small')
@@ -328,6 +336,7 @@ def plot_faults_found(generation_rows: Sequence[Mapping[str, Any]], path: str | 
 def _summary_table(first: Mapping[str, Any], last: Mapping[str, Any]) -> str:
     metrics = [('valid_failures_so_far', 'valid failures so far'),
                ('distinct_faults_so_far', 'distinct faults so far'),
+               ('fault_situations_so_far', 'fault situations so far'),
                ('mean_fault_risk_score', 'mean fault risk score'),
                ('mean_risk_score', 'mean risk score'), ('max_risk_score', 'max member risk'),
                ('mean_collisions', 'mean collisions'),
@@ -340,8 +349,8 @@ def _summary_table(first: Mapping[str, Any], last: Mapping[str, Any]) -> str:
     for key, label in metrics:
         a, b = first.get(key), last.get(key)
         ratio = ''
-        if key in ('valid_failures_so_far', 'distinct_faults_so_far') and a is None:
-            continue  # a run recorded before faults were counted
+        if key.endswith('_so_far') and a is None:
+            continue  # a run recorded before faults (or situations) were counted
         # Fitness can be negative, so a ratio of fitnesses means nothing.
         if key not in ('mean_fitness', 'best_fitness', 'valid_failures_so_far',
                        'distinct_faults_so_far') and isinstance(a, (int, float)) \

@@ -112,6 +112,11 @@ class RunStore:
         return self.run_dir / 'metrics.jsonl'
 
     @property
+    def situations_path(self) -> Path:
+        """The fault situations found so far (sessgan_evolver.fault_tally), for a resume."""
+        return self.run_dir / 'situations.npz'
+
+    @property
     def report_dir(self) -> Path:
         return self.run_dir / 'report'
 

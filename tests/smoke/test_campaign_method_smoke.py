@@ -38,7 +38,7 @@ def test_a_method_campaign_on_ros_workers_matches_the_in_process_one(ros_workspa
     ros_rows, local_rows = rows(tmp_path / 'runs' / 'ros'), rows(tmp_path / 'runs' / 'local')
     assert len(ros_rows) == 6
     compared = ('environment_id', 'map_seed', 'sim_seed', 'outcome', 'ticks', 'collisions',
-                'fault')
+                'fault', 'situation')
     assert [[row[k] for k in compared] for row in ros_rows] == \
         [[row[k] for k in compared] for row in local_rows]
     failures = [row for row in ros_rows if row['fault']]
@@ -51,5 +51,7 @@ def test_a_method_campaign_on_ros_workers_matches_the_in_process_one(ros_workspa
     done = next(line for line in over_ros.stderr.splitlines() if '[campaign] done in' in line)
     assert f'{len(failures)} valid failures' in done
     assert f'{len({row["fault"] for row in failures})} distinct faults' in done
+    situations = sum(row['situation'] == 'True' for row in failures)
+    assert 0 < situations <= len(failures) and f', {situations} fault situations in ' in done
     report = (tmp_path / 'runs' / 'ros' / 'report' / 'report.md').read_text()
     assert report.index('## Faults found') < report.index('## Summary')

@@ -233,6 +233,43 @@ def test_fault_tally_counts_failures_faults_and_unplaced_ones():
                                    '(0.333/episode) + 1 unplaced in 6 episodes')
 
 
+def test_fault_situations_group_variants_of_a_failing_map_and_survive_a_resume(tmp_path):
+    """Two failures at one place on maps 2 % apart are two distinct faults (the map around
+    the place differs) but one situation; a map 50 % apart is another situation. A resumed
+    tally compares against the situations its kept rows found, not a dropped row's."""
+    rule = FaultRule()
+
+    def environment(identifier, occupancy):
+        return type('E', (), {'id': identifier, 'occupancy': occupancy})()
+
+    first = np.zeros((32, 32), dtype=np.int8)
+    variant = first.copy()
+    variant[1, 1:21] = 100  # 20 cells: 2 % of the map, beside the fault place
+    other = first.copy()
+    other[2:18, :] = 100
+    keys = [FaultKey('collision_static', 0, 0, place_context(occupancy, 0, 0, rule))
+            for occupancy in (first, variant, other)]
+    assert keys[0] != keys[1]
+    tally = FaultTally()
+    found = [tally.add(key.label, key, environment(f'e{index}', occupancy))
+             for index, (key, occupancy) in enumerate(zip(keys, (first, variant, other)))]
+    assert found == [True, False, True]
+    assert (tally.distinct_faults, tally.fault_situations) == (3, 2)
+    assert '3 distinct faults (1.000/episode), 2 fault situations in 3 episodes' in tally.line()
+    tally.save_situations(tmp_path / 'situations.npz')
+    rows = [{'fault': key.label, 'environment_id': f'e{index}', 'situation': new}
+            for index, (key, new) in enumerate(zip(keys, found))]
+    resumed = FaultTally.from_rows(rows, tmp_path / 'situations.npz')
+    assert resumed.fault_situations == 2
+    assert resumed.add(keys[1].label, keys[1], environment('e3', variant)) is False
+    # The row that found the second situation was dropped (its batch runs again).
+    resumed = FaultTally.from_rows(rows[:2], tmp_path / 'situations.npz')
+    assert (resumed.fault_situations, resumed.situation_ids) == (1, ['e0'])
+    assert resumed.add(keys[2].label, keys[2], environment('e2', other)) is True
+    # A run recorded before situations were counted says nothing about them.
+    assert 'situation' not in FaultTally.from_rows([{'fault': 'a'}]).line()
+
+
 def test_a_failure_without_trace_or_bag_is_unplaced_and_a_success_has_no_fault(tmp_path):
     tracker = FaultTracker()
     environment = object.__new__(type('E', (), {'id': 'x'}))

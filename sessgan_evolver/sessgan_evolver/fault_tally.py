@@ -178,6 +178,8 @@ class FaultTally:
     """The environment id of each situation's first episode."""
     situations_counted: bool = True
     """False for a run recorded before situations were (no 'situation' column)."""
+    saved_situations: int = -1
+    """Situations in the file :meth:`save_situations` last wrote (-1: none written yet)."""
 
     def add(self, label: str, key: FaultKey | None = None,
             environment: Environment | None = None) -> bool:
@@ -228,17 +230,22 @@ class FaultTally:
         return len(self.faults)
 
     def save_situations(self, path: str | Path) -> None:
-        """Each situation's fault and first map, for a resumed run (:func:`load_situations`)."""
+        """Each situation's fault and first map, for a resumed run (:func:`load_situations`);
+        written again only when a situation was added since."""
         known = self.situations.known
+        if len(known) == self.saved_situations:
+            return
         arrays = {'ids': np.array(self.situation_ids, dtype=str),
                   'kinds': np.array([key.kind for key, _ in known], dtype=str),
                   'places': np.array([(key.row, key.col) for key, _ in known],
                                      dtype=np.int64).reshape(-1, 2),
                   'contexts': np.array([key.context for key, _ in known], dtype=str)}
-        arrays.update({f'map_{index}': occupancy for index, (_, occupancy) in enumerate(known)})
+        arrays.update({f'map_{index}': np.asarray(occupancy, dtype=np.int8)
+                       for index, (_, occupancy) in enumerate(known)})
         buffer = io.BytesIO()
         np.savez(buffer, **arrays)  # type: ignore[arg-type]  # numpy's stub types allow_pickle
         atomic_write_bytes(path, buffer.getvalue())
+        self.saved_situations = len(known)
 
     def per_episode(self, count: int) -> float:
         return count / self.episodes if self.episodes else 0.0

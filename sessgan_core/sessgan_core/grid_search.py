@@ -136,24 +136,27 @@ def label_regions(grid: FlatGrid) -> FlatRegions:
     lower = np.repeat(np.arange(len(starts)), counts)
     offsets = np.arange(len(lower)) - np.repeat(np.cumsum(counts) - counts, counts)
     upper = np.repeat(first, counts) + offsets
-    root = np.arange(len(starts))
-    while True:  # hook each joined pair's larger root under the smaller, then compress
-        a, b = root[upper], root[lower]
-        if np.array_equal(a, b):
-            break
-        low = np.minimum(a, b)
-        np.minimum.at(root, a, low)
-        np.minimum.at(root, b, low)
-        while True:
-            jumped = root[root]
-            if np.array_equal(jumped, root):
-                break
-            root = jumped
+    root = union_roots(len(starts), upper, lower)
     # Each region's root is its first run, so numbering roots in order is row-major order.
     _, region = np.unique(root, return_inverse=True)
     lengths = ends - starts
     labels[open_cells] = np.repeat(region, lengths)
     return FlatRegions(labels, np.bincount(region, weights=lengths).astype(np.int64))
+
+
+def union_roots(count: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Union-find over ``count`` items joined in pairs (``a[i]``, ``b[i]``), in a few numpy
+    passes: each item's root, the smallest item of its set."""
+    root = np.arange(count)
+    while True:  # hook each joined pair's larger root under the smaller, then compress
+        root_a, root_b = root[a], root[b]
+        if np.array_equal(root_a, root_b):
+            return root
+        low = np.minimum(root_a, root_b)
+        np.minimum.at(root, root_a, low)
+        np.minimum.at(root, root_b, low)
+        while not np.array_equal(root[root], root):
+            root = root[root]
 
 
 def distance_field(free: np.ndarray, source: Cell, diagonal: bool = False) -> np.ndarray:

@@ -46,7 +46,7 @@ from PIL import Image
 from sessgan_core.atomic_files import atomic_write_bytes
 from sessgan_core.environment import MAX_CELLS_PER_SIDE, Environment
 from sessgan_core.errors import MapFormatError
-from sessgan_core.grid_search import flat_grid, label_regions
+from sessgan_core.grid_search import flat_grid, label_regions, union_roots
 from sessgan_core.scenarios import BLOCKED, FREE
 from sessgan_core.token_map import (
     UNKNOWN,
@@ -612,21 +612,12 @@ def _regions_8(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     grid = flat_grid(mask)
     regions = label_regions(grid)
     labels = regions.labels.reshape(-1, grid.stride)[1:-1, 1:-1]
-    root = np.arange(len(regions.sizes))
-    if not len(root):
+    if not len(regions.sizes):
         return labels, regions.sizes
     corners = [(labels[:-1, :-1], labels[1:, 1:]), (labels[:-1, 1:], labels[1:, :-1])]
-    a = np.concatenate([x[(x >= 0) & (y >= 0)] for x, y in corners])
-    b = np.concatenate([y[(x >= 0) & (y >= 0)] for x, y in corners])
-    while True:  # label_regions' union-find: hook under the smaller root, then compress
-        root_a, root_b = root[a], root[b]
-        if np.array_equal(root_a, root_b):
-            break
-        low = np.minimum(root_a, root_b)
-        np.minimum.at(root, root_a, low)
-        np.minimum.at(root, root_b, low)
-        while not np.array_equal(root[root], root):
-            root = root[root]
+    root = union_roots(len(regions.sizes),
+                       np.concatenate([x[(x >= 0) & (y >= 0)] for x, y in corners]),
+                       np.concatenate([y[(x >= 0) & (y >= 0)] for x, y in corners]))
     merged = np.where(labels >= 0, root[labels], -1)
     return merged, np.bincount(root, weights=regions.sizes, minlength=len(root)).astype(np.int64)
 

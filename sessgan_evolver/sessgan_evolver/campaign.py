@@ -581,25 +581,6 @@ class Campaign:
         # The first map of up to four members: enough for the report's figure.
         np.save(path, np.stack([maps[0] for maps in token_maps[:4]]))
 
-    def harness_notes(self) -> list[str]:
-        """The report's lines on harness re-runs and lost failure bags of the whole run."""
-        generations = self.store.read_rows('generation')
-        reruns = sum(int(row.get('harness_reruns') or 0) for row in generations)
-        lost = [row for row in self.store.read_rows('episode') if row.get('bag_error')]
-        notes = []
-        if reruns:
-            notes.append(f'Harness re-runs: {reruns} episodes were ended by the test harness '
-                         '(a silent controller, a dead process, a cancelled episode), not by '
-                         'the controller, and run again; none of them is a result (the '
-                         '`harness_reruns` column of metrics_generations.csv says when).')
-        if lost:
-            notes.append(f'**WARNING: {len(lost)} failure bags were lost** (their metrics are '
-                         'recorded; see the `bag_error` column of metrics_episodes.csv): '
-                         + '; '.join(f'{row.get("environment_id")}: {row.get("bag_error")}'
-                                     for row in lost[:5])
-                         + ('; ...' if len(lost) > 5 else ''))
-        return notes
-
     def write_report(self, last_population: list[list[np.ndarray]]) -> Path:
         maps_by_generation = {}
         for generation in report_generations(self.config.generations - 1):
@@ -622,11 +603,31 @@ class Campaign:
                  if self.has_bags() else
                  ['No failure bag was written (no failure was found, or failures were not '
                   'recorded).'])
-        notes += self.harness_notes()
+        notes += harness_notes(self.store)
         return write_report(self.store.run_dir, maps_by_generation, tpkl_table, uniqueness_table,
                             title=f'SESS-GAN campaign {self.store.run_name} '
                                   f'({self.config.scenario})',
                             token_names=self.scenario.token_names, notes=notes)
+
+
+def harness_notes(store: RunStore) -> list[str]:
+    """A report's lines on the harness re-runs and lost failure bags of a whole run."""
+    generations = store.read_rows('generation')
+    reruns = sum(int(row.get('harness_reruns') or 0) for row in generations)
+    lost = [row for row in store.read_rows('episode') if row.get('bag_error')]
+    notes = []
+    if reruns:
+        notes.append(f'Harness re-runs: {reruns} episodes were ended by the test harness '
+                     '(a silent controller, a dead process, a cancelled episode), not by '
+                     'the controller, and run again; none of them is a result (the '
+                     '`harness_reruns` column of metrics_generations.csv says when).')
+    if lost:
+        notes.append(f'**WARNING: {len(lost)} failure bags were lost** (their metrics are '
+                     'recorded; see the `bag_error` column of metrics_episodes.csv): '
+                     + '; '.join(f'{row.get("environment_id")}: {row.get("bag_error")}'
+                                 for row in lost[:5])
+                     + ('; ...' if len(lost) > 5 else ''))
+    return notes
 
 
 def harness_note(harness_reruns: int, lost_bags: int) -> str:

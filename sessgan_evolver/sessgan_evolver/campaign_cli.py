@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import shutil
 import sys
 import time
@@ -29,7 +30,7 @@ from sessgan_evolver.campaign import (
     Campaign,
     CampaignConfig,
 )
-from sessgan_evolver.errors import HarnessFailureError, SessganEvolverError
+from sessgan_evolver.errors import HarnessFailureError, RunStoreError, SessganEvolverError
 from sessgan_evolver.method_campaign import MethodCampaign
 from sessgan_evolver.process_supervisor import (
     ChildProcess,
@@ -167,6 +168,8 @@ def run_campaign(argv: list[str]) -> int:
     if config.external:
         controller = config.controller or 'external'
 
+    resume = resume_command(argv, run_name)
+
     def log(message: str) -> None:
         print(f'[campaign] {message}', file=sys.stderr, flush=True)
 
@@ -179,24 +182,39 @@ def run_campaign(argv: list[str]) -> int:
     except OSError as err:  # the run directory cannot be made
         print(f'error: {err}', file=sys.stderr)
         return 1
+    try:  # before any process starts: a resume with other settings than the run's
+        campaign.store.check_config(campaign.config.to_dict(), config.seed)
+    except RunStoreError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
 
     # SIGINT and SIGTERM raise KeyboardInterrupt (run_command), so the children are stopped;
     # caught here, so a signal while the graph stops or the report is written gives the hint too.
     try:
         if config.in_process:
-            return run_in_process(campaign, config, controller, run_name, args.resume, log)
-        return run_with_ros(campaign, config, controller, run_name, args.resume, log,
+            return run_in_process(campaign, config, controller, resume, args.resume, log)
+        return run_with_ros(campaign, config, controller, resume, args.resume, log,
                             args.worker_bags)
     except KeyboardInterrupt:
-        log('interrupted: stopping every process this campaign started (continue later with '
-            f'--resume --run {run_name}{" --in-process" if config.in_process else ""})')
+        log('interrupted: stopping every process this campaign started (continue later with: '
+            f'{resume})')
         return INTERRUPTED_STATUS
 
 
+def resume_command(argv: Sequence[str], run_name: str) -> str:
+    """The command that continues this run: the same options, with --resume and --run."""
+    extra = [] if '--resume' in argv else ['--resume']
+    if not any(arg == '--run' or arg.startswith('--run=') for arg in argv):
+        extra += ['--run', run_name]
+    return shlex.join(['ros2', 'run', 'sessgan_evolver', 'campaign', *argv, *extra])
+
+
 def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, controller: str,
-                 run_name: str, resume: bool, log: Callable[[str], None],
+                 resume_hint: str, resume: bool, log: Callable[[str], None],
                  worker_bags: str = 'keep') -> int:
-    """The campaign on the ROS graph: its generator and workers (or yours, --external)."""
+    """The campaign on the ROS graph: its generator and workers (or yours, --external);
+    ``resume_hint``: the command that continues it."""
+    run_name = campaign.store.run_name
     import rclpy
     init_rclpy(['--ros-args'])
     node = rclpy.create_node('sessgan_evolver')
@@ -229,7 +247,7 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
         log(evaluator.overhead.summary())
     except (HarnessFailureError, OSError) as err:
         # OSError: the run directory cannot be written (a full disk): nothing more can be.
-        log(f'error: {err}\nstopped; continue later with --resume --run {run_name}')
+        log(f'error: {err}\nstopped; continue later with: {resume_hint}')
         return 1
     except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         log(f'error: {err}')
@@ -250,9 +268,11 @@ def remove_if_empty(directory: Path) -> None:
 
 
 def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
-                   controller: str, run_name: str, resume: bool,
+                   controller: str, resume_hint: str, resume: bool,
                    log: Callable[[str], None]) -> int:
-    """The campaign with sessgan_evolver.in_process's evaluator: no ROS at all."""
+    """The campaign with sessgan_evolver.in_process's evaluator: no ROS at all;
+    ``resume_hint``: the command that continues it."""
+    run_name = campaign.store.run_name
     from sessgan_evolver.in_process import InProcessEvaluator
 
     log(f'run {run_name}: {plan_of(campaign.config)}, scenario {config.scenario}, controller '
@@ -266,8 +286,7 @@ def run_in_process(campaign: Campaign | MethodCampaign, config: CampaignConfig,
                 harness_tries=config.harness_tries, log=log) as evaluator:
             result = campaign.run(evaluator, resume=resume)
     except (HarnessFailureError, OSError) as err:
-        log(f'error: {err}\nstopped; continue later with --resume --run {run_name} '
-            '--in-process')
+        log(f'error: {err}\nstopped; continue later with: {resume_hint}')
         return 1
     except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
         log(f'error: {err}')

@@ -43,6 +43,8 @@ from sessgan_evolver.campaign import (
     EpisodeJob,
     Evaluator,
     fmt,
+    harness_note,
+    harness_notes,
 )
 from sessgan_evolver.errors import CampaignError, FaultError, SearchMethodError
 from sessgan_evolver.fault_tally import (
@@ -230,12 +232,19 @@ class MethodCampaign:
 
             def on_result(job: EpisodeJob, metrics: dict) -> None:
                 results[job.key] = metrics
+                if metrics.get('bag_error'):
+                    self.log(f'WARNING: failure bag LOST for episode {job.environment.id}: '
+                             f'{metrics["bag_error"]} (its metrics are recorded; bag_error in '
+                             'metrics_episodes.csv)')
                 progress.update(len(results), f'collisions so far '
                                 f'{sum(m["collisions"] for m in results.values())}')
 
             episodes_start = time.perf_counter()
+            reruns_before = evaluator.harness_reruns
             evaluator.evaluate(jobs, on_result)
             episodes_wall = time.perf_counter() - episodes_start
+            harness_reruns = evaluator.harness_reruns - reruns_before
+            lost_bags = sum(bool(metrics.get('bag_error')) for metrics in results.values())
             missing = [job.key for job in jobs if job.key not in results]
             if missing:
                 raise CampaignError(f'batch {batch}: no result for episodes {missing}')
@@ -261,6 +270,7 @@ class MethodCampaign:
             cheap_total += cheap
             tally.save_situations(self.store.situations_path)
             summary = {**generation_summary(batch, breakdowns), **tally.columns(),
+                       'harness_reruns': harness_reruns, 'lost_bags': lost_bags,
                        'cheap_wall_time': cheap, 'episodes_wall_time': episodes_wall}
             self.store.append_generation(summary)
             elapsed = time.monotonic() - wall_start
@@ -272,7 +282,8 @@ class MethodCampaign:
                 f', TPKL {fmt(summary["mean_tpkl"])} | {tally.episodes}/{budget} episodes, '
                 f'cheap work {cheap_total / max(elapsed, 1e-9):.0%} of the wall time, '
                 f'elapsed {format_duration(elapsed)}, ETA '
-                f'{format_duration(per_episode * (budget - tally.episodes))}')
+                f'{format_duration(per_episode * (budget - tally.episodes))}'
+                + harness_note(harness_reruns, lost_bags))
             if tally.episodes - len(cut) == first_episode and \
                     summary['feasible_fraction'] < FEW_VALID_TESTS:
                 self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '
@@ -322,6 +333,7 @@ class MethodCampaign:
                      if self.bags_dir.is_dir() and any(self.bags_dir.iterdir()) else
                      'No failure bag was written (no failure was found, or failures were not '
                      'recorded).')
+        notes += harness_notes(self.store)
         return write_report(self.store.run_dir, maps_by_batch, tpkl_table, uniqueness_table,
                             title=f'{self.config.method} campaign {self.store.run_name} '
                                   f'({self.config.scenario})',

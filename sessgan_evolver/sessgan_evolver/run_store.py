@@ -31,6 +31,7 @@ import io
 import json
 import os
 import re
+import shlex
 import shutil
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -141,17 +142,28 @@ class RunStore:
         document = {'config': _plain(config), 'seed': int(seed),
                     'software_version': software_version,
                     'invocation': _plain(dict(invocation or {}))}
+        self.check_config(config, seed)
         if self.config_path.exists():
-            existing = self.read_config()
-            differences = _differences({'config': existing.get('config'),
-                                        'seed': existing.get('seed')},
-                                       {'config': document['config'], 'seed': seed})
-            if differences:
-                raise RunStoreError(f'run {self.run_name!r} already exists with a different '
-                                    f'config: {"; ".join(differences[:10])}')
             return
         text = json.dumps(document, indent=2, sort_keys=True, allow_nan=False) + '\n'
         atomic_write_bytes(self.config_path, text.encode())
+
+    def check_config(self, config: Mapping[str, Any], seed: int) -> None:
+        """RunStoreError listing what differs when the run exists with another config or seed
+        (nothing written: a command checks this before it starts anything)."""
+        if not self.config_path.exists():
+            return
+        existing = self.read_config()
+        differences = _differences({'config': existing.get('config'),
+                                    'seed': existing.get('seed')},
+                                   {'config': _plain(config), 'seed': int(seed)})
+        if differences:
+            made_with = (existing.get('invocation') or {}).get('command_line')
+            raise RunStoreError(
+                f'run {self.run_name!r} already exists with a different config: '
+                f'{"; ".join(differences[:10])}' + (
+                    f'; it was made with `{shlex.join(made_with)}` (add --resume to continue '
+                    'it)' if isinstance(made_with, list) else ''))
 
     def read_config(self) -> dict[str, Any]:
         """The config.json document: {'config', 'seed', 'software_version'}."""

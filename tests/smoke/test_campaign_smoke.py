@@ -200,5 +200,6 @@ def test_ctrl_c_stops_a_ros_campaign_cleanly_with_the_resume_hint(ros_workspace,
         if run.poll() is None:
             os.killpg(run.pid, signal.SIGKILL)
     log = stderr_path.read_text(errors='replace')
-    assert 'continue later with --resume --run interrupted' in log, log[-3000:]
+    hint = next(line for line in log.splitlines() if 'continue later with: ' in line)
+    assert '--run interrupted' in hint and hint.endswith(' --resume)'), hint
     assert 'Traceback' not in log and 'ExternalShutdownException' not in log, log[-3000:]

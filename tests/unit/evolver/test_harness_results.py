@@ -111,6 +111,26 @@ def test_an_unresponsive_episode_is_rerun_not_recorded(tmp_path):
     assert 'Harness re-runs: 1 episodes' in result.report_path.read_text()
 
 
+def test_a_method_campaign_counts_its_harness_re_runs_too(tmp_path):
+    """The default (screened) and every ask/tell method run through MethodCampaign: its
+    console line, generation rows and report say how many episodes the harness ended."""
+    from sessgan_evolver.method_campaign import MethodCampaign
+
+    config = small_config(method='random', budget=2, population=2, record_failures=True)
+    logs: list[str] = []
+    campaign = MethodCampaign(config, 'rerun', tmp_path / 'runs', tmp_path / 'bags',
+                              logs.append)
+    with InProcessEvaluator('factory', time_limit=2.0, record_directory=campaign.bags_dir,
+                            log=logs.append) as evaluator:
+        calls = silent_runner(evaluator, {1})
+        result = campaign.run(evaluator)
+    assert len(calls) == 3 and calls[0] == calls[1]
+    assert [row['harness_reruns'] for row in rows(result.run_dir / 'metrics_generations.csv')] \
+        == ['1']
+    assert any('harness re-runs 1' in line for line in logs), logs
+    assert 'Harness re-runs: 1 episodes' in result.report_path.read_text()
+
+
 def test_a_controller_silent_on_every_try_stops_the_campaign_with_a_resume_hint(
         tmp_path, monkeypatch, capsys):
     real = in_process.EpisodeRunner.run
@@ -130,7 +150,10 @@ def test_a_controller_silent_on_every_try_stops_the_campaign_with_a_resume_hint(
     err = capsys.readouterr().err
     assert status == 1, err
     assert 'the controller under test was silent on every one of 2 tries' in err
-    assert '--resume --run silent --in-process' in err and 'Traceback' not in err
+    # The hint repeats the run's own options, so the resume runs as the run did.
+    hint = next(line for line in err.splitlines() if 'continue later with: ' in line)
+    assert '--in-process' in hint and '--run silent' in hint and hint.endswith('--resume')
+    assert 'Traceback' not in err
     assert not (tmp_path / 'runs' / 'silent' / 'metrics_episodes.csv').exists()
 
 
@@ -213,5 +236,7 @@ def test_a_run_directory_that_cannot_be_written_stops_the_campaign_cleanly(
         '--runs-root', str(tmp_path / 'runs'), '--bags-root', str(tmp_path / 'bags')])
     err = capsys.readouterr().err
     assert status == 1, err
-    assert 'No space left on device' in err and '--resume --run full --in-process' in err
+    assert 'No space left on device' in err
+    hint = next(line for line in err.splitlines() if 'continue later with: ' in line)
+    assert '--in-process' in hint and '--run full' in hint and hint.endswith('--resume')
     assert 'Traceback' not in err

@@ -22,7 +22,9 @@ from sessgan_evolver.campaign_cli import (
     make_campaign,
     plan_of,
     report_result,
+    resume_command,
 )
+from sessgan_evolver.campaign_cli import main as campaign_main
 from sessgan_evolver.episode_runner import EpisodeRun, EpisodeTrace
 from sessgan_evolver.errors import FaultError, FreshSeedError
 from sessgan_evolver.fault_tally import (
@@ -50,6 +52,8 @@ class ScriptedEvaluator:
     """Runs no simulator: an episode fails (a wall contact where the robot starts) when its
     map seed is even, so the test knows every outcome; traced like the in-process evaluator
     (it has an ``observer``)."""
+
+    harness_reruns = 0
 
     def __init__(self, interrupt_after: int | None = None) -> None:
         self.observer = None
@@ -209,6 +213,31 @@ def test_the_command_defaults_to_the_default_method_and_records_the_chosen_one(t
         assert f'screening effort {effort}' in plan_of(screened)  # the run's first log line
     sessgan = config_from_args(campaign_parser().parse_args(['--method', 'sessgan']))
     assert isinstance(make_campaign(sessgan, 's', tmp_path, tmp_path, print, {}), Campaign)
+
+
+def test_resuming_takes_the_run_s_own_options_and_other_settings_are_refused_first(
+        tmp_path, capsys):
+    """The hint a stopped campaign prints repeats its options (an --external run resumed
+    without --external would start simulators of its own), and a resume with other settings
+    is refused before any process starts, naming the command that made the run."""
+    assert resume_command(['--external', '--budget', '40', '--run', 'c40'], 'c40') == \
+        'ros2 run sessgan_evolver campaign --external --budget 40 --run c40 --resume'
+    assert resume_command(['--seed', '3', '--resume'], 'factory-seed3') == \
+        'ros2 run sessgan_evolver campaign --seed 3 --resume --run factory-seed3'
+    runs = tmp_path / 'runs'
+    arguments = ['--method', 'random', '--budget', '3', '--in-process', '--run', 'r',
+                 '--runs-root', str(runs), '--bags-root', str(tmp_path / 'bags')]
+    made = make_campaign(config_from_args(campaign_parser().parse_args(arguments)), 'r', runs,
+                         tmp_path / 'bags', print, {'command_line': ['campaign', *arguments]})
+    made.store.write_config(made.config.to_dict(), made.config.seed,
+                            invocation={'command_line': ['campaign', *arguments]})
+    status = campaign_main(['--method', 'random', '--budget', '5', '--in-process', '--run', 'r',
+                            '--runs-root', str(runs), '--bags-root', str(tmp_path / 'bags'),
+                            '--resume'])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert 'config.budget: 3 -> 5' in err and '--budget 3' in err and 'Traceback' not in err
+    assert not (runs / 'r' / 'metrics.jsonl').exists()
 
 
 def test_the_last_line_leads_with_failures_and_faults(tmp_path, capsys):

@@ -219,7 +219,8 @@ def confirmation_line(label: str, faults: Sequence[FaultEntry], repeats: int,
     confirmed = sum(entry.confirmation is not None and entry.confirmation.confirmed
                     for entry in faults)
     line = (f'{label}: {confirmed} of {len(faults)} distinct faults confirmed ({repeats} '
-            f're-runs each showed the same kind at the same place)')
+            f're-runs each showed the same kind at the same place, its coarse cell or a '
+            'neighbouring one)')
     if kept:
         return line + f'; {len(kept)} kept as bag + picture in {Path(kept[0]).parent}'
     return line + '; none kept' + (' (only confirmed faults are)' if faults else '')

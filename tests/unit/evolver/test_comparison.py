@@ -83,9 +83,11 @@ def test_evaluate_says_how_many_faults_their_re_runs_confirmed(tmp_path):
     fault.confirmation = Confirmation(repeats=3, reproduced=2, exact=0, wall_time=1.0)
     assert confirmation_line('mine', [fault], 3, []) == (
         'mine: 0 of 1 distinct faults confirmed (3 re-runs each showed the same kind at the '
-        'same place); none kept (only confirmed faults are)')
+        'same place, its coarse cell or a neighbouring one); none kept (only confirmed faults '
+        'are)')
     fault.confirmation = Confirmation(repeats=3, reproduced=3, exact=3, wall_time=1.0)
     record = tmp_path / 'faults' / 'mine' / '000-stuck'
     assert confirmation_line('mine', [fault], 3, [record]).endswith(
         f'1 of 1 distinct faults confirmed (3 re-runs each showed the same kind at the same '
-        f'place); 1 kept as bag + picture in {record.parent}')
+        f'place, its coarse cell or a neighbouring one); 1 kept as bag + picture in '
+        f'{record.parent}')

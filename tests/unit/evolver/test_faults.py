@@ -11,6 +11,7 @@ from sessgan_evolver.episode_runner import EpisodeTrace
 from sessgan_evolver.faults import (
     FaultError,
     FaultEvent,
+    FaultKey,
     FaultRule,
     confirm,
     fault_key,
@@ -122,3 +123,10 @@ def test_grouping_and_confirmation(example):
     assert not flaky.confirmed and (flaky.reproduced, flaky.exact) == (2, 1)
     assert entries[0].confirmation is flaky
     assert not confirm(entries[1], original, lambda: (original, a, 0.0), 0).confirmed
+    # A re-run that ends across the edge of the fault's coarse cell shows the same fault (a
+    # clocked stack is not exactly repeatable); one two cells away or of another kind does not.
+    beside = FaultKey(b.kind, b.row + 1, b.col - 1, 'other context')
+    assert confirm(entries[0], original, lambda: (original, beside, 0.0), 2).confirmed
+    for other in (FaultKey(b.kind, b.row + 2, b.col, 'x'), FaultKey('timeout', b.row, b.col,
+                                                                     b.context)):
+        assert not confirm(entries[0], original, lambda: (original, other, 0.0), 1).confirmed

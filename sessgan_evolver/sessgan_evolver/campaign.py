@@ -471,22 +471,9 @@ class Campaign:
             if generation in sample_generations:
                 self.save_sample_maps(generation, token_maps)
 
-            results: dict[tuple[int, int], dict] = {}
-            progress.start(f'generation {generation}/{config.generations - 1}', len(jobs))
-
-            def on_result(job: EpisodeJob, metrics: dict) -> None:
-                results[job.key] = metrics
-                if metrics.get('bag_error'):
-                    self.log(f'WARNING: failure bag LOST for episode {job.environment.id}: '
-                             f'{metrics["bag_error"]} (its metrics are recorded; bag_error in '
-                             'metrics_episodes.csv)')
-                progress.update(len(results), f'collisions so far '
-                                f'{sum(m["collisions"] for m in results.values())}')
-
-            reruns_before = evaluator.harness_reruns
-            evaluator.evaluate(jobs, on_result)
-            harness_reruns = evaluator.harness_reruns - reruns_before
-            lost_bags = sum(bool(metrics.get('bag_error')) for metrics in results.values())
+            results, harness_reruns, lost_bags = run_episodes(
+                evaluator, jobs, progress, f'generation {generation}/{config.generations - 1}',
+                self.log)
             missing = [job.key for job in jobs if job.key not in results]
             if missing:
                 raise CampaignError(f'generation {generation}: no result for episodes {missing}')
@@ -608,6 +595,29 @@ class Campaign:
                             title=f'SESS-GAN campaign {self.store.run_name} '
                                   f'({self.config.scenario})',
                             token_names=self.scenario.token_names, notes=notes)
+
+
+def run_episodes(evaluator: Evaluator, jobs: Sequence[EpisodeJob], progress: ProgressPrinter,
+                 label: str, log: Callable[[str], None]
+                 ) -> tuple[dict[tuple[int, int], dict], int, int]:
+    """Every job's metrics by its key (with a progress bar, and a lost failure bag warned of
+    as it comes), the episodes the harness ended and ran again, and the failure bags lost."""
+    results: dict[tuple[int, int], dict] = {}
+    progress.start(label, len(jobs))
+
+    def on_result(job: EpisodeJob, metrics: dict) -> None:
+        results[job.key] = metrics
+        if metrics.get('bag_error'):
+            log(f'WARNING: failure bag LOST for episode {job.environment.id}: '
+                f'{metrics["bag_error"]} (its metrics are recorded; bag_error in '
+                'metrics_episodes.csv)')
+        progress.update(len(results),
+                        f'collisions so far {sum(m["collisions"] for m in results.values())}')
+
+    reruns_before = evaluator.harness_reruns
+    evaluator.evaluate(jobs, on_result)
+    lost_bags = sum(bool(metrics.get('bag_error')) for metrics in results.values())
+    return results, evaluator.harness_reruns - reruns_before, lost_bags
 
 
 def harness_notes(store: RunStore) -> list[str]:

@@ -45,6 +45,7 @@ from sessgan_evolver.campaign import (
     fmt,
     harness_note,
     harness_notes,
+    run_episodes,
 )
 from sessgan_evolver.errors import CampaignError, FaultError, SearchMethodError
 from sessgan_evolver.fault_tally import (
@@ -227,24 +228,10 @@ class MethodCampaign:
                 tpkl_reference = float(np.mean(finite)) if finite else None
             self.save_sample_maps(batch, [np.asarray(p.cells) for p in cut])
             cheap = time.perf_counter() - cheap_start
-            results: dict[tuple[int, int], dict] = {}
-            progress.start(f'batch {batch}', len(jobs))
-
-            def on_result(job: EpisodeJob, metrics: dict) -> None:
-                results[job.key] = metrics
-                if metrics.get('bag_error'):
-                    self.log(f'WARNING: failure bag LOST for episode {job.environment.id}: '
-                             f'{metrics["bag_error"]} (its metrics are recorded; bag_error in '
-                             'metrics_episodes.csv)')
-                progress.update(len(results), f'collisions so far '
-                                f'{sum(m["collisions"] for m in results.values())}')
-
             episodes_start = time.perf_counter()
-            reruns_before = evaluator.harness_reruns
-            evaluator.evaluate(jobs, on_result)
+            results, harness_reruns, lost_bags = run_episodes(evaluator, jobs, progress,
+                                                              f'batch {batch}', self.log)
             episodes_wall = time.perf_counter() - episodes_start
-            harness_reruns = evaluator.harness_reruns - reruns_before
-            lost_bags = sum(bool(metrics.get('bag_error')) for metrics in results.values())
             missing = [job.key for job in jobs if job.key not in results]
             if missing:
                 raise CampaignError(f'batch {batch}: no result for episodes {missing}')

@@ -351,9 +351,10 @@ def _summary_table(first: Mapping[str, Any], last: Mapping[str, Any]) -> str:
         ratio = ''
         if key.endswith('_so_far') and a is None:
             continue  # a run recorded before faults (or situations) were counted
-        # Fitness can be negative, so a ratio of fitnesses means nothing.
-        if key not in ('mean_fitness', 'best_fitness', 'valid_failures_so_far',
-                       'distinct_faults_so_far') and isinstance(a, (int, float)) \
+        # Fitness can be negative, so a ratio of fitnesses means nothing; nor does one of
+        # counts so far (the first generation's are a part of the last's).
+        if key not in ('mean_fitness', 'best_fitness') and not key.endswith('_so_far') \
+                and isinstance(a, (int, float)) \
                 and isinstance(b, (int, float)) and a > 0:
             ratio = f'{b / a:.2f}x'
         lines.append(f'| {label} | {_fmt(a)} | {_fmt(b)} | {ratio} |')

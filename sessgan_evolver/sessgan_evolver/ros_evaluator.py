@@ -51,6 +51,8 @@ IDENTITY_TIMEOUT = 30.0
 GONE_GRACE = 2.0
 """Wall seconds a worker running an episode may be missing from the graph before the episode
 is taken back (DDS drops a host that vanished once its lease expires: 20 s in Fast DDS)."""
+CANCEL_DELIVERY = 0.2
+"""Wall seconds a stopped campaign waits for its cancel requests to reach the workers."""
 
 
 def served_actions(node: Node, action_type: str) -> list[str]:
@@ -422,10 +424,27 @@ class RosEvaluator:
 
     def evaluate(self, jobs: Sequence[EpisodeJob],
                  on_result: Callable[[EpisodeJob, dict], None]) -> None:
+        running: dict[str, RunningEpisode] = {}
+        try:
+            self.dispatch(jobs, on_result, running)
+        except KeyboardInterrupt:
+            # Stopped (Ctrl-C): a user's simulators would run these episodes on to their end
+            # and write their failure bags into the run; cancelled, they end at once as
+            # cancelled, which writes none. The pause lets DDS deliver the requests.
+            handles = [state.goal_handle for state in running.values()
+                       if state.goal_handle is not None]
+            for handle in handles:
+                handle.cancel_goal_async()
+            if handles:
+                time.sleep(CANCEL_DELIVERY)
+            raise
+
+    def dispatch(self, jobs: Sequence[EpisodeJob], on_result: Callable[[EpisodeJob, dict], None],
+                 running: dict[str, RunningEpisode]) -> None:
+        """:meth:`evaluate`'s loop; ``running``: the episodes on the workers, by worker."""
         from action_msgs.msg import GoalStatus
 
         pending = deque(jobs)
-        running: dict[str, RunningEpisode] = {}
         last_discovery = 0.0
         last_worker_seen = time.monotonic()
         while pending or running:

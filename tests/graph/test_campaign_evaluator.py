@@ -115,6 +115,36 @@ def run_with(evaluator, script) -> list:
     return results
 
 
+def test_a_stopped_campaign_cancels_the_episodes_on_its_workers(evaluator):
+    """Ctrl-C: the episodes running on the workers are cancelled, so a user's simulators do not
+    run them on and write their bags into the stopped run."""
+    cancelled = []
+    client = FakeClient(evaluator.goals)
+    send = client.send_goal_async
+
+    def send_goal_async(job):
+        future = send(job)
+        future.value.cancel_goal_async = lambda: cancelled.append(job)
+        return future
+
+    client.send_goal_async = send_goal_async
+    evaluator.action_client_class = lambda node, kind, name: client
+    spins = []
+
+    def spin(seconds: float = 0.02) -> None:
+        spins.append(seconds)
+        if len(spins) == 3:  # the goal is accepted by now: the user presses Ctrl-C
+            raise KeyboardInterrupt
+
+    evaluator.spin = spin
+    evaluator.discover_workers()
+    environment = SimpleNamespace(id='factory-g000-m00-s1', occupancy=np.zeros((32, 32)))
+    job = EpisodeJob(0, 0, 0, environment, 1)
+    with pytest.raises(KeyboardInterrupt):
+        evaluator.evaluate([job], lambda job, metrics: None)
+    assert cancelled == [job]
+
+
 def test_controller_unresponsive_from_a_dead_controller_is_rerun_not_recorded(evaluator):
     pair = evaluator.pool.pairs['/w0']
     first_controller = pair.controller.process

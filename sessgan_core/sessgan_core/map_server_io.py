@@ -275,8 +275,11 @@ def read_map_yaml(yaml_path: str | os.PathLike) -> MapMetadata:
     return MapMetadata(image_path, resolution, origin3, negate, occupied, free, mode.lower())
 
 
-def pixels_to_occupancy(pixels: np.ndarray, maxval: int, metadata: MapMetadata) -> np.ndarray:
-    """Apply map_server's thresholding; ``pixels`` top row first, result in OccupancyGrid order."""
+def pixels_to_occupancy(pixels: np.ndarray, maxval: int, metadata: MapMetadata,
+                        translucent: np.ndarray | None = None) -> np.ndarray:
+    """Apply map_server's thresholding; ``pixels`` top row first, result in OccupancyGrid order.
+    ``translucent``: where (top row first) the image's alpha channel is not opaque, unknown
+    in scale mode as map_server makes it."""
     shade = pixels.astype(np.float64) / float(maxval)
     occ = shade if metadata.negate else 1.0 - shade
     if metadata.mode == 'raw':
@@ -289,14 +292,20 @@ def pixels_to_occupancy(pixels: np.ndarray, maxval: int, metadata: MapMetadata) 
                            / (metadata.occupied_thresh - metadata.free_thresh) * 100.0)
         grid = np.where(occ > metadata.occupied_thresh, BLOCKED, grid)
         grid = np.where(occ < metadata.free_thresh, FREE, grid)
+        if metadata.mode == 'scale' and translucent is not None:
+            grid = np.where(translucent, UNKNOWN, grid)
     return np.ascontiguousarray(grid.astype(np.int8)[::-1])
 
 
-def read_image(path: Path) -> tuple[np.ndarray, int]:
+def read_image(path: Path, mode: str = 'trinary') -> tuple[np.ndarray, int, np.ndarray | None]:
     """A non-PGM map image (PNG, BMP, ...) as (uint16 shades (height, width), top row first;
-    maxval), the shade of a colour pixel being the mean of its colour channels (as map_server
-    computes it; an alpha channel is ignored)."""
+    maxval; where its alpha channel is not opaque, None without one), the shade of a colour
+    pixel being the mean of its colour channels as map_server computes it: in trinary
+    ``mode`` an alpha channel's opacity is averaged in as a fourth channel (a transparent
+    white pixel is grey, unknown under the usual thresholds); in scale mode a pixel that is
+    not opaque is unknown (:func:`pixels_to_occupancy`)."""
     source = str(path)
+    translucent = None
     if not path.is_file():
         raise MapFormatError(f'map image {source!r} does not exist')
     try:
@@ -306,9 +315,13 @@ def read_image(path: Path) -> tuple[np.ndarray, int]:
                 array = np.asarray(image, dtype=np.int64)
                 maxval = 65535
             else:
-                colour = image.convert('RGBA' if 'A' in image.getbands() else 'RGB')
-                array = np.rint(np.asarray(colour, dtype=np.float64)[..., :3].mean(axis=2))
+                alpha = 'A' in image.getbands() or 'transparency' in image.info
+                colour = np.asarray(image.convert('RGBA' if alpha else 'RGB'), dtype=np.float64)
+                channels = 4 if alpha and mode == 'trinary' else 3
+                array = np.rint(colour[..., :channels].mean(axis=2))
                 maxval = 255
+                if alpha:
+                    translucent = colour[..., 3] < 255
     except (OSError, ValueError, Image.DecompressionBombError) as err:
         raise MapFormatError(f'cannot read map image {source!r}: {err}') from err
     if array.ndim != 2 or array.size == 0:
@@ -316,22 +329,23 @@ def read_image(path: Path) -> tuple[np.ndarray, int]:
     if max(array.shape) > MAX_IMAGE_SIDE:
         raise MapFormatError(f'{source}: image size {array.shape[1]}x{array.shape[0]} is '
                              f'outside 1..{MAX_IMAGE_SIDE} per side')
-    return np.clip(array, 0, maxval).astype(np.uint16), maxval
+    return np.clip(array, 0, maxval).astype(np.uint16), maxval, translucent
 
 
-def read_map_pixels(metadata: MapMetadata) -> tuple[np.ndarray, int]:
-    """The map image's shades (top row first) and their maxval."""
+def read_map_pixels(metadata: MapMetadata) -> tuple[np.ndarray, int, np.ndarray | None]:
+    """The map image's shades (top row first), their maxval and where its alpha channel is
+    not opaque (:func:`read_image`; None for a PGM, which has none)."""
     if metadata.image.suffix.lower() in ('.pgm', ''):
-        return read_pgm(metadata.image)
-    return read_image(metadata.image)
+        return (*read_pgm(metadata.image), None)
+    return read_image(metadata.image, metadata.mode)
 
 
 def read_map_server(yaml_path: str | os.PathLike) -> MapServerMap:
     """Read a map_server map: (occupancy int8 in OccupancyGrid order, resolution, origin)."""
     metadata = read_map_yaml(yaml_path)
-    pixels, maxval = read_map_pixels(metadata)
-    return MapServerMap(pixels_to_occupancy(pixels, maxval, metadata), metadata.resolution,
-                        metadata.origin)
+    pixels, maxval, translucent = read_map_pixels(metadata)
+    return MapServerMap(pixels_to_occupancy(pixels, maxval, metadata, translucent),
+                        metadata.resolution, metadata.origin)
 
 
 def map_saver_unknown(pixels: np.ndarray, maxval: int, metadata: MapMetadata) -> np.ndarray:
@@ -659,8 +673,8 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     """
     spec = resolve_scenario(scenario)
     metadata = read_map_yaml(yaml_path)
-    pixels, maxval = read_map_pixels(metadata)
-    occupancy = pixels_to_occupancy(pixels, maxval, metadata)
+    pixels, maxval, translucent = read_map_pixels(metadata)
+    occupancy = pixels_to_occupancy(pixels, maxval, metadata, translucent)
     saver_unknown = map_saver_unknown(pixels, maxval, metadata)
     occupancy[saver_unknown] = UNKNOWN
     loaded = MapServerMap(occupancy, metadata.resolution, metadata.origin)

@@ -53,3 +53,27 @@ def test_the_oracle_refuses_what_map_server_refuses(tmp_path):
                                                              'origin: [0.0, 0.0]'))
     with pytest.raises(AssertionError, match='3 elements'):
         nav2_load_map(tmp_path / 'short_origin.yaml')
+
+
+@pytest.mark.parametrize('mode', ['trinary', 'scale'])
+def test_a_png_s_transparent_pixels_load_as_map_server_loads_them(tmp_path, mode):
+    """A map drawn with transparent unknown space (RGBA): map_server averages the opacity in as
+    a fourth channel in trinary mode (transparent white is grey: unknown) and makes every pixel
+    that is not opaque unknown in scale mode. Read with the alpha ignored, the outside was
+    floor, and the import kept it as the facility's."""
+    from PIL import Image
+
+    rgba = np.zeros((6, 8, 4), dtype=np.uint8)
+    rgba[..., :3] = 254  # white floor
+    rgba[..., 3] = 255
+    rgba[1:5, 2] = (0, 0, 0, 255)  # a wall
+    rgba[:, 6:] = (255, 255, 255, 0)  # transparent white: outside the mapped area
+    rgba[0, 0] = (254, 254, 254, 128)  # half transparent
+    Image.fromarray(rgba, mode='RGBA').save(tmp_path / 'map.png')
+    (tmp_path / 'map.yaml').write_text(
+        f'image: map.png\nmode: {mode}\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n'
+        'negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n')
+    loaded = nav2_load_map(tmp_path / 'map.yaml')
+    ours = read_map_server(tmp_path / 'map.yaml')
+    assert np.array_equal(ours.occupancy, loaded.data)
+    assert (ours.occupancy[:, 6:] == -1).all() and (ours.occupancy[:, :2] != -1).any()

@@ -89,7 +89,20 @@ def check_options(config: ExportConfig) -> Path:
         read_token_map(config.map_file)
     if config.bag and not (Path(config.bag) / 'map.yaml').is_file():
         raise SessganGenError(f'{config.bag} is no failure bag: it has no map.yaml')
+    if config.generate:  # another scenario's checkpoint, a size it cannot make: bad options
+        from sessgan_gen.environment_sampler import EnvironmentSampler, resolve_sample_size
+
+        pyramid, metadata = EnvironmentSampler().load(config.checkpoint or None,
+                                                      generated_scenario(config))
+        resolve_sample_size(pyramid, metadata, (config.height, config.width),
+                            config.scenario)
     return output
+
+
+def generated_scenario(config: ExportConfig) -> str | None:
+    """The scenario --generate asks for: --scenario's, else the checkpoint's own (None), else
+    the factory's shipped generator."""
+    return config.scenario or (None if config.checkpoint else 'factory')
 
 
 def export(config: ExportConfig) -> Path:
@@ -112,7 +125,7 @@ def export(config: ExportConfig) -> Path:
         from sessgan_gen.checkpoint import incomplete_warning
         from sessgan_gen.environment_sampler import EnvironmentSampler
 
-        scenario = config.scenario or (None if config.checkpoint else 'factory')
+        scenario = generated_scenario(config)
         sampler = EnvironmentSampler()
         _, metadata = sampler.load(config.checkpoint or None, scenario)
         if warning := incomplete_warning(metadata, f'checkpoint {config.checkpoint}'):

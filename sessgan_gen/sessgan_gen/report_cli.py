@@ -67,9 +67,12 @@ def check_options(config: ReportConfig) -> list[str]:
         checkpoint = getattr(config, f'{name}_checkpoint', '')
         if checkpoint:  # missing, truncated or foreign: a bad option, nothing written
             try:
-                read_checkpoint(checkpoint)
+                trained = read_checkpoint(checkpoint)['metadata']['scenario']
             except CheckpointError as err:
                 raise SessganGenError(f'--{name}-checkpoint: {err}') from err
+            if trained != name:
+                raise SessganGenError(f'--{name}-checkpoint: {checkpoint} was trained for '
+                                      f'scenario {trained!r}, not {name!r}')
     return scenarios
 
 

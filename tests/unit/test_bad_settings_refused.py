@@ -118,7 +118,11 @@ def test_train_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments,
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--generate', '--seed', '-1'], '--seed'), (['--generate', '--width', '-3'], '--width'),
     (['--generate', '--scenario', 'moon'], 'moon'),
-    (['--map-file', '/nonexistent.txt'], '--map-file')])
+    (['--map-file', '/nonexistent.txt'], '--map-file'),
+    # Another scenario's generator, a size it cannot make: bad options too (exit 1 before).
+    (['--generate', '--checkpoint', str(default_checkpoint_path('drone')), '--scenario',
+      'racetrack'], "'drone', not 'racetrack'"),
+    (['--generate', '--width', '3', '--height', '3'], 'size 3x3 cells is outside')])
 def test_export_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments, named):
     status = export_cli.main(['--output', str(tmp_path / 'out' / 'map.yaml'), *arguments])
     err = capsys.readouterr().err
@@ -154,7 +158,9 @@ def test_export_refuses_a_map_file_that_is_no_token_map(tmp_path, capsys):
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--samples', '0'], '--samples'), (['--scenarios', 'moon'], 'moon'),
     (['--threads', '-1'], '--threads'),
-    (['--factory-checkpoint', '/nonexistent.pt'], '--factory-checkpoint')])
+    (['--factory-checkpoint', '/nonexistent.pt'], '--factory-checkpoint'),
+    (['--scenarios', 'drone', '--drone-checkpoint', str(default_checkpoint_path('factory'))],
+     "trained for scenario 'factory', not 'drone'")])
 def test_report_refuses_a_bad_setting_before_writing(tmp_path, capsys, arguments, named):
     status = report_cli.main(['--output-dir', str(tmp_path / 'out'), *arguments])
     err = capsys.readouterr().err

@@ -212,7 +212,10 @@ def read_map_yaml(yaml_path: str | os.PathLike) -> MapMetadata:
         text = path.read_text(encoding='utf-8')
     except FileNotFoundError as err:
         raise MapFormatError(f'map YAML {source!r} does not exist') from err
-    except (OSError, UnicodeDecodeError) as err:
+    except UnicodeDecodeError as err:  # the image given for its YAML, most likely
+        raise MapFormatError(f'{source!r} is no map YAML (not text: an image? give the .yaml '
+                             'that names the image)') from err
+    except OSError as err:
         raise MapFormatError(f'cannot read map YAML {source!r}: {err}') from err
     try:
         document: Any = yaml.safe_load(text)

@@ -611,8 +611,8 @@ def run_episodes(evaluator: Evaluator, jobs: Sequence[EpisodeJob], progress: Pro
             log(f'WARNING: failure bag LOST for episode {job.environment.id}: '
                 f'{metrics["bag_error"]} (its metrics are recorded; bag_error in '
                 'metrics_episodes.csv)')
-        progress.update(len(results),
-                        f'collisions so far {sum(m["collisions"] for m in results.values())}')
+        progress.update(len(results), f'collisions in these episodes '
+                        f'{sum(m["collisions"] for m in results.values())}')
 
     reruns_before = evaluator.harness_reruns
     evaluator.evaluate(jobs, on_result)

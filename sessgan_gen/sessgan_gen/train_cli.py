@@ -175,8 +175,12 @@ def run_training(argv: Sequence[str] | None) -> int:
     try:
         return train(config, training_map)
     except KeyboardInterrupt:
-        print('train: interrupted; run again with --resume to continue from the last '
-              'finished scale', file=sys.stderr)
+        # A checkpoint is written after each finished scale: before the first, none is there.
+        print('train: interrupted; ' + (
+            'run again with --resume to continue from the last finished scale'
+            if Path(config.output).exists() else
+            'no scale had finished, so nothing was saved: run the command again'),
+            file=sys.stderr)
         return INTERRUPTED_STATUS
     except (SessganCoreError, SessganGenError, ValueError, OSError) as err:
         print(f'train: error: {err}', file=sys.stderr)
@@ -234,8 +238,9 @@ def train(config: TrainConfig, training_map: TrainingMap | None = None) -> int:
     log = sys.stderr
     if config.map_yaml:
         write_imported_map(output, cells, scenario, origin)
-    print(f'train: {scenario.name} map {source} {shapes[-1][0]}x{shapes[-1][1]}, '
-          f'{len(shapes)} scales {[f"{h}x{w}" for h, w in shapes]}, '
+    # width x height, as the import's summary and map_server say a size
+    print(f'train: {scenario.name} map {source} {shapes[-1][1]}x{shapes[-1][0]} cells, '
+          f'{len(shapes)} scales {[f"{w}x{h}" for h, w in shapes]}, '
           f'{config.iterations} iterations per scale, {config.channels} channels, '
           + (f'crops of {trainer.crop_size}x{trainer.crop_size} at larger scales, '
              if trainer.crop_size else '')
@@ -257,7 +262,7 @@ def train(config: TrainConfig, training_map: TrainingMap | None = None) -> int:
             return
         if done == 1:
             h, w = shapes[scale]
-            printer.start(f'scale {scale + 1}/{num_scales} {h}x{w}', total)
+            printer.start(f'scale {scale + 1}/{num_scales} {w}x{h}', total)
         printer.update(done, f'total ETA {format_duration(eta.estimate(scale, done))}')
 
     def checkpoint(pyramid, state: TrainingState) -> None:

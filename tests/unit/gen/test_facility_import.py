@@ -170,6 +170,12 @@ def test_an_empty_yaml_says_it_is_empty(tmp_path):
         read_map_server(tmp_path / 'empty.yaml')
 
 
+def test_the_image_given_for_the_yaml_says_so(tmp_path):
+    Image.fromarray(np.full((4, 4), FREE, dtype=np.uint8), mode='L').save(tmp_path / 'map.png')
+    with pytest.raises(MapFormatError, match='is no map YAML .* give the .yaml'):
+        read_map_server(tmp_path / 'map.png')
+
+
 def test_a_map_too_small_to_learn_is_named():
     check_training_map(np.zeros((8, 12)))
     with pytest.raises(ValueError, match='the map is 1x1 cells .* at least 8 cells per side'):

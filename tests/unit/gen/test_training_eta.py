@@ -35,3 +35,22 @@ def test_the_eta_tracks_a_run_three_times_slower_than_the_model_without_jumps():
         if when >= 0.1 * total:
             assert left == pytest.approx(total - when, rel=0.25, abs=2.0)
     assert estimates[-1][1] == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize('saved', [False, True])
+def test_an_interrupted_training_advises_resume_only_when_a_scale_was_saved(
+        tmp_path, monkeypatch, capsys, saved):
+    from sessgan_gen import train_cli
+
+    output = tmp_path / 'g.pt'
+    if saved:
+        output.write_bytes(b'a checkpoint of a finished scale')
+
+    def interrupted(config, training_map):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(train_cli, 'train', interrupted)
+    assert train_cli.run_training(['--output', str(output), '--iterations', '1']) == 130
+    err = capsys.readouterr().err
+    assert ('run again with --resume' in err) == saved
+    assert ('nothing was saved' in err) != saved

@@ -273,8 +273,10 @@ def faults_found_lines(episode_rows: Sequence[Mapping[str, Any]],
         return []
     tally = FaultTally.from_rows(episode_rows)
     plot_faults_found(generation_rows, report_dir / 'faults_found.png')
+    # The episode's number counts from 1, its id (and its bag's name) from 0: name both.
     first = ('none' if tally.first_failure is None
-             else f'episode {tally.first_failure}')
+             else f'episode {tally.first_failure} '
+                  f'(`{episode_rows[tally.first_failure - 1].get("environment_id")}`)')
     fault_risks = [row.get('mean_fault_risk_score') for row in generation_rows]
     lines = ['## Faults found', '',
              f'**{tally.valid_failures} valid failures and {tally.distinct_faults} distinct '

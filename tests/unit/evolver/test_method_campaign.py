@@ -117,6 +117,9 @@ def test_a_method_campaign_spends_its_budget_and_counts_the_faults(tmp_path):
     report = result.report_path.read_text()
     assert report.index('## Faults found') < report.index('## Summary')
     assert f'**{len(failing)} valid failures and ' in report
+    # Numbered from 1, its id (and bag) from 0: the report names both.
+    assert (f"first valid failure: episode {failing[0]['episode']} "
+            f"(`{failing[0]['environment_id']}`)") in report
     assert '| mean fault risk score |' in report
     assert (result.report_path.parent / 'faults_found.png').stat().st_size > 0
 

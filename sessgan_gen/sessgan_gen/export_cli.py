@@ -14,10 +14,12 @@ The YAML goes to ``--output``, the PGM beside it (same name, .pgm).
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from sessgan_core.config_cli import parse_config
 from sessgan_core.errors import SessganCoreError
@@ -90,13 +92,21 @@ def check_options(config: ExportConfig) -> Path:
     if config.bag and not (Path(config.bag) / 'map.yaml').is_file():
         raise SessganGenError(f'{config.bag} is no failure bag: it has no map.yaml')
     if config.generate:  # another scenario's checkpoint, a size it cannot make: bad options
-        from sessgan_gen.environment_sampler import EnvironmentSampler, resolve_sample_size
+        from sessgan_gen.environment_sampler import resolve_sample_size
 
-        pyramid, metadata = EnvironmentSampler().load(config.checkpoint or None,
-                                                      generated_scenario(config))
+        pyramid, metadata = sampler().load(config.checkpoint or None,
+                                           generated_scenario(config))
         resolve_sample_size(pyramid, metadata, (config.height, config.width),
                             config.scenario)
     return output
+
+
+@functools.cache
+def sampler() -> Any:
+    """One EnvironmentSampler for the checks and the export: it loads a checkpoint once."""
+    from sessgan_gen.environment_sampler import EnvironmentSampler
+
+    return EnvironmentSampler()
 
 
 def generated_scenario(config: ExportConfig) -> str | None:
@@ -123,14 +133,12 @@ def export(config: ExportConfig) -> Path:
         export_token_map(output, read_token_map(config.map_file))
     elif config.generate:
         from sessgan_gen.checkpoint import incomplete_warning
-        from sessgan_gen.environment_sampler import EnvironmentSampler
 
         scenario = generated_scenario(config)
-        sampler = EnvironmentSampler()
-        _, metadata = sampler.load(config.checkpoint or None, scenario)
+        _, metadata = sampler().load(config.checkpoint or None, scenario)
         if warning := incomplete_warning(metadata, f'checkpoint {config.checkpoint}'):
             print(f'export: WARNING: {warning}', file=sys.stderr)
-        environment = sampler.sample([config.seed], config.checkpoint or None, scenario,
+        environment = sampler().sample([config.seed], config.checkpoint or None, scenario,
                                      (config.height, config.width))[0]
         export_environment(output, environment)
         if not environment.feasible:

@@ -128,11 +128,6 @@ class FaultTracker:
         except (BagReadError, FaultError):
             return None
 
-    def label_of(self, environment: Environment, metrics: Mapping[str, Any]) -> str:
-        """'' for an episode that is no valid failure, else its fault label (UNPLACED when
-        neither a trace nor a readable failure bag says where it happened)."""
-        return fault_label(metrics, self.key_of(environment, metrics))
-
 
 def fault_label(metrics: Mapping[str, Any], key: FaultKey | None) -> str:
     """The ``fault`` column of an episode: '' for no valid failure, else its key's label or

@@ -31,6 +31,7 @@ from sessgan_evolver.fault_tally import (
     UNPLACED,
     FaultTally,
     FaultTracker,
+    fault_label,
     key_from_bag,
     key_from_label,
 )
@@ -305,10 +306,11 @@ def test_fault_situations_group_variants_of_a_failing_map_and_survive_a_resume(t
 def test_a_failure_without_trace_or_bag_is_unplaced_and_a_success_has_no_fault(tmp_path):
     tracker = FaultTracker()
     environment = object.__new__(type('E', (), {'id': 'x'}))
-    assert tracker.label_of(environment, {'feasible': True, 'outcome': 'goal_reached',
-                                          'fault_collisions': 0}) == ''
-    assert tracker.label_of(environment, {'feasible': True, 'outcome': 'timeout',
-                                          'fault_collisions': 0, 'bag_path': ''}) == UNPLACED
+    for metrics, label in (({'feasible': True, 'outcome': 'goal_reached',
+                             'fault_collisions': 0}, ''),
+                           ({'feasible': True, 'outcome': 'timeout', 'fault_collisions': 0,
+                             'bag_path': ''}, UNPLACED)):
+        assert fault_label(metrics, tracker.key_of(environment, metrics)) == label
 
 
 @pytest.mark.parametrize(('time_limit', 'seeds', 'kinds'), [
@@ -331,7 +333,7 @@ def test_the_fault_key_of_a_failure_bag_is_the_key_of_its_trace(tmp_path, time_l
             assert key_from_bag(environment, run.metrics['bag_path'], rule) == key
             found.add(key.kind)
             tracker = FaultTracker(rule)  # as the campaign over ROS: no trace, the bag
-            assert tracker.label_of(environment, run.metrics) == key.label
+            assert tracker.key_of(environment, run.metrics) == key
     assert found == kinds
 
 

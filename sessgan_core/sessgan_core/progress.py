@@ -68,6 +68,14 @@ class ProgressPrinter:
         self.stream.write(line + '\n')
         self.stream.flush()
 
+    def note(self, line: str) -> None:
+        """Print ``line`` above the bar (it redraws below)."""
+        if self.bar is not None:
+            self.bar.write(line, file=self.stream)
+        else:
+            self.stream.write(line + '\n')
+            self.stream.flush()
+
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()

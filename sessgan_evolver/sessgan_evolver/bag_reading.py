@@ -186,10 +186,13 @@ def verify_bag_files(path: str | Path) -> str | None:
     """
     directory = bag_directory(path)
     episode = read_episode_json(directory)
-    files = (episode or {}).get('files')
+    if episode is None:
+        return (f'{directory} has no {EPISODE_FILE} (a bag recorded by another tool, or it '
+                'was deleted): its files cannot be checked for corruption')
+    files = episode.get('files')
     if files is None:
-        return (f'{directory} records no file digests (a bag from an older version, or no '
-                'failure bag): its files cannot be checked for corruption')
+        return (f'{directory / EPISODE_FILE} records no file digests (a bag from a version '
+                'before 2026-11-26): its files cannot be checked for corruption')
     if not isinstance(files, Mapping) or not files:
         raise BagReadError(f'{directory / EPISODE_FILE}: field "files" must map file names to '
                            '{size, sha256}')

@@ -33,7 +33,7 @@ import yaml
 
 from sessgan_core.atomic_files import atomic_write_bytes
 from sessgan_evolver.errors import BagReadError, SuiteError
-from sessgan_sim.metrics import FAILURE_OUTCOMES
+from sessgan_sim.metrics import FAILURE_OUTCOMES, Outcome
 from sessgan_sim.metrics import HARNESS_OUTCOMES as SIM_HARNESS_OUTCOMES
 
 SUITE_FORMAT = 1
@@ -47,6 +47,10 @@ HARNESS_OUTCOMES = frozenset({*(str(outcome) for outcome in SIM_HARNESS_OUTCOMES
 since a suite's scenarios were valid tests when recorded, invalid_environment on a re-run
 (settings the simulator could not build), not the map's."""
 
+
+RESULT_OUTCOMES = frozenset(str(outcome) for outcome in Outcome
+                            if str(outcome) not in HARNESS_OUTCOMES)
+"""Outcomes a suite file may expect: the results of a valid test."""
 
 NUMERIC_PROPERTIES = (
     'simulation_time', 'collisions', 'fault_collisions', 'min_clearance', 'proximity_time',
@@ -237,6 +241,9 @@ def load_suite(path: Path) -> Suite:
         if not isinstance(expected, dict):
             raise SuiteError(f'{where}: "expected" must be a mapping (outcome, '
                              'fault_collisions)')
+        if 'outcome' in expected and expected['outcome'] not in RESULT_OUTCOMES:
+            raise SuiteError(f'{where}: expected outcome {expected["outcome"]!r} is none of '
+                             f'{", ".join(sorted(RESULT_OUTCOMES))}')
         if entry.name in names:
             raise SuiteError(f'{where}: the name {entry.name!r} is used twice')
         names.add(entry.name)
@@ -264,6 +271,20 @@ def load_suite_source(source: Path) -> Suite:
     if (source / SUITE_FILE).is_file():
         return load_suite(source / SUITE_FILE)
     return suite_from_bag_directory(source)
+
+
+def check_bags(suite: Suite) -> None:
+    """SuiteError naming the scenario whose bag changed since it was written (episode.json's
+    sizes and digests) or whose messages are cut off or corrupt, as ``replay`` refuses it:
+    nothing re-runs a map that is not the one recorded."""
+    from sessgan_evolver.bag_reading import check_bag_complete, verify_bag_files
+
+    for entry in suite.entries:
+        try:
+            verify_bag_files(entry.bag)  # a bag older than the digests: nothing to check
+            check_bag_complete(entry.bag)
+        except BagReadError as err:
+            raise SuiteError(f'scenario {entry.name}: {err}') from err
 
 
 def suite_document(name: str, bags: Sequence[Path], directory: Path,
@@ -618,13 +639,14 @@ EXIT_INTERRUPTED = 130
 
 def exit_code(progresses: Sequence[ScenarioProgress], fail_on_flaky: bool = False,
               interrupted: bool = False) -> int:
-    """1 when a scenario failed (or was flaky with ``fail_on_flaky``), else 3 when one is a
-    harness error, else 130 when interrupted, else 0."""
+    """130 when interrupted (the run is incomplete, whatever it saw: CI tells a cancelled
+    job from a regression), else 1 when a scenario failed (or was flaky with
+    ``fail_on_flaky``), else 3 when one is a harness error, else 0."""
     verdicts = {p.verdict for p in progresses}
+    if interrupted:
+        return EXIT_INTERRUPTED
     if Verdict.FAIL in verdicts or (fail_on_flaky and Verdict.FLAKY in verdicts):
         return EXIT_FAILED
     if Verdict.ERROR in verdicts:
         return EXIT_HARNESS
-    if interrupted:
-        return EXIT_INTERRUPTED
     return EXIT_PASSED

@@ -33,6 +33,7 @@ from typing import Literal
 
 from sessgan_core.config_cli import cli, parse_valid_config
 from sessgan_core.ros_spin import init_rclpy, run_command
+from sessgan_core.validation import ros_namespace
 
 EXIT_AS_EXPECTED, EXIT_DIFFERENT, EXIT_ERROR = 0, 1, 2
 
@@ -68,6 +69,9 @@ class ReplayConfig:
     def validate(self) -> None:
         if not self.rate > 0:
             raise ValueError(f'--rate must be positive, got {self.rate}')
+        for option in ('worker', 'namespace'):
+            if getattr(self, option):
+                setattr(self, option, ros_namespace(f'--{option}', getattr(self, option)))
 
 
 def parse_args(argv: Sequence[str] | None) -> ReplayConfig:
@@ -92,8 +96,10 @@ def republished_topic(topic: str, recorded_namespace: str, namespace: str) -> st
 def replay(args: ReplayConfig, episode) -> int:
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rosbags.interfaces import QosDurability
 
     from sessgan_evolver.bag_reading import iter_bag_messages, read_bag_topics
+    from sessgan_sim.bag_recording import qos_for_topic
 
     topics = read_bag_topics(args.bag)
     recorded_namespace = (episode or {}).get('namespace', '')
@@ -102,7 +108,9 @@ def replay(args: ReplayConfig, episode) -> int:
     try:
         publishers = {}
         for topic in topics:
-            latched = topic.durability == 'transient_local'
+            # The contract's QoS, not the recorded one: bags before 2026-11-28 recorded
+            # goal_pose and waypoints as volatile, which a transient-local reader never gets.
+            latched = qos_for_topic(topic.topic).durability == QosDurability.TRANSIENT_LOCAL
             qos = QoSProfile(
                 depth=max(1, topic.depth or 10), reliability=ReliabilityPolicy.RELIABLE,
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if latched

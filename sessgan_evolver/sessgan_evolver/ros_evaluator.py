@@ -79,6 +79,9 @@ class CampaignOverhead:
     """Per episode: goal sent to result received, less the worker's own episode wall time
     (goal and result messaging, world build, the dispatch loop's polling)."""
     bags: int = 0
+    """Failure bags copied from the workers."""
+    bags_in_place: int = 0
+    """Failure bags a worker wrote into the campaign's own bags folder (nothing to copy)."""
     bag_transfer: float = 0.0
     """Copying failure bags from the workers (sessgan_evolver.bag_collection)."""
     cpu: float = 0.0
@@ -89,8 +92,9 @@ class CampaignOverhead:
         per = 1e3 / max(1, self.episodes)
         return (f'campaign overhead per episode ({self.episodes} episodes): generator '
                 f'{self.generator * per:.1f} ms, dispatch {self.dispatch * per:.1f} ms, bag '
-                f'transfer {self.bag_transfer * per:.1f} ms ({self.bags} bags, '
-                f'{self.bag_transfer * 1e3 / max(1, self.bags):.1f} ms each); campaign '
+                f'transfer {self.bag_transfer * per:.1f} ms ({self.bags} bags copied, '
+                f'{self.bag_transfer * 1e3 / max(1, self.bags):.1f} ms each; '
+                f'{self.bags_in_place} written in place by the workers); campaign '
                 f'process CPU {self.cpu * per:.1f} ms')
 
 
@@ -277,12 +281,17 @@ class RosEvaluator:
         process did not start (a user's stack, --external), what to check."""
         wanted = (', '.join(sorted(self.allowed)) if self.allowed is not None
                   else 'any <namespace>/evaluate, e.g. /w0/evaluate')
-        unused = sorted(name for name in self.evaluate_servers() if name not in ready
+        servers = self.evaluate_servers()
+        unused = sorted(name for name in servers if name not in ready
                         and (self.allowed is None or name in self.allowed))
+        others = sorted(name for name in servers
+                        if self.allowed is not None and name not in self.allowed)
         text = (f'only {len(ready)} of {count} simulator workers answered within '
                 f'{timeout:.0f} s (looked for {EVALUATE_TYPE} action servers: {wanted}; '
-                + (f'found but not ready or refused: {", ".join(unused)})' if unused
-                   else 'found none)'))
+                + (f'found but not ready or refused: {", ".join(unused)}' if unused
+                   else 'found none')
+                + (f'; not asked for, but running: {", ".join(others)}' if others else '')
+                + ')')
         if self.pool.pairs:  # workers we started: their logs say why
             return text
         return (f'{text}. Start a simulator beside your controller, e.g. `ros2 run sessgan_sim '
@@ -557,7 +566,8 @@ class RosEvaluator:
             return
         final = self.collect_into / job.environment.id
         if Path(metrics['bag_path']).resolve() == final.resolve():
-            return  # the worker writes into this campaign's bags root
+            self.overhead.bags_in_place += 1  # the worker writes into this campaign's root
+            return
         from sessgan_evolver.bag_collection import collect_bag
         from sessgan_evolver.remote_bags import RemoteBagSource
 

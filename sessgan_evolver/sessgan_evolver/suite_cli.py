@@ -14,27 +14,33 @@ depends on the machine, so each scenario runs 1 + --retries times and is pass, f
 build) is no result: it is run again, and after --harness-tries in a row the scenario is a
 harness error (JUnit <error>), never a pass or a fail.
 
-Exit codes: 0 every scenario passed (flaky ones too, unless --fail-on-flaky); 1 a scenario
-failed; 2 bad input (a missing bag, a bag of another scenario, malformed YAML, an empty
-suite: nothing is run or written); 3 a harness error and no failure; 130 interrupted (Ctrl-C:
-what ran is reported, the rest is marked not_run).
+Exit codes: 130 interrupted (Ctrl-C, SIGTERM: what ran is reported, the rest is marked
+not_run); else 0 every scenario passed (flaky ones too, unless --fail-on-flaky); 1 a scenario
+failed; 2 bad input (a missing, changed or cut-off bag, a bag of another scenario, malformed
+YAML, an empty suite, an output folder that is a file or that another run holds: nothing is
+run); 3 a harness error and no failure.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import fcntl
+import itertools
+import os
 import shlex
 import sys
 import time
 from collections.abc import Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import IO, Any, Literal
 
 from sessgan_core.config_cli import cli, parse_valid_config
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.progress import ProgressPrinter
 from sessgan_core.ros_spin import init_rclpy, run_command
+from sessgan_core.validation import ros_namespace
 from sessgan_evolver.errors import SessganEvolverError, SuiteError
 from sessgan_evolver.regression_suite import (
     EXIT_HARNESS,
@@ -45,9 +51,11 @@ from sessgan_evolver.regression_suite import (
     Suite,
     SuiteEntry,
     Verdict,
+    check_bags,
     classify,
     exit_code,
     load_suite_source,
+    unique_names,
     write_outputs,
 )
 from sessgan_gen.errors import SessganGenError
@@ -102,6 +110,7 @@ class SuiteConfig:
         if self.controller and self.external:
             raise SuiteError('--controller picks a built-in controller; with --external the '
                              'controller is the one running beside each simulator')
+        self.worker = tuple(ros_namespace('--worker', name, SuiteError) for name in self.worker)
 
 
 def parse_args(argv: Sequence[str]) -> SuiteConfig:
@@ -145,11 +154,16 @@ def prepare_in_process(entry: SuiteEntry, controller: str) -> tuple[PreparedEntr
 
     where = f'scenario {entry.name} ({entry.bag})'
     episode = entry.episode
+    built_in = ', '.join(sorted(CONTROLLERS))
+    if controller and controller not in CONTROLLERS:
+        raise SuiteError(f'--controller {controller!r} is not a built-in controller '
+                         f'({built_in}): to test your own, run the suite with --external '
+                         'beside it')
     name = controller or str(episode.get('controller') or '')
     if name not in CONTROLLERS:
         raise SuiteError(f'{where}: recorded with controller {name!r}, not a built-in one '
-                         f'({", ".join(sorted(CONTROLLERS))}): pass --controller or run it '
-                         'with --external beside your controller')
+                         f'({built_in}): pass --controller or run it with --external beside '
+                         'your controller')
     try:
         settings, notes = resimulation_settings(episode)
         environment = bag_environment(entry.bag, dict(episode))
@@ -171,6 +185,8 @@ class InProcessRunner:
     def __init__(self, record: str, bags_directory: Path) -> None:
         self.record = record
         self.bags_directory = bags_directory
+        self.bag_folders: dict[str, str] = {}
+        """Scenario name -> its folder under ``bags_directory`` (:func:`bag_folders`)."""
         self._evaluators: dict[tuple, Any] = {}
 
     def evaluator(self, prepared: PreparedEntry) -> Any:
@@ -194,7 +210,7 @@ class InProcessRunner:
         bag = ''
         if run.trace is not None and (self.record == 'all' or (
                 self.record == 'failures' and kind is AttemptKind.FAIL)):
-            directory = (self.bags_directory / safe_name(prepared.entry.name)
+            directory = (self.bags_directory / self.bag_folders[prepared.entry.name]
                          / f'attempt-{number}')
             bag = str(evaluator.write_bag(directory, prepared.environment, prepared.seed, run,
                                           f'suite scenario {prepared.entry.name}'))
@@ -218,11 +234,12 @@ def run_in_process(progresses: list[ScenarioProgress], prepared: list[PreparedEn
 # ---- external ----------------------------------------------------------------------------
 
 
-def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
-                 output: Path, report: Callable[[], None]) -> None:
+def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: Path,
+                 bags: str, folders: dict[str, str], report: Callable[[], None]) -> None:
     """Dispatch every scenario's attempts to the running simulators (the campaign's
     RosEvaluator: parallel, a worker that refuses or stalls gets the job taken away), in
-    rounds until every scenario has its verdict."""
+    rounds until every scenario has its verdict. The simulators record failures under
+    ``bags``/<scenario's folder>/attempt-N of their bags root."""
     import rclpy
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
@@ -253,8 +270,8 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
             goal.controller = 'external'  # stored with the bag: not the recorded controller
             # A directory per attempt: the simulator names a bag after the environment.
             goal.record_directory = (
-                f'suite-{safe_name(output.name)}/{safe_name(progresses[job.member].entry.name)}'
-                f'/attempt-{job.index}' if args.record != 'none' else '')
+                f'{bags}/{folders[progresses[job.member].entry.name]}/attempt-{job.index + 1}'
+                if args.record != 'none' else '')
             return goal
 
         def real_time_factor_scale(self, job) -> float:
@@ -271,7 +288,7 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig,
     try:
         evaluator = SuiteEvaluator(node, config, Path('suite'), 'external', supervisor, log)
         if args.worker:
-            evaluator.allowed = {f'{name.rstrip("/")}/evaluate' for name in args.worker}
+            evaluator.allowed = {f'{name}/evaluate' for name in args.worker}
         evaluator.wait_for_workers(1, timeout=60.0)
 
         def on_result(job, metrics: dict) -> None:
@@ -307,11 +324,50 @@ def main(argv: Sequence[str] | None = None) -> int:
     return run_command(lambda: run_suite(arguments))
 
 
+_RUNS = itertools.count(1)
+"""Suite runs in this process: with the time and the process id, a run's bag folder name."""
+
+
+def bag_folders(suite: Suite) -> dict[str, str]:
+    """Scenario name -> the folder its re-runs' bags go to: the name made safe for a path,
+    and distinct ('a/b' and 'a_b' would both be 'a_b')."""
+    names = [entry.name for entry in suite.entries]
+    return dict(zip(names, unique_names(safe_name(name) for name in names)))
+
+
+def lock_output(output: Path) -> IO[str]:
+    """Hold ``output`` for this run (the open lock file; closing it lets go). SuiteError when
+    it is a file, cannot be written, or another suite run holds it: two runs into one folder
+    would mix their reports and bags."""
+    if output.exists() and not output.is_dir():
+        raise SuiteError(f'--output-dir {output} is a file, not a folder')
+    try:
+        output.mkdir(parents=True, exist_ok=True)
+        handle = open(output / '.suite.lock', 'w')  # noqa: SIM115 (held for the whole run)
+    except OSError as err:
+        raise SuiteError(f'cannot write to --output-dir {output}: {err}') from err
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as err:
+        handle.close()
+        raise SuiteError(f'another suite run is writing to {output}: give this one another '
+                         '--output-dir') from err
+    return handle
+
+
 def run_suite(arguments: list[str]) -> int:
     args = parse_args(arguments)
     runner = InProcessRunner(args.record, Path())
+    with ExitStack() as held:
+        held.callback(runner.close)
+        return _run_suite(args, arguments, runner, held)
+
+
+def _run_suite(args: SuiteConfig, arguments: list[str], runner: InProcessRunner,
+               held: ExitStack) -> int:
     try:
         suite: Suite = load_suite_source(args.source)
+        check_bags(suite)
         prepared: list[PreparedEntry] = []
         if not args.external:
             for entry in suite.entries:
@@ -323,12 +379,16 @@ def run_suite(arguments: list[str]) -> int:
                 prepared.append(item)
                 for note in notes:
                     print(f'note: {note}', file=sys.stderr)
+        # Resolved: a simulator refuses to write a bag to a path with '..' in it.
+        output = (args.output_dir or Path('runs') / f'suite-{safe_name(suite.name)}').resolve()
+        held.enter_context(lock_output(output))
     except (SessganEvolverError, SessganCoreError, SessganGenError) as err:
-        runner.close()
         print(f'error: {err}', file=sys.stderr)
         return EXIT_USAGE
-    output = args.output_dir or Path('runs') / f'suite-{safe_name(suite.name)}'
-    runner.bags_directory = output / 'bags'
+    # This run's bags in a folder of their own: a report never points at another run's bag.
+    run_bags = f'{time.strftime("%Y%m%d-%H%M%S")}-{os.getpid()}-{next(_RUNS)}'
+    folders = bag_folders(suite)
+    runner.bags_directory, runner.bag_folders = output / 'bags' / run_bags, folders
     if not args.external and args.retries:
         print('note: in-process lockstep episodes are exact: each scenario runs once '
               '(--retries applies to --external)', file=sys.stderr)
@@ -338,8 +398,15 @@ def run_suite(arguments: list[str]) -> int:
     printer = ProgressPrinter()
     printer.start(f'suite {suite.name}', len(progresses))
 
+    told: set[str] = set()
+
     def report() -> None:
         done = [p for p in progresses if p.done]
+        for progress in done:
+            # A harness error's reason, at once: it is no verdict on the controller.
+            if progress.verdict is Verdict.ERROR and progress.entry.name not in told:
+                told.add(progress.entry.name)
+                printer.note(f'{progress.entry.name}: {progress.detail()}')
         counts = {v: sum(1 for p in done if p.verdict is v) for v in Verdict}
         printer.update(len(done), ', '.join(f'{counts[v]} {v.value}' for v in Verdict
                                             if counts[v]))
@@ -349,7 +416,8 @@ def run_suite(arguments: list[str]) -> int:
     status = None
     try:
         if args.external:
-            run_external(progresses, args, output, report)
+            run_external(progresses, args, output,
+                         f'suite-{safe_name(output.name)}-{run_bags}', folders, report)
         else:
             run_in_process(progresses, prepared, runner, report)
     except KeyboardInterrupt:

@@ -29,9 +29,10 @@ refuse a bag corrupted after it was written (``sessgan_evolver.bag_reading.verif
 A simulator writes only under the bags root it was started with: the record directory an
 evaluate goal names is a relative subdirectory of it (:func:`record_directory_under`).
 
-QoS recorded per topic (what ``ros2 bag play`` will offer on replay): ``map`` and
-``tf_static`` as reliable, transient local, keep last 1 (late subscribers still get the
-map and static transforms); every other topic reliable, volatile, keep last 10.
+QoS recorded per topic (what ``ros2 bag play`` will offer on replay): ``map``,
+``tf_static``, ``goal_pose`` and ``waypoints`` as reliable, transient local, keep last 1, as
+the simulator publishes them (late subscribers still get the map, the static transforms and
+the goal); every other topic reliable, volatile, keep last 10.
 """
 
 from __future__ import annotations
@@ -75,8 +76,9 @@ from sessgan_sim.errors import BagWriteError
 BAG_VERSION: Final[Literal[9]] = 9
 """rosbag2 metadata version; Jazzy's ``ros2 bag`` reads version 9."""
 
-TRANSIENT_LOCAL_TOPICS = frozenset({'map', 'tf_static'})
-"""Topic base names recorded as transient local (reliable, depth 1)."""
+TRANSIENT_LOCAL_TOPICS = frozenset({'map', 'tf_static', 'goal_pose', 'waypoints'})
+"""Topic base names recorded as transient local (reliable, depth 1), as the simulator
+publishes them (README, the topic contract)."""
 
 VOLATILE_DEPTH = 10
 """History depth recorded for the other (volatile) topics: rclpy's default depth."""

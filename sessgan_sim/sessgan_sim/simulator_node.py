@@ -23,8 +23,8 @@ mode maps), runs one episode at a time and answers with its metrics.
 
 Failure bags go only under ``bags_root`` (fixed at start-up): a goal's ``record_directory``
 must be a relative subdirectory of it (sessgan_sim.bag_recording.record_directory_under); a
-goal naming anything else (an absolute path, '..') is answered ``invalid_environment`` with the
-reason, and no episode runs.
+goal naming anything else (an absolute path, '..') is answered ``harness_error`` with the
+reason (the client's fault, never a test result), and no episode runs.
 """
 
 from __future__ import annotations
@@ -317,6 +317,13 @@ class SimulatorNode(Node):
             else:
                 episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
             return episode.metrics()
+        for index, channel in enumerate(stepper.channels):
+            writers = channel.commands.writers_in_graph()
+            if writers > 1:  # a stack left running beside the one under test, say
+                self.get_logger().warning(
+                    f'{stepper.who(index)}{writers} nodes publish on '
+                    f'{channel.commands.topic}: more than one controller drives the robot, '
+                    'and this episode mixes their commands')
         start_ns = clock.stamp_ns(0.0)
         for channel, robot in zip(stepper.channels, episode.robots, strict=True):
             channel.topics.publish_world(environment, robot.ride_height, robot.sensor_height,

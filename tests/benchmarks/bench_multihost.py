@@ -39,8 +39,8 @@ from tests.multihost.network_namespaces import (  # noqa: E402
 )
 
 OVERHEAD = re.compile(r'campaign overhead per episode \((\d+) episodes\): generator ([\d.]+) '
-                      r'ms, dispatch ([\d.]+) ms, bag transfer ([\d.]+) ms \((\d+) bags, '
-                      r'[\d.]+ ms each\); '
+                      r'ms, dispatch ([\d.]+) ms, bag transfer ([\d.]+) ms \((\d+) bags '
+                      r'copied, [\d.]+ ms each; \d+ written in place by the workers\); '
                       r'campaign process CPU ([\d.]+) ms')
 DONE = re.compile(r'done in [\d.]+ min: .* in (\d+) episodes')
 FIRST_RESULT = 'generation 0'

@@ -60,7 +60,9 @@ def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, 
         'pass:goal_reached pass:goal_reached'), props
     # The straight line of an empty room is shorter than the certified route's grid steps.
     assert props['success'] == '1' and float(props['path_length_ratio']) > 0.5
-    assert not (tmp_path / 'sim' / 'suite-fixed').exists()  # --record failures
+    # --record failures: no bag of a pass. The blind run's bags were its own run's folder.
+    assert not list((tmp_path / 'sim').glob('suite-fixed-*'))
+    assert len(list((tmp_path / 'sim').glob('suite-blind-*'))) == 1
 
 
 def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error(
@@ -90,6 +92,9 @@ def test_a_fault_that_shows_now_and_then_is_flaky_and_silence_is_a_harness_error
     assert (counts['failures'], counts['errors']) == ('0', '1')
     assert props['verdict'] == 'error' and props['attempt_outcomes'] == (
         'harness:controller_unresponsive harness:controller_unresponsive'), props
+    # The console says why, not only the JUnit file.
+    assert 'harness error: no result in 2 attempt(s), last controller_unresponsive' in (
+        silent.stderr), silent.stderr[-3000:]
     assert not (tmp_path / 'sim').exists() or not list((tmp_path / 'sim').rglob('episode.json'))
 
 
@@ -126,3 +131,16 @@ def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, roo
     assert suite_element is not None
     skipped = int(suite_element.get('skipped') or 0)
     assert 0 < skipped < count and suite_element.get('failures') == '0', suite_element.attrib
+
+
+def test_a_second_controller_driving_the_robot_is_warned_about(node_processes, room_bag,
+                                                               tmp_path):
+    """Two stacks left running under one worker both drive its robot: the simulator's log
+    says so (a user's mixed results had no other trace)."""
+    simulator = start_simulator(node_processes, '/w0', 'dummy_agents:=0',
+                                f'bags_root:={tmp_path / "sim"}')
+    start_external(node_processes, '/w0', name='first_stack')
+    start_external(node_processes, '/w0', name='second_stack')
+    suite(str(room_bag), '--external', '--output', str(tmp_path / 'out'))
+    simulator.wait_for_output(r'2 nodes publish on /w0/cmd_vel: more than one controller',
+                              timeout=60)

@@ -206,6 +206,11 @@ def test_without_digests_the_chunk_crcs_still_catch_the_corruption(bag, capsys):
     assert 'warning:' in err and 'checksum mismatch' in err
 
 
+def test_a_bag_without_episode_json_says_so(bag):
+    (bag / 'episode.json').unlink()  # replayable, but nothing to check its files against
+    assert 'has no episode.json' in verify_bag_files(bag)
+
+
 def test_a_changed_side_file_is_refused(bag):
     (bag / 'map.yaml').write_text((bag / 'map.yaml').read_text().replace('0.5', '0.25'))
     with pytest.raises(BagReadError, match='map.yaml'):

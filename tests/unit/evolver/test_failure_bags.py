@@ -140,7 +140,8 @@ def test_write_then_read_returns_every_message_unchanged(tmp_path, storage):
     assert set(by_topic) == {'/map', '/tf_static', '/goal_pose', '/clock', '/scan', '/odom',
                              '/tf', '/cmd_vel'}
     assert by_topic['/scan'].message_count == 3 and by_topic['/map'].message_count == 1
-    for latched in ('/map', '/tf_static'):
+    # As the simulator publishes them: a late reader still gets the map and the goal.
+    for latched in ('/map', '/tf_static', '/goal_pose'):
         assert by_topic[latched].durability == 'transient_local'
         assert by_topic[latched].reliability == 'reliable' and by_topic[latched].depth == 1
     assert by_topic['/scan'].durability == 'volatile'

@@ -41,3 +41,13 @@ def test_a_run_directory_with_a_file_is_kept(tmp_path):
     (run / 'logs' / 'generator.log').unlink()
     campaign_cli.remove_if_empty(run)
     assert not run.exists()
+
+
+def test_a_worker_not_asked_for_is_named():
+    """--worker /w1 with /w0 up: the message says /w0 runs but was not asked for."""
+    evaluator = object.__new__(RosEvaluator)
+    evaluator.allowed = {'/w1/evaluate'}
+    evaluator.evaluate_servers = lambda: ['/w0/evaluate']
+    evaluator.pool = type('Pool', (), {'pairs': [None]})()
+    text = evaluator.missing_workers(1, [], 60.0)
+    assert '/w1/evaluate; found none; not asked for, but running: /w0/evaluate)' in text

@@ -118,6 +118,8 @@ def test_exit_codes():
     assert exit_code([finished(['pass']), finished(['harness'])]) == 3
     assert exit_code([finished(['fail']), finished(['harness'])]) == 1
     assert exit_code([finished(['pass'])], interrupted=True) == 130
+    # An interrupted run is incomplete whatever it saw: CI tells it from a regression.
+    assert exit_code([finished(['fail'])], interrupted=True) == 130
 
 
 def test_junit_counts_and_elements():
@@ -177,6 +179,9 @@ def write_yaml(path: Path, document) -> Path:
     ({'scenarios': [{'name': 'z'}]}, r'scenario 1 \(z\): field "bag"'),
     ({'scenarios': [{'bag': '{bag}', 'bogus': 1}]}, r"scenario 1: unknown field\(s\) \['bogus'\]"),
     ({'format': 9, 'scenarios': [{'bag': '{bag}'}]}, 'format 9 is not supported'),
+    ({'scenarios': [{'bag': '{bag}', 'expected': {'outcome': 'teleported'}}]},
+     r"scenario 1: expected outcome 'teleported' is none of collision_limit, goal_reached, "
+     'stuck, timeout'),
     ({'scenarios': [{'bag': '{bag}'}, {'bag': '{bag}'}]}, 'scenario 2.*used twice'),
 ])
 def test_bad_suites_are_refused_naming_the_entry(failure_bag, tmp_path, document, message):
@@ -199,7 +204,8 @@ def test_a_controller_that_cannot_drive_the_recorded_robot_is_refused(failure_ba
     assert not output.exists()
     assert suite_cli.main([str(failure_bag), '--controller', 'no_such', '--output',
                            str(output)]) == 2
-    assert 'not a built-in one' in capsys.readouterr().err
+    # It names what was given, not the bag's recorded controller.
+    assert "--controller 'no_such' is not a built-in controller" in capsys.readouterr().err
 
 
 def test_an_empty_bag_directory_and_a_missing_source_are_refused(tmp_path):
@@ -290,8 +296,8 @@ def test_ctrl_c_reports_what_ran(failure_bag, tmp_path, monkeypatch):
 
     monkeypatch.setattr(suite_cli.InProcessRunner, 'run', interrupted_run)
     output = tmp_path / 'out'
-    # The failure that ran decides the exit code; the rest is reported as not run.
-    assert suite_cli.main([str(suite_file), '--output', str(output), '--record', 'none']) == 1
+    # 130, not the failure's 1: the run is incomplete. What ran is reported, the rest not run.
+    assert suite_cli.main([str(suite_file), '--output', str(output), '--record', 'none']) == 130
     counts, cases = read_junit(output)
     assert (counts['tests'], counts['failures'], counts['skipped']) == ('2', '1', '1')
     assert cases['first']['verdict'] == 'fail' and cases['second']['verdict'] == 'not_run'
@@ -359,3 +365,57 @@ def test_mission_and_fleet_bags_rerun_exactly_in_process(tmp_path):
         assert props['verdict'] == 'fail' and props['outcome'] == recorded[name]['outcome']
         assert int(props['ticks']) == recorded[name]['ticks']
         assert float(props['path_length']) == recorded[name]['distance_travelled']
+
+
+def test_the_output_folder_is_resolved_locked_and_each_run_keeps_its_own_bags(
+        failure_bag, tmp_path, monkeypatch, capsys):
+    suite_file = write_yaml(tmp_path / 'suite.yaml', {'name': 'clash', 'scenarios': [
+        {'name': 'a/b', 'bag': str(failure_bag)}, {'name': 'a_b', 'bag': str(failure_bag)}]})
+    (tmp_path / 'work').mkdir()
+    monkeypatch.chdir(tmp_path / 'work')
+    # '..' in a relative folder: resolved, not refused by the bag writer half-way.
+    assert suite_cli.main([str(suite_file), '--output-dir', '../ci']) == 1
+    _, first = read_junit(tmp_path / 'ci')
+    bags = {name: Path(props['bag']) for name, props in first.items()}
+    # Names that clash once made safe for a path still get a folder each.
+    assert len({bag.parent for bag in bags.values()}) == 2
+    assert all((bag / 'episode.json').is_file() for bag in bags.values())
+    # A second run into the same folder leaves the first one's bags as they were.
+    assert suite_cli.main([str(suite_file), '--output-dir', '../ci']) == 1
+    _, second = read_junit(tmp_path / 'ci')
+    assert all(Path(props['bag']) != bags[name] for name, props in second.items())
+    assert all((bag / 'episode.json').is_file() for bag in bags.values())
+    # Another run holding the folder, or a file in its place: refused, nothing run.
+    capsys.readouterr()
+    with suite_cli.lock_output(tmp_path / 'ci'):
+        assert suite_cli.main([str(suite_file), '--output-dir', '../ci']) == 2
+    assert 'another suite run is writing to' in capsys.readouterr().err
+    (tmp_path / 'afile').write_text('x')
+    assert suite_cli.main([str(suite_file), '--output-dir', '../afile']) == 2
+    assert 'is a file, not a folder' in capsys.readouterr().err
+
+
+def test_a_bag_changed_since_it_was_written_is_refused(failure_bag, tmp_path, capsys):
+    import shutil
+
+    bag = tmp_path / 'bag'
+    shutil.copytree(failure_bag, bag)
+    mcap = next(bag.glob('*.mcap'))
+    mcap.write_bytes(mcap.read_bytes()[:mcap.stat().st_size // 2])
+    output = tmp_path / 'out'
+    assert suite_cli.main([str(bag), '--output-dir', str(output)]) == 2
+    assert f'scenario bag: bag {bag} is incomplete or corrupt' in capsys.readouterr().err
+    assert not output.exists()
+
+
+@pytest.mark.parametrize('given, worker', [('w0', '/w0'), ('/w1/', '/w1'), ('/a/b', '/a/b')])
+def test_worker_names_are_namespaces(given, worker):
+    assert suite_cli.parse_args(['x', '--external', '--worker', given]).worker == (worker,)
+
+
+@pytest.mark.parametrize('given', ['/w0/../w0', '//w0', '0w', 'w 0', '/'])
+def test_a_worker_that_is_no_namespace_is_refused(given, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        suite_cli.parse_args(['x', '--external', '--worker', given])
+    assert exit_info.value.code == 2
+    assert '--worker must be a ROS namespace such as /w0' in capsys.readouterr().err

@@ -34,13 +34,13 @@ def require_non_negative(name: str, value: object, error: type[Exception] = Valu
         raise error(f'{name} must be >= 0{unit}, got {_shown(value)}')
 
 
-_NAMESPACE = re.compile(r'/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*/?')
+_NAMESPACE = re.compile(r'/|/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*/?')
 
 
 def ros_namespace(name: str, value: str, error: type[Exception] = ValueError) -> str:
-    """``value`` as an absolute ROS namespace ('w0' and '/w0/' are '/w0'); ``error`` naming
-    ``name`` unless it is one (tokens of letters, digits and '_', not starting with a digit:
-    no '..', no '//')."""
+    """``value`` as an absolute ROS namespace ('w0' and '/w0/' are '/w0', '/' the root);
+    ``error`` naming ``name`` unless it is one (tokens of letters, digits and '_', not
+    starting with a digit: no '..', no '//')."""
     if not _NAMESPACE.fullmatch(value):
         raise error(f'{name} must be a ROS namespace such as /w0, got {value!r}')
     return '/' + value.strip('/')

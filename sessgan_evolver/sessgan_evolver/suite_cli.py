@@ -288,7 +288,7 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: 
     try:
         evaluator = SuiteEvaluator(node, config, Path('suite'), 'external', supervisor, log)
         if args.worker:
-            evaluator.allowed = {f'{name}/evaluate' for name in args.worker}
+            evaluator.allowed = {f'{name.rstrip("/")}/evaluate' for name in args.worker}
         evaluator.wait_for_workers(1, timeout=60.0)
 
         def on_result(job, metrics: dict) -> None:

@@ -266,3 +266,12 @@ def test_digests_survive_reading_and_catch_flipped_bytes_in_either_storage(tmp_p
     flip_middle(storage_file)
     with pytest.raises(BagReadError, match=f'SHA-256 digest of {storage_file} is'):
         verify_bag_files(bag)
+
+
+def test_replay_takes_namespaces_and_refuses_what_is_none(capsys):
+    args = replay_cli.parse_args(['bag', '--worker', 'w0', '--namespace', '/robot/'])
+    assert (args.worker, args.namespace) == ('/w0', '/robot')
+    with pytest.raises(SystemExit) as exit_info:
+        replay_cli.parse_args(['bag', '--worker', '/w0/../w0'])
+    assert exit_info.value.code == 2
+    assert '--worker must be a ROS namespace such as /w0' in capsys.readouterr().err

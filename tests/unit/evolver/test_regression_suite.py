@@ -408,12 +408,13 @@ def test_a_bag_changed_since_it_was_written_is_refused(failure_bag, tmp_path, ca
     assert not output.exists()
 
 
-@pytest.mark.parametrize('given, worker', [('w0', '/w0'), ('/w1/', '/w1'), ('/a/b', '/a/b')])
+@pytest.mark.parametrize('given, worker', [('w0', '/w0'), ('/w1/', '/w1'), ('/a/b', '/a/b'),
+                                           ('/', '/')])
 def test_worker_names_are_namespaces(given, worker):
     assert suite_cli.parse_args(['x', '--external', '--worker', given]).worker == (worker,)
 
 
-@pytest.mark.parametrize('given', ['/w0/../w0', '//w0', '0w', 'w 0', '/'])
+@pytest.mark.parametrize('given', ['/w0/../w0', '//w0', '0w', 'w 0', 'a-b'])
 def test_a_worker_that_is_no_namespace_is_refused(given, capsys):
     with pytest.raises(SystemExit) as exit_info:
         suite_cli.parse_args(['x', '--external', '--worker', given])

@@ -559,12 +559,19 @@ class RosEvaluator:
             return None
         return 'left the ROS graph during the episode (its host or processes are gone)'
 
+    def bag_places(self, job: EpisodeJob) -> tuple[str, Path]:
+        """Where the failure bag of ``job`` is: its folder under a worker's bags root (the
+        goal's record directory), and the folder here it is collected into."""
+        assert self.collect_into is not None
+        return str(self.record_directory), self.collect_into
+
     def collect_bag(self, name: str, job: EpisodeJob, metrics: dict) -> None:
         """Copy the failure bag of a result into ``collect_into`` (verified:
         sessgan_evolver.bag_collection) and point ``metrics['bag_path']`` at the copy."""
         if self.collect_into is None or not metrics.get('bag_path'):
             return
-        final = self.collect_into / job.environment.id
+        remote, local = self.bag_places(job)
+        final = local / job.environment.id
         if Path(metrics['bag_path']).resolve() == final.resolve():
             self.overhead.bags_in_place += 1  # the worker writes into this campaign's root
             return
@@ -576,8 +583,8 @@ class RosEvaluator:
             self.bag_sources[namespace] = RemoteBagSource(self.node, namespace, self.spin)
         started = time.monotonic()
         metrics['bag_path'] = str(collect_bag(
-            self.bag_sources[namespace], f'{self.record_directory}/{job.environment.id}',
-            self.collect_into, remove=self.remove_collected))
+            self.bag_sources[namespace], f'{remote}/{job.environment.id}', local,
+            remove=self.remove_collected))
         seconds = time.monotonic() - started
         self.overhead.bag_transfer += seconds
         self.overhead.bags += 1

@@ -235,11 +235,12 @@ def run_in_process(progresses: list[ScenarioProgress], prepared: list[PreparedEn
 
 
 def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: Path,
-                 bags: str, folders: dict[str, str], report: Callable[[], None]) -> None:
+                 run_bags: str, folders: dict[str, str], report: Callable[[], None]) -> None:
     """Dispatch every scenario's attempts to the running simulators (the campaign's
     RosEvaluator: parallel, a worker that refuses or stalls gets the job taken away), in
     rounds until every scenario has its verdict. The simulators record failures under
-    ``bags``/<scenario's folder>/attempt-N of their bags root."""
+    suite-<output's name>-``run_bags``/<scenario's folder>/attempt-N of their bags root; each
+    is copied to <output>/bags/``run_bags``/<scenario's folder>/attempt-N/<environment id>."""
     import rclpy
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
@@ -248,6 +249,7 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: 
     from sessgan_evolver.replay_cli import bag_environment
     from sessgan_evolver.ros_evaluator import RosEvaluator
 
+    bags = f'suite-{safe_name(output.name)}-{run_bags}'
     environments = []
     for progress in progresses:
         try:
@@ -269,10 +271,12 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: 
             goal.robot = str(episode.get('robot') or '')
             goal.controller = 'external'  # stored with the bag: not the recorded controller
             # A directory per attempt: the simulator names a bag after the environment.
-            goal.record_directory = (
-                f'{bags}/{folders[progresses[job.member].entry.name]}/attempt-{job.index + 1}'
-                if args.record != 'none' else '')
+            goal.record_directory = self.bag_places(job)[0] if args.record != 'none' else ''
             return goal
+
+        def bag_places(self, job) -> tuple[str, Path]:
+            attempt = f'{folders[progresses[job.member].entry.name]}/attempt-{job.index + 1}'
+            return f'{bags}/{attempt}', output / 'bags' / run_bags / attempt
 
         def real_time_factor_scale(self, job) -> float:
             if not args.adaptive_rtf:
@@ -287,6 +291,9 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: 
     supervisor = ProcessSupervisor(output / 'logs')
     try:
         evaluator = SuiteEvaluator(node, config, Path('suite'), 'external', supervisor, log)
+        # Copied here over ROS, verified, as a campaign collects its bags: the report points at
+        # the copy, also when the simulators run on other machines.
+        evaluator.collect_into = output / 'bags' / run_bags
         if args.worker:
             evaluator.allowed = {f'{name.rstrip("/")}/evaluate' for name in args.worker}
         evaluator.wait_for_workers(1, timeout=60.0)
@@ -416,8 +423,7 @@ def _run_suite(args: SuiteConfig, arguments: list[str], runner: InProcessRunner,
     status = None
     try:
         if args.external:
-            run_external(progresses, args, output,
-                         f'suite-{safe_name(output.name)}-{run_bags}', folders, report)
+            run_external(progresses, args, output, run_bags, folders, report)
         else:
             run_in_process(progresses, prepared, runner, report)
     except KeyboardInterrupt:

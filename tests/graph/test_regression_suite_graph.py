@@ -45,8 +45,11 @@ def test_external_controller_fails_the_suite_and_its_fix_passes(node_processes, 
     assert (counts['tests'], counts['failures'], counts['errors']) == ('1', '1', '0')
     assert props['verdict'] == 'fail' and props['attempts'] == '2', props
     assert props['attempt_outcomes'].count('fail:') == 2, props
-    assert Path(props['bag']).is_dir() and Path(props['bag']).is_relative_to(tmp_path / 'sim')
-    assert len(list((tmp_path / 'sim').rglob('episode.json'))) == 2  # a bag per attempt
+    # A bag per attempt, written by the simulator and copied into the output over ROS.
+    assert len(list((tmp_path / 'sim').rglob('episode.json'))) == 2
+    assert Path(props['bag']).is_dir() and Path(props['bag']).is_relative_to(
+        tmp_path / 'blind' / 'bags')
+    assert len(list((tmp_path / 'blind' / 'bags').rglob('episode.json'))) == 2
 
     os.killpg(blind.process.pid, signal.SIGINT)
     blind.process.wait(timeout=15)

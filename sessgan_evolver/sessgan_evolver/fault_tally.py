@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,8 +51,9 @@ UNPLACED = '?'
 
 
 def trace_from_bag(bag: str | Path) -> tuple[EpisodeTrace, dict[str, Any]]:
-    """The robot's path (odometry; a fleet's robot r0) as a trace, and the episode.json
-    metrics (with the contact events) of a failure bag. BagReadError if it holds neither."""
+    """The robot's path (odometry; a fleet's r0, with r1, r2, ... as its ``fleet``) as a
+    trace, and the episode.json metrics (with the contact events) of a failure bag.
+    BagReadError if it holds neither."""
     episode = read_episode_json(bag) or {}
     metrics = episode.get('metrics')
     if not isinstance(metrics, dict):
@@ -66,15 +68,19 @@ def trace_from_bag(bag: str | Path) -> tuple[EpisodeTrace, dict[str, Any]]:
         paths.setdefault(message.topic, []).append(
             (float(stamp.sec) + 1e-9 * float(stamp.nanosec),
              float(odom.pose.pose.position.x), float(odom.pose.pose.position.y)))
-    rows = next((path for topic, path in paths.items() if topic.endswith('/r0/odom')),
-                next(iter(paths.values()), []))
-    if not rows:
+    fleet = sorted((int(match.group(1)), topic) for topic in paths
+                   if (match := re.search(r'/r(\d+)/odom$', topic)))
+    topics = [topic for _, topic in fleet] or list(paths)[:1]
+    if not topics:
         raise BagReadError(f'bag {bag} has no odometry')
-    table = np.asarray(rows, dtype=float)
-    poses = np.column_stack([table[:, 1:3], np.zeros(len(table))])
-    trace = EpisodeTrace(times=table[:, 0], poses=poses, twists=np.zeros((len(table), 3)),
-                         commands=np.zeros((max(len(table) - 1, 0), 4)),
-                         agents=np.zeros((len(table), 0, 2)))
+    traces = []
+    for topic in topics:
+        table = np.asarray(paths[topic], dtype=float)
+        traces.append(EpisodeTrace(
+            times=table[:, 0], poses=np.column_stack([table[:, 1:3], np.zeros(len(table))]),
+            twists=np.zeros((len(table), 3)), commands=np.zeros((max(len(table) - 1, 0), 4)),
+            agents=np.zeros((len(table), 0, 2))))
+    trace, trace.fleet = traces[0], traces[1:]
     return trace, metrics
 
 

@@ -8,9 +8,10 @@ driving into a robot that stood still is recorded but is no failure.
 
 **Distinct faults.** A valid failure's *fault* is its first fault event: the first contact
 the robot caused (kind ``collision_static`` against a wall, barrier or low obstacle,
-``collision_agent`` when it moved into an agent; at the robot's position when the contact
-began), or, without one, where the robot ended (kind ``stuck`` or ``timeout``). Two valid
-failures are the same fault when
+``collision_agent`` when it moved into an agent, ``collision_robot`` when a robot of a fleet
+moved into another; at that robot's position when the contact began), or, without one, where
+the robot ended (kind ``stuck`` or ``timeout``; in a fleet the robot the episode's outcome
+comes from). Two valid failures are the same fault when
 
 1. their kinds are equal,
 2. their fault places fall into the same coarse cell (squares of ``FaultRule.coarse_cells``
@@ -115,13 +116,16 @@ class FaultEvent:
 
 
 FAULT_KIND_OF_CONTACT = {ContactKind.STATIC.value: 'collision_static',
-                         ContactKind.ROBOT_INTO_AGENT.value: 'collision_agent'}
-"""Fault kinds of the contact kinds that are the robot's fault."""
+                         ContactKind.ROBOT_INTO_AGENT.value: 'collision_agent',
+                         ContactKind.ROBOT_INTO_ROBOT.value: 'collision_robot'}
+"""Fault kinds of the contact kinds that are the robot's fault (sessgan_sim.metrics:
+every kind but those in NOT_FAULT_KINDS)."""
 
 
 def first_fault_event(metrics: Mapping[str, Any], trace: EpisodeTrace) -> FaultEvent:
-    """The first contact the robot caused (from the metrics' contact events), else where the
-    robot ended (kind = the outcome)."""
+    """The first contact a robot under test caused (from the metrics' contact events, at
+    that robot's place), else where the failing robot ended (kind = the outcome): in a fleet
+    the robot the episode's outcome comes from (``failed_leg``), else the one robot."""
     for contact in metrics.get('contacts') or ():
         kind = FAULT_KIND_OF_CONTACT.get(str(contact.get('kind')))
         if kind is not None:
@@ -130,10 +134,15 @@ def first_fault_event(metrics: Mapping[str, Any], trace: EpisodeTrace) -> FaultE
     if int(metrics.get('fault_collisions') or 0) > 0:
         raise FaultError('the metrics count a fault collision but list no contact event the '
                          'robot caused')
-    if not len(trace.poses):
+    robot = int(metrics.get('failed_leg', -1)) if trace.fleet else 0
+    if robot > len(trace.fleet):
+        raise FaultError(f'the metrics name robot r{robot} as failing, the trace has '
+                         f'{len(trace.fleet) + 1} robots')
+    ended = trace.fleet[robot - 1] if robot > 0 else trace
+    if not len(ended.poses):
         raise FaultError('the trace has no robot pose')
-    x, y, _ = (float(v) for v in trace.poses[-1])
-    return FaultEvent(str(metrics.get('outcome')), x, y, float(trace.times[-1]))
+    x, y, _ = (float(v) for v in ended.poses[-1])
+    return FaultEvent(str(metrics.get('outcome')), x, y, float(ended.times[-1]))
 
 
 def fault_key(environment: Environment, event: FaultEvent, rule: FaultRule) -> FaultKey:

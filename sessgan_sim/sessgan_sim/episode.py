@@ -650,11 +650,12 @@ class Episode:
 
     def _fleet_outcome(self) -> tuple[Outcome | None, int]:
         """The episode's outcome and the index of the robot it comes from (-1: every robot
-        reached its goal): the earliest-ending robot that did not reach its goal, or
-        a robot with a fault collision (then collision_limit's or the goal's outcome)."""
+        reached its goal without a fault): the earliest-ending robot that did not reach its
+        goal, else the earliest-ending one with a fault collision (then the goal's outcome):
+        an episode where a robot timed out does not read goal_reached."""
         records = self._records
-        failing = [record for record in records if record.outcome is not Outcome.GOAL_REACHED
-                   or record.recorder.fault_collisions]
+        failing = ([record for record in records if record.outcome is not Outcome.GOAL_REACHED]
+                   or [record for record in records if record.recorder.fault_collisions])
         if not failing:
             return (records[0].outcome, -1) if records else (None, -1)
         first = min(failing, key=lambda record: (record.ticks, record.index))

@@ -72,6 +72,23 @@ def test_the_first_fault_event_is_the_first_contact_the_robot_caused(example):
         first_fault_event(broken, trace())
 
 
+def test_a_fleet_fault_is_placed_at_the_robot_that_failed():
+    # A robot of a fleet that moved into another: its fault (a campaign stopped on it).
+    bump = contact('robot_into_robot', 2.0, 3.0, 0.7)
+    assert first_fault_event(metrics('goal_reached', [bump]), trace()) == \
+        FaultEvent('collision_robot', 2.0, 3.0, 0.7)
+    # Without a contact, where the robot the outcome comes from ended, not r0.
+    fleet = trace(end=(3.0, 4.0))
+    fleet.fleet = [trace(end=(6.0, 7.5)), trace(end=(1.0, 1.5))]
+    stuck = {**metrics('stuck'), 'failed_leg': 1}
+    assert first_fault_event(stuck, fleet) == FaultEvent('stuck', 6.0, 7.5, 0.05)
+    assert first_fault_event({**stuck, 'failed_leg': 0}, fleet).x == 3.0
+    with pytest.raises(FaultError, match='name robot r5 as failing, the trace has 3 robots'):
+        first_fault_event({**stuck, 'failed_leg': 5}, fleet)
+    # A mission's failed_leg is a leg, not a robot: one robot, its own end.
+    assert first_fault_event({**stuck, 'failed_leg': 2}, trace(end=(8.0, 1.0))).x == 8.0
+
+
 def test_same_kind_place_and_surroundings_is_one_fault(example):
     environment = make_environment(example, 'factory', 'a')
     rule = FaultRule()

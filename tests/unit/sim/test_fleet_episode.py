@@ -152,3 +152,22 @@ def test_the_same_seed_gives_the_same_fleet_episode(episode):
         results.append((episode.metrics().to_dict(), np.array(scans)))
     assert results[0][0] == results[1][0]
     np.testing.assert_array_equal(results[0][1], results[1][1])
+
+
+def test_a_fleet_where_a_robot_timed_out_does_not_read_goal_reached():
+    """r0 reached its goal early after a fault collision, r1 timed out later: the episode's
+    outcome is r1's timeout (it read goal_reached, from r0, though a robot never arrived)."""
+    from types import SimpleNamespace
+
+    def record(index, outcome, ticks, faults):
+        return SimpleNamespace(index=index, outcome=outcome, ticks=ticks,
+                               recorder=SimpleNamespace(fault_collisions=faults))
+
+    fleet = object.__new__(Episode)
+    fleet._records = [record(0, Outcome.GOAL_REACHED, 100, 1),
+                      record(1, Outcome.TIMEOUT, 600, 0)]
+    assert fleet._fleet_outcome() == (Outcome.TIMEOUT, 1)
+    fleet._records[1] = record(1, Outcome.GOAL_REACHED, 300, 0)
+    assert fleet._fleet_outcome() == (Outcome.GOAL_REACHED, 0)  # the fault collision's robot
+    fleet._records[0] = record(0, Outcome.GOAL_REACHED, 100, 0)
+    assert fleet._fleet_outcome() == (Outcome.GOAL_REACHED, -1)

@@ -7,9 +7,11 @@ and is renamed over the target (``os.replace`` is atomic within a file system).
 
 from __future__ import annotations
 
+import fcntl
 import os
 import tempfile
 from pathlib import Path
+from typing import IO
 
 TEMPORARY_MARK = '.tmp-'
 """Temporary files are named ``.<target name>.tmp-<random>`` (hidden, recognisable)."""
@@ -56,3 +58,18 @@ def fsync_tree(directory: str | os.PathLike) -> None:
             with path.open('rb') as handle:
                 os.fsync(handle.fileno())
     fsync_directory(directory)
+
+
+def lock_folder(folder: str | os.PathLike, name: str = '.lock') -> IO[str] | None:
+    """Hold ``folder`` (made if missing) for this process: its open lock file ``name``,
+    whose closing (or the process's end) lets go; None when another process holds it. Two
+    writers of one run or report folder would mix their files."""
+    path = Path(folder)
+    path.mkdir(parents=True, exist_ok=True)
+    handle = open(path / name, 'a')  # noqa: SIM115 (held until the caller closes it)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.close()
+        return None
+    return handle

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from sessgan_core.atomic_files import lock_folder
 from sessgan_core.config_cli import add_config_arguments, build_parser, config_from_namespace
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
@@ -182,9 +183,16 @@ def run_campaign(argv: list[str]) -> int:
     except OSError as err:  # the run directory cannot be made
         print(f'error: {err}', file=sys.stderr)
         return 1
+    # Held until the campaign ends: two campaigns in one run would interleave their rows.
+    held = lock_folder(campaign.store.run_dir, RUN_LOCK)
+    if held is None:
+        print(f'error: run {run_name!r} is in use by another campaign ({campaign.store.run_dir})'
+              ': give this one another --run, or wait for that one to end', file=sys.stderr)
+        return 2
     try:  # before any process starts: a resume with other settings than the run's
         campaign.store.check_config(campaign.config.to_dict(), config.seed)
     except RunStoreError as err:
+        held.close()
         print(f'error: {err}', file=sys.stderr)
         return 2
 
@@ -199,6 +207,12 @@ def run_campaign(argv: list[str]) -> int:
         log('interrupted: stopping every process this campaign started (continue later with: '
             f'{resume})')
         return INTERRUPTED_STATUS
+    finally:
+        held.close()
+
+
+RUN_LOCK = '.campaign.lock'
+"""The file in a run folder a running campaign holds (sessgan_core.atomic_files.lock_folder)."""
 
 
 def resume_command(argv: Sequence[str], run_name: str) -> str:
@@ -261,9 +275,11 @@ def run_with_ros(campaign: Campaign | MethodCampaign, config: CampaignConfig, co
 
 
 def remove_if_empty(directory: Path) -> None:
-    """Remove ``directory`` when nothing but empty folders is below it (the run directory,
-    checkpoints/ and logs/ are made up front): a campaign that wrote nothing leaves nothing."""
-    if directory.is_dir() and all(path.is_dir() for path in directory.rglob('*')):
+    """Remove ``directory`` when nothing but empty folders and the campaign's lock file is
+    below it (the run directory, checkpoints/ and logs/ are made up front): a campaign that
+    wrote nothing leaves nothing."""
+    if directory.is_dir() and all(path.is_dir() or path.name == RUN_LOCK
+                                  for path in directory.rglob('*')):
         shutil.rmtree(directory, ignore_errors=True)
 
 

@@ -24,7 +24,6 @@ run); 3 a harness error and no failure.
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import itertools
 import os
 import shlex
@@ -36,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Literal
 
+from sessgan_core.atomic_files import lock_folder
 from sessgan_core.config_cli import cli, parse_valid_config
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.progress import ProgressPrinter
@@ -349,16 +349,12 @@ def lock_output(output: Path) -> IO[str]:
     if output.exists() and not output.is_dir():
         raise SuiteError(f'--output-dir {output} is a file, not a folder')
     try:
-        output.mkdir(parents=True, exist_ok=True)
-        handle = open(output / '.suite.lock', 'w')  # noqa: SIM115 (held for the whole run)
+        handle = lock_folder(output, '.suite.lock')
     except OSError as err:
         raise SuiteError(f'cannot write to --output-dir {output}: {err}') from err
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError as err:
-        handle.close()
+    if handle is None:
         raise SuiteError(f'another suite run is writing to {output}: give this one another '
-                         '--output-dir') from err
+                         '--output-dir')
     return handle
 
 

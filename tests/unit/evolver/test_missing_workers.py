@@ -51,3 +51,24 @@ def test_a_worker_not_asked_for_is_named():
     evaluator.pool = type('Pool', (), {'pairs': [None]})()
     text = evaluator.missing_workers(1, [], 60.0)
     assert '/w1/evaluate; found none; not asked for, but running: /w0/evaluate)' in text
+
+
+def test_a_run_another_campaign_holds_is_refused_before_anything_runs(tmp_path, capsys):
+    """Two campaigns started at once with one --run both ran and interleaved their rows."""
+    from sessgan_core.atomic_files import lock_folder
+
+    runs = tmp_path / 'runs'
+    held = lock_folder(runs / 'dup', campaign_cli.RUN_LOCK)
+    assert held is not None
+    try:
+        status = campaign_cli.run_campaign([
+            '--in-process', '--method', 'random', '--budget', '2', '--run', 'dup',
+            '--runs-root', str(runs), '--bags-root', str(tmp_path / 'bags')])
+    finally:
+        held.close()
+    assert status == 2
+    assert "run 'dup' is in use by another campaign" in capsys.readouterr().err
+    assert not (runs / 'dup' / 'config.json').exists()
+    again = lock_folder(runs / 'dup', campaign_cli.RUN_LOCK)  # let go
+    assert again is not None
+    again.close()

@@ -61,6 +61,7 @@ from sessgan_sim.metrics import (
     MetricsRecorder,
     Outcome,
     fleet_metrics,
+    is_harness_outcome,
 )
 from sessgan_sim.mission import MissionEvent, MissionTracker, failed_leg
 from sessgan_sim.progress import ProgressField, ProgressMonitor, progress_field
@@ -605,9 +606,17 @@ class Episode:
             return self.robot_metrics(0)
         robots = [self.robot_metrics(index) for index in range(len(records))]
         outcome, failed = self._fleet_outcome() if self.done else (None, -1)
-        detail = '; '.join(f'r{index}: {metrics.outcome.value if metrics.outcome else "running"}'
-                           + (f' ({metrics.detail})' if metrics.detail else '')
-                           for index, metrics in enumerate(robots))
+        if outcome is not None and is_harness_outcome(outcome) and failed >= 0:
+            # No result: say why once, naming the robot (an abort ends every robot with the
+            # detail of the one that fell silent; listed per robot, r0 read unresponsive).
+            detail = robots[failed].detail
+            if not detail.startswith('robot r'):
+                detail = f'robot r{failed}: {detail}'
+        else:
+            detail = '; '.join(
+                f'r{index}: {metrics.outcome.value if metrics.outcome else "running"}'
+                + (f' ({metrics.detail})' if metrics.detail else '')
+                for index, metrics in enumerate(robots))
         return fleet_metrics(robots, outcome, detail, failed)
 
     def robot_metrics(self, index: int) -> EpisodeMetrics:

@@ -106,3 +106,4 @@ def test_a_missing_robot_controller_is_named(node_processes, ros_node):
                           timeout=120)
     assert metrics.outcome == 'controller_unresponsive', metrics.detail
     assert 'robot r1' in metrics.detail and f'{namespace}/r1/scan' in metrics.detail
+    assert 'r0:' not in metrics.detail, metrics.detail  # said once, not listed as r0's

@@ -23,7 +23,10 @@ episode, for every method). Per run:
   occurrence each), to the example map.
 
 Figures are reported per method as mean ± sample standard deviation over the search seeds,
-with every seed's value in runs.csv.
+with every seed's value in runs.csv; a figure of the final generator counts each distinct
+generator once (``random``, ``latent`` and ``cellular_automaton`` leave the same one on every
+seed: one measurement, n=1, no spread). compare.png draws the mean as a bar, each
+measurement as a dot and their min–max as whiskers (inside the quantity's possible range).
 """
 
 from __future__ import annotations
@@ -395,6 +398,16 @@ def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None,
     return None, ''
 
 
+def generator_users(runs: Sequence[MethodRun], source_key: str) -> str:
+    """Which runs left the generator ``source_key``, for the console: ' (left by random,
+    latent: one evaluation for their 4 runs)'; '' for a generator of one run."""
+    users = [run for run in runs if run.source_key == source_key]
+    if len(users) < 2:
+        return ''
+    methods = ', '.join(dict.fromkeys(run.figures.method for run in users))
+    return f' (left by {methods}: one evaluation for their {len(users)} runs)'
+
+
 def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Path,
                        log: Callable[[str], None]) -> dict[str, FreshSeedSummary]:
     """Evaluate every distinct final generator on one plan of fresh seeds."""
@@ -408,8 +421,10 @@ def fresh_seed_figures(config: CompareConfig, runs: list[MethodRun], output: Pat
                 continue
             result = evaluate_source(run.source, plan, evaluator, config.rule())
             summaries[run.source_key] = result.summary
-            log(f'fresh seeds, {run.source.label}: failure rate '
-                f'{result.summary.failure_rate}, {result.summary.valid_maps} valid maps')
+            rate = result.summary.failure_rate
+            log(f'fresh seeds, {run.source.label}{generator_users(runs, run.source_key)}: '
+                f'failure rate {"none" if rate is None else f"{rate:.3f}"}, '
+                f'{result.summary.valid_maps} valid maps')
     for run in runs:
         summary = summaries.get(run.source_key)
         if summary is not None:
@@ -437,6 +452,24 @@ REPORTED = (
 )
 """(RunFigures field, label, format) of the report's table and figure."""
 
+PER_GENERATOR = frozenset({'fresh_failure_rate', 'fresh_valid_fraction'})
+"""RunFigures fields that measure a run's final generator, evaluated once per distinct
+generator (fresh_seed_figures): runs that leave the same one (random, latent and
+cellular_automaton on every seed) share one measurement, counted once."""
+
+
+def method_values(runs: Sequence[MethodRun], method: str, key: str) -> list[float | None]:
+    """``method``'s measurements of the RunFigures field ``key``: one per run, or for a
+    figure of the final generator (PER_GENERATOR) one per distinct generator its runs left."""
+    chosen = [run for run in runs if run.figures.method == method]
+    if key not in PER_GENERATOR:
+        return [getattr(run.figures, key) for run in chosen]
+    by_generator: dict[str, float | None] = {}
+    for run in chosen:
+        by_generator.setdefault(run.source_key or f'none:{run.figures.search_seed}',
+                                getattr(run.figures, key))
+    return list(by_generator.values())
+
 
 def spread(values: Sequence[float | None]) -> tuple[float | None, float | None, int]:
     """(mean, sample std or None for fewer than 2 values, count) of the non-None values."""
@@ -447,7 +480,9 @@ def spread(values: Sequence[float | None]) -> tuple[float | None, float | None, 
     return float(np.mean(present)), std, len(present)
 
 
-def format_spread(values: Sequence[float | None], number_format: str) -> str:
+def format_spread(values: Sequence[float | None], number_format: str, runs: int = 0) -> str:
+    """Mean ± sample std of ``values``; ``runs``: how many runs they come from, when more
+    than the measurements (one shared generator: '0.167 (n=1)', no spread)."""
     mean, std, count = spread(values)
     if mean is None:
         return 'none'
@@ -456,13 +491,15 @@ def format_spread(values: Sequence[float | None], number_format: str) -> str:
         text += ' ± ' + number_format.format(std)
     if count < len(values):
         text += f' ({count}/{len(values)} runs)'
+    elif count < runs:
+        text += f' (n={count})'
     return text
 
 
 def method_table(config: CompareConfig, runs: Sequence[MethodRun]) -> str:
     methods = [m for m in config.methods if any(r.figures.method == m for r in runs)]
     lines = ['| | ' + ' | '.join(methods) + ' |', '|---|' + '---:|' * len(methods)]
-    by_method = {m: [r.figures for r in runs if r.figures.method == m] for m in methods}
+    run_count = {m: sum(r.figures.method == m for r in runs) for m in methods}
     rows = list(REPORTED) + [('episodes', 'episodes per run', '{:.0f}'),
                              ('valid_failures', 'valid failures (episodes)', '{:.1f}'),
                              ('distinct_faults', 'distinct faults', '{:.1f}'),
@@ -471,58 +508,85 @@ def method_table(config: CompareConfig, runs: Sequence[MethodRun]) -> str:
                              ('cheap_wall', 'cheap work wall s (within search)', '{:.1f}'),
                              ('search_cpu', 'search CPU s', '{:.0f}')]
     for key, label, number_format in rows:
-        cells = [format_spread([getattr(f, key) for f in by_method[m]], number_format)
+        cells = [format_spread(method_values(runs, m, key), number_format, run_count[m])
                  for m in methods]
         lines.append(f'| {label} | ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines)
 
 
-def plot_comparison(config: CompareConfig, runs: Sequence[MethodRun], path: Path) -> Path:
+def comparison_figure(config: CompareConfig, runs: Sequence[MethodRun]) -> Any:
+    """compare.png's matplotlib figure: per reported figure and method, the mean as a bar,
+    every measurement as a dot and, from two on, their min–max as whiskers (never outside
+    what the quantity can take, unlike mean ± std of a few seeds)."""
     import matplotlib
 
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
     methods = [m for m in config.methods if any(r.figures.method == m for r in runs)]
-    figure, axes = plt.subplots(2, 4, figsize=(16, 7.5))
+    figure, axes = plt.subplots(2, 4, figsize=(16, 7.5), layout='constrained')
     colours = plt.rcParams['axes.prop_cycle'].by_key()['color']
     for axis, (key, label, _) in zip(axes.flat, REPORTED):
         for index, method in enumerate(methods):
-            values = [getattr(r.figures, key) for r in runs if r.figures.method == method]
-            mean, std, count = spread(values)
+            values = method_values(runs, method, key)
+            runs_of_method = sum(r.figures.method == method for r in runs)
+            mean, _, count = spread(values)
             colour = colours[index % len(colours)]
+            present = [float(v) for v in values if v is not None and math.isfinite(float(v))]
             if mean is not None:
-                axis.bar(index, mean, yerr=std or 0.0, color=colour, alpha=0.6, capsize=4)
-            present = [float(v) for v in values if v is not None]
+                axis.bar(index, mean, color=colour, alpha=0.6)
+            if mean is not None and count > 1:
+                axis.errorbar(index, mean, yerr=[[mean - min(present)], [max(present) - mean]],
+                              fmt='none', ecolor='black', capsize=4)
             axis.plot([index] * len(present), present, 'o', color='black', markersize=3)
             if count < len(values):
                 axis.text(index, 0, f'{count}/{len(values)}', ha='center', va='bottom',
                           fontsize='x-small')
+            elif 0 < count < runs_of_method:
+                axis.text(index, 0, f'n={count}', ha='center', va='bottom',
+                          fontsize='x-small')
         axis.set_xticks(range(len(methods)), methods, rotation=30, fontsize='small')
-        axis.set_title(label, fontsize='small')
+        axis.set_title(label + (' (dots: generators)' if key in PER_GENERATOR else ''),
+                       fontsize='small')
         axis.grid(axis='y', alpha=0.3)
     axes.flat[-1].set_axis_off()
     axes.flat[-1].text(0.0, 0.5, _settings_text(config), fontsize='small', va='center',
                        transform=axes.flat[-1].transAxes)
     figure.suptitle(f'Fault finding on {config.scenario} against '
-                    f'{config.controller_label()}: mean ± '
-                    f'std over search seeds {list(config.search_seeds)} (dots: runs)')
-    figure.tight_layout()
+                    f'{config.controller_label()} over search seeds '
+                    f'{list(config.search_seeds)}\nbars: mean; dots: each run (each distinct '
+                    'final generator for the fresh-seed rate; n=1: one generator shared by '
+                    'every seed); whiskers: min–max')
+    return figure
+
+
+def plot_comparison(config: CompareConfig, runs: Sequence[MethodRun], path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    figure = comparison_figure(config, runs)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
     plt.close(figure)
     return path
 
 
+GA_METHODS = ('grid_ga', 'latent')
+"""Baselines whose GA runs with ``population`` (CompareConfig.ga_config)."""
+
+
 def _settings_text(config: CompareConfig) -> str:
+    """The chart's caption: the settings, those of a method only when it was run."""
+    ga_methods = [m for m in config.methods if m in GA_METHODS]
     return (f'budget {config.budget} episodes per run\n'
             f'{len(config.search_seeds)} search seeds\n'
             f'{config.repeats} re-runs per distinct fault'
             + (f' (first {config.confirm_limit} per run)' if config.confirm_limit else '')
             + f'\n{config.fresh_episodes} fresh seed pairs per generator\n'
-            f'SESS-GAN: {config.population} x {config.maps_per_member}, '
-            f'{config.seed_schedule} seeds\n'
-            f'fault cells {config.coarse_cells} (+{config.context_cells} context)')
+            + (f'SESS-GAN: {config.population} x {config.maps_per_member}, '
+               f'{config.seed_schedule} seeds\n' if 'sessgan' in config.methods else '')
+            + (f'GA population {config.population} ({", ".join(ga_methods)})\n'
+               if ga_methods else '')
+            + f'fault cells {config.coarse_cells} (+{config.context_cells} context)')
 
 
 def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method: int = 4,
@@ -555,6 +619,20 @@ def example_scenes(config: CompareConfig, runs: Sequence[MethodRun], per_method:
                 scenes.append(scene)
             rows.append((method, scenes))
     return rows
+
+
+GENERATOR_NOTES = {
+    'sessgan': 'SESS-GAN runs whole generations of population x K episodes; its final '
+               "generator is its last generation's fittest member, one per seed",
+    'random': 'random leaves the generator it sampled (weights frozen: the same on every seed)',
+    'latent': 'latent leaves the generator whose noise it evolved (weights frozen: the same on '
+              'every seed)',
+    'screened': 'screened its archive (children of its failing tests, start and goal kept; '
+                'the generator when it kept none)',
+    'cellular_automaton': 'cellular_automaton its automaton (the same on every seed)',
+    'grid_ga': 'grid_ga leaves none',
+}
+"""What each method leaves for the fresh-seed evaluation, for the report."""
 
 
 def write_report(config: CompareConfig, runs: Sequence[MethodRun],
@@ -598,7 +676,9 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
         + ('on the external workers (one episode at a time), ' if config.external
            else 'in process (lockstep, one core), ') +
         f'{wall_time / 60:.1f} min in all. Mean ± sample std over the seeds; '
-        '`(k/n runs)`: only k of n runs had a value.', '',
+        '`(k/n runs)`: only k of n runs had a value; `(n=k)`: k measurements only, because '
+        'runs left the same final generator, evaluated once on fresh seeds. The chart: bars '
+        'the mean, dots the measurements, whiskers their min–max.', '',
         method_table(config, runs), '',
         '![comparison](compare.png)', '',
         '## Example failing maps (confirmed distinct faults)', '',
@@ -614,13 +694,12 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
            if config.confirm_limit else '') + '.',
         '* Every map goes through the same validity certificate; maps without a certified '
         'route are not simulated and still cost one episode.',
-        '* SESS-GAN runs whole generations of population x K episodes; its final generator '
-        "is its last generation's fittest member. random and latent leave the generator they "
-        'sampled (weights frozen); screened its archive (children of its failing tests, start '
-        'and goal kept); grid_ga leaves none.',
+        '* Final generators: ' + '; '.join(GENERATOR_NOTES[m] for m in config.methods
+                                             if m in GENERATOR_NOTES) + '.',
         '* Files: runs.csv (every run), faults.csv (every distinct fault), episodes.csv '
         '(every episode), fresh_seed.csv, faults/<method>-seed<s>/ (bags and pictures of '
-        'confirmed faults), runs/ (SESS-GAN campaigns).',
+        'confirmed faults)' + (', runs/ (SESS-GAN campaigns)' if 'sessgan' in config.methods
+                               else '') + '.',
     ]
     path = output / 'report.md'
     path.write_text('\n'.join(lines) + '\n', encoding='utf-8')

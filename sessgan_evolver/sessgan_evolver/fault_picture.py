@@ -343,15 +343,15 @@ def write_scene_png(scene: FaultScene, path: str | Path) -> Path:
     return path
 
 
-def write_scene_grid(rows: Sequence[tuple[str, Sequence[FaultScene]]], path: str | Path,
-                     columns: int = 4) -> Path:
-    """Small pictures, one row per label (e.g. per method), up to ``columns`` each."""
+def scene_grid_figure(rows: Sequence[tuple[str, Sequence[FaultScene]]], columns: int = 4
+                      ) -> Any:
+    """Small pictures, one row per label (e.g. per method), up to ``columns`` each: the
+    matplotlib figure. Constrained layout keeps every row's titles clear of the row above
+    (tight_layout let equal-aspect maps overlap them)."""
     if not rows:
         raise FaultPictureError('no scenes to draw')
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure, axes = plt.subplots(len(rows), columns, figsize=(3.0 * columns, 3.2 * len(rows)),
-                                squeeze=False)
+    figure, axes = plt.subplots(len(rows), columns, figsize=(3.0 * columns, 3.4 * len(rows)),
+                                squeeze=False, layout='constrained')
     for row, (label, scenes) in enumerate(rows):
         for column in range(columns):
             axis = axes[row][column]
@@ -375,9 +375,17 @@ def write_scene_grid(rows: Sequence[tuple[str, Sequence[FaultScene]]], path: str
                 handles.append(handle)
                 labels.append(text)
     if handles:
-        figure.legend(handles, labels, loc='lower center', ncol=min(len(labels), 7),
+        figure.legend(handles, labels, loc='outside lower center', ncol=min(len(labels), 7),
                       fontsize='small')
-    figure.tight_layout(rect=(0.0, 0.5 / figure.get_figheight(), 1.0, 1.0))
+    return figure
+
+
+def write_scene_grid(rows: Sequence[tuple[str, Sequence[FaultScene]]], path: str | Path,
+                     columns: int = 4) -> Path:
+    """scene_grid_figure as a PNG."""
+    figure = scene_grid_figure(rows, columns)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=FIGURE_DPI)
     plt.close(figure)
     return path

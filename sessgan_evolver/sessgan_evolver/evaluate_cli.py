@@ -8,8 +8,10 @@ their metrics and skipped), runs each map once with the built-in controller in t
 (lockstep; with --external: on the simulators and stack already running under /w0, /w1, ...,
 as ``campaign --external``) and writes <output-dir>/summary.md, summary.csv (one row per
 generator) and episodes.csv (one row per map): valid maps, failure rate, collisions, risk,
-TPKL to the example map, uniqueness, distinct faults. --max-fault-records N keeps the first N
-confirmed distinct faults of each generator as a bag with a picture.
+TPKL to the example map, uniqueness (n/a for a patch larger than the maps), distinct faults,
+harness re-runs (episodes the test harness ended and ran again: never results).
+--max-fault-records N keeps the first N confirmed distinct faults of each generator as a bag
+with a picture.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from sessgan_evolver.faults import FaultEntry, FaultRule
 from sessgan_evolver.fresh_seed import (
     EPISODE_COLUMNS,
     AutomatonSource,
+    FreshSeedSummary,
     MapSource,
     PyramidSource,
     campaign_sources,
@@ -45,6 +48,7 @@ from sessgan_evolver.fresh_seed import (
     episode_rows,
     evaluate_source,
     fresh_seed_plan,
+    harness_reruns_of,
     open_run,
     summary_rows,
     summary_table,
@@ -55,6 +59,7 @@ from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.regression_suite import SUITE_FILE, suite_line, write_suite_of_bags_below
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.checkpoint import incomplete_warning
+from sessgan_gen.environment_metrics import DEFAULT_TPKL_SIZES
 from sessgan_gen.errors import SessganGenError
 from sessgan_sim.episode import check_time_limit
 from sessgan_sim.errors import InvalidConfigError
@@ -136,6 +141,12 @@ class EvaluateConfig:
         if self.width < 0 or self.height < 0:
             raise FreshSeedError("--width and --height must be >= 0 (0: the generator's map "
                                  'size)')
+        tile = max(DEFAULT_TPKL_SIZES)
+        for option, side in (('--width', self.width), ('--height', self.height)):
+            if 0 < side < tile:
+                raise FreshSeedError(f'{option} {side}: a map needs at least {tile} cells a '
+                                     f'side for its TPKL ({tile}x{tile} tiles; 0: the '
+                                     "generator's map size)")
         if self.member != 'best' and not (self.run or self.run_dir):
             raise FreshSeedError(f"--member {self.member} picks a member of a --run's last "
                                  'population: give --run (or --run-dir) with it')
@@ -196,12 +207,18 @@ def build_sources(args: EvaluateConfig, scenario: str,
     training map."""
     size = (args.height, args.width) if args.height or args.width else None
     sources: list[PyramidSource] = []
-    for run_dir in run_dirs:
-        sources += campaign_sources(run_dir, args.member, size)
-    for checkpoint in args.checkpoint:
-        sources.append(PyramidSource(str(checkpoint), scenario, checkpoint, size))
-    if args.shipped or not sources:
-        sources.insert(0, PyramidSource('shipped generator', scenario, None, size))
+    try:
+        for run_dir in run_dirs:
+            sources += campaign_sources(run_dir, args.member, size)
+        for checkpoint in args.checkpoint:
+            sources.append(PyramidSource(str(checkpoint), scenario, checkpoint, size))
+        if args.shipped or not sources:
+            sources.insert(0, PyramidSource('shipped generator', scenario, None, size))
+    except FreshSeedError as err:
+        if size is not None and 'size' in str(err):
+            # The generator's own bounds (its coarsest scale): say which option asked.
+            raise FreshSeedError(f'--width {args.width} --height {args.height}: {err}') from err
+        raise
     for source in sources:
         if warning := incomplete_warning(source.metadata, source.label):
             print(f'WARNING: {warning}', file=sys.stderr)
@@ -224,6 +241,19 @@ def confirmation_line(label: str, faults: Sequence[FaultEntry], repeats: int,
     if kept:
         return line + f'; {len(kept)} kept as bag + picture in {Path(kept[0]).parent}'
     return line + '; none kept' + (' (only confirmed faults are)' if faults else '')
+
+
+def harness_paragraph(reruns: int, summaries: Sequence[FreshSeedSummary]) -> str:
+    """summary.md's line on the episodes the test harness ended and ran again (0 in process,
+    normally; per generator in summary.csv and per episode in episodes.csv)."""
+    line = (f'Harness re-runs: {reruns} (episodes the test harness ended, a silent '
+            'controller or a dead process, not the controller under test, and ran again; '
+            'none of them is a result')
+    if reruns:
+        line += '; ' + ', '.join(f'{s.generator}: {s.harness_reruns}' for s in summaries
+                                 if s.harness_reruns)
+        line += '; the `harness_reruns` columns of summary.csv and episodes.csv say where'
+    return line + ').'
 
 
 def open_evaluator(args: EvaluateConfig, scenario: str, mission: MissionSpec,
@@ -280,6 +310,7 @@ def evaluate(arguments: list[str]) -> int:
           f'{len(map_seeds)} map and {len(sim_seeds)} simulator seeds of {len(runs)} runs '
           f'excluded, {plan.skipped} drawn seeds skipped', file=sys.stderr)
     summaries, rows, confirmations = [], [], []
+    harness_reruns = 0
     progress = ProgressPrinter()
     try:
         with open_evaluator(args, scenario, mission, fleet, output) as evaluator:
@@ -292,12 +323,15 @@ def evaluate(arguments: list[str]) -> int:
                 if args.max_fault_records:
                     safe = ''.join(c if c.isalnum() or c in '-_.' else '_'
                                    for c in source.label)
+                    reruns_before = harness_reruns_of(evaluator)
                     kept = confirm_faults(result.faults, result.records, evaluator, rule,
                                           args.repeats, output / 'faults' / safe,
                                           args.max_fault_records, {'generator': source.label})
+                    result.summary.harness_reruns += harness_reruns_of(evaluator) - reruns_before
                     confirmations.append(confirmation_line(source.label, result.faults,
                                                            args.repeats, kept))
                     print(confirmations[-1], file=sys.stderr)
+            harness_reruns = harness_reruns_of(evaluator)
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
         return INTERRUPTED_STATUS
@@ -316,9 +350,15 @@ def evaluate(arguments: list[str]) -> int:
         f'{args.evaluation_seed}, disjoint from the {len(runs)} runs given, '
         + ('on the external workers' if args.external else 'in process (lockstep)')
         + '; failure rate = valid '
-        'failures / valid maps; collisions and risk: means over valid maps.\n\n'
-        f'{table}\n' + ''.join(f'\n{line}\n' for line in confirmations), encoding='utf-8')
+        'failures / valid maps; collisions and risk: means over valid maps; uniqueness: '
+        'mean of the 8x8 and 16x16 patch uniqueness (n/a when the maps are smaller than 16 '
+        'cells a side; each size in summary.csv, empty there when n/a).\n\n'
+        f'{table}\n\n{harness_paragraph(harness_reruns, summaries)}\n'
+        + ''.join(f'\n{line}\n' for line in confirmations), encoding='utf-8')
     print(table)
+    if harness_reruns:
+        print(f'harness re-runs {harness_reruns} (episodes the harness, not the controller, '
+              'ended: run again)')
     print(f'summary: {output / "summary.md"}')
     suite = write_suite_of_bags_below(output / SUITE_FILE, output.name, output / 'faults',
                                       {'source': 'evaluate: confirmed distinct faults',

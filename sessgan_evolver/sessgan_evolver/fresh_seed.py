@@ -15,7 +15,9 @@ simulator seed that no campaign used either:
 Per source: valid maps (certified route), valid failures (controller failures,
 sessgan_evolver.faults), failure rate = valid failures / valid maps, mean fault collisions,
 risk (the paper's) and fault risk over valid maps, TPKL of all its maps to the example map,
-their uniqueness, and the distinct faults among them.
+their uniqueness (None, not applicable, for a patch side larger than the maps), the distinct
+faults among them, and the episodes the test harness ended and ran again (harness re-runs:
+never results, sessgan_evolver.harness).
 """
 
 from __future__ import annotations
@@ -48,7 +50,11 @@ from sessgan_gen.checkpoint import (
     map_origin,
     training_map,
 )
-from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
+from sessgan_gen.environment_metrics import (
+    DEFAULT_UNIQUENESS_SIZES,
+    tile_pattern_kl,
+    uniqueness_report,
+)
 from sessgan_gen.environment_sampler import resolve_sample_size
 from sessgan_gen.errors import SamplingRequestError
 from sessgan_gen.sampling import sample_token_maps
@@ -300,11 +306,20 @@ class FreshSeedSummary:
     """Fault risk score, mean over valid maps."""
     tpkl: float
     """Of all its maps to the map its generator learned (``MapSource.reference``), nats."""
-    uniqueness: float
-    """Mean of the 8x8 and 16x16 uniqueness of all its maps, percent."""
+    uniqueness: float | None
+    """Mean of the 8x8 and 16x16 uniqueness of all its maps, percent; None (not applicable)
+    when its maps are smaller than 16 cells a side (no 16x16 patch)."""
     distinct_faults: int
     wall_time: float
     """Wall seconds of its episodes."""
+    uniqueness_8x8: float | None = None
+    """8x8 uniqueness of all its maps, percent (None: the maps hold no 8x8 patch)."""
+    uniqueness_16x16: float | None = None
+    """16x16 uniqueness of all its maps, percent (None: the maps hold no 16x16 patch)."""
+    harness_reruns: int = 0
+    """Its episodes the test harness ended (a silent controller, a dead process) and ran
+    again: never results (sessgan_evolver.harness). ``evaluate`` adds those of the re-runs
+    that confirm its faults."""
 
 
 @dataclass
@@ -312,6 +327,18 @@ class FreshSeedResult:
     summary: FreshSeedSummary
     records: list[EpisodeRecord]
     faults: list[FaultEntry] = field(default_factory=list)
+    harness_reruns: list[int] = field(default_factory=list)
+    """Harness re-runs of each record's episode (records' order; empty: not counted)."""
+
+
+def _optional(value: float) -> float | None:
+    """A figure that may be NaN (not applicable) as None."""
+    return None if math.isnan(value) else float(value)
+
+
+def harness_reruns_of(evaluator: object) -> int:
+    """The evaluator's harness re-runs so far (0 for one that does not count them)."""
+    return int(getattr(evaluator, 'harness_reruns', 0) or 0)
 
 
 def _mean(values: list[float]) -> float | None:
@@ -324,6 +351,7 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
     """Run every fresh seed pair of ``plan`` on ``source``'s maps."""
     log = EpisodeLog(rule)
     observer, evaluator.observer = evaluator.observer, log
+    harness_reruns: list[int] = []
     started = time.perf_counter()
     try:
         map_seeds = [map_seed for map_seed, _ in plan.pairs]
@@ -342,7 +370,9 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
                                              origin=source.origin)
                             for index, (map_seed, cells) in enumerate(zip(map_seeds, maps))]
         for index, ((_, sim_seed), environment) in enumerate(zip(plan.pairs, environments)):
+            reruns_before = harness_reruns_of(evaluator)
             evaluator.run_environment(environment, sim_seed, source.label)
+            harness_reruns.append(harness_reruns_of(evaluator) - reruns_before)
             if progress is not None:
                 progress(index + 1, len(plan.pairs))
     finally:
@@ -354,6 +384,7 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
     example = source.reference
     token_maps = [np.asarray(m) for m in maps]
     faults = group_faults([record.fault for record in records])
+    unique = uniqueness_report(token_maps, DEFAULT_UNIQUENESS_SIZES)
     summary = FreshSeedSummary(
         generator=source.label, maps=len(records), valid_maps=len(valid),
         valid_fraction=len(valid) / len(records) if records else 0.0,
@@ -364,22 +395,29 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
         mean_risk=_mean([float(r.metrics['risk_score']) for r in valid]),
         mean_fault_risk=_mean([float(r.metrics['fault_risk_score']) for r in valid]),
         tpkl=tile_pattern_kl(example, token_maps),
-        uniqueness=uniqueness_report(token_maps).mean, distinct_faults=len(faults),
-        wall_time=wall)
-    return FreshSeedResult(summary, records, faults)
+        uniqueness=_optional(unique.mean), distinct_faults=len(faults), wall_time=wall,
+        uniqueness_8x8=_optional(unique.per_size[8]),
+        uniqueness_16x16=_optional(unique.per_size[16]),
+        harness_reruns=sum(harness_reruns))
+    return FreshSeedResult(summary, records, faults, harness_reruns)
 
 
 EPISODE_COLUMNS = ('generator', 'index', 'environment_id', 'map_seed', 'sim_seed', 'feasible',
                    'route_length', 'route_min_clearance', 'outcome', 'fault_collisions',
                    'collisions', 'proximity_time', 'simulation_time', 'risk_score',
-                   'fault_risk_score', *NAVIGATION_COLUMNS, 'valid_failure', 'fault',
-                   'wall_time')
+                   'fault_risk_score', *NAVIGATION_COLUMNS, 'invalid_commands',
+                   'valid_failure', 'fault', 'harness_reruns', 'wall_time')
 
 
 def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
-    """Per-map rows of one generator (EPISODE_COLUMNS)."""
+    """Per-map rows of one generator (EPISODE_COLUMNS): ``invalid_commands`` counts the
+    commands with a NaN or infinite component that the simulator replaced by a stop;
+    ``harness_reruns`` the tries of the episode the harness ended before its result."""
     rows = []
-    for record in result.records:
+    reruns: Sequence[int | None] = result.harness_reruns
+    if len(reruns) != len(result.records):  # not counted per episode: left empty
+        reruns = [None] * len(result.records)
+    for record, harness_reruns in zip(result.records, reruns):
         metrics = record.metrics
         rows.append({
             'generator': result.summary.generator, 'index': record.index,
@@ -395,8 +433,10 @@ def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
             'risk_score': metrics.get('risk_score'),
             'fault_risk_score': metrics.get('fault_risk_score'),
             **navigation_columns(metrics),
+            'invalid_commands': metrics.get('invalid_commands'),
             'valid_failure': record.valid_failure,
             'fault': record.fault.label if record.fault else '',
+            'harness_reruns': harness_reruns,
             'wall_time': metrics.get('wall_time')})
     return rows
 
@@ -434,7 +474,8 @@ def summary_table(summaries: Sequence[FreshSeedSummary]) -> str:
             f'| {s.generator} | {s.maps} | {s.valid_maps} ({s.valid_fraction:.0%}) | '
             f'{s.valid_failures} | {_format(s.failure_rate)} | '
             f'{_format(s.mean_fault_collisions, 2)} | {_format(s.mean_risk)} | '
-            f'{_format(s.mean_fault_risk)} | {s.tpkl:.3f} | {s.uniqueness:.2f} | '
+            f'{_format(s.mean_fault_risk)} | {s.tpkl:.3f} | '
+            f'{"n/a" if s.uniqueness is None else f"{s.uniqueness:.2f}"} | '
             f'{s.distinct_faults} |')
     return '\n'.join(lines)
 

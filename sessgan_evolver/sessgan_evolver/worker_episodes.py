@@ -28,12 +28,12 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from sessgan_core.environment import Environment
+from sessgan_core.environment import MAX_ROBOTS, Environment
 from sessgan_core.fleet import FleetSpec
 from sessgan_core.missions import MissionSpec
 from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
 from sessgan_evolver.episode_runner import EpisodeRun
-from sessgan_evolver.errors import BagReadError, ExternalWorkerError
+from sessgan_evolver.errors import BagReadError, ExternalWorkerError, HarnessFailureError
 from sessgan_evolver.fault_tally import trace_from_bag
 from sessgan_evolver.faults import is_valid_failure
 from sessgan_evolver.in_process import EpisodeObserver, invalid_map_run
@@ -182,6 +182,35 @@ def external_record_subdirectory(output: Path, label: str = '') -> str:
     return check_record_subdirectory('/'.join(['external', safe] + ([label] if label else [])))
 
 
+SILENT_STACK = 'no controller subscribed to'
+"""What a simulator's controller_unresponsive detail says when no stack took its scans."""
+
+
+def fleet_stack_hint(count_subscribers: Callable[[str], int], workers: Sequence[str],
+                     robots: int) -> str:
+    """A one-robot episode no controller answered, while controllers are subscribed to the
+    scans of fleet robots (``<worker namespace>/r0/scan``, ``r1/scan``, ...: a fleet stack
+    under the worker): the hint to pass ``--robots``; '' otherwise. ``count_subscribers``:
+    the node's (a graph query, no waiting); ``workers``: their evaluate action names."""
+    if robots != 1:
+        return ''
+    found: dict[str, int] = {}
+    for worker in workers:
+        namespace = worker.rsplit('/', 1)[0]
+        fleet = 0
+        while fleet < MAX_ROBOTS and count_subscribers(f'{namespace}/r{fleet}/scan') > 0:
+            fleet += 1
+        if fleet:
+            found[namespace] = fleet
+    if not found:
+        return ''
+    where = ', '.join(f'{namespace}/r0..r{count - 1}' if count > 1 else f'{namespace}/r0'
+                      for namespace, count in found.items())
+    count = max(found.values())
+    return (f'. Controllers are subscribed to the scans of fleet robots under {where}: a '
+            f'fleet stack, while this evaluation runs one robot; pass --robots {count}')
+
+
 @contextmanager
 def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
                      controller: str = '',
@@ -228,9 +257,16 @@ def worker_evaluator(scenario: str, record_directory: str, log_directory: Path,
         log(f'external workers: {", ".join(ros.discover_workers())} in ROS_DOMAIN_ID '
             f'{os.environ.get("ROS_DOMAIN_ID", "0")}; failure bags in <their bags_root>/'
             f'{record_directory}')
-        yield WorkerEvaluator(scenario, ros.evaluate, record_directory, label,
-                              simulate_invalid, observer, mission, fleet,
-                              lambda: ros.harness_reruns, size)
+        try:
+            yield WorkerEvaluator(scenario, ros.evaluate, record_directory, label,
+                                  simulate_invalid, observer, mission, fleet,
+                                  lambda: ros.harness_reruns, size)
+        except HarnessFailureError as err:
+            hint = (fleet_stack_hint(node.count_subscribers, sorted(ros.clients), fleet.robots)
+                    if SILENT_STACK in str(err) else '')
+            if hint:
+                raise HarnessFailureError(f'{err}{hint}') from err
+            raise
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

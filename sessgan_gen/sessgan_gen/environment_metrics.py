@@ -15,7 +15,8 @@ hashing: the counts are exact.
   patterns (a pattern the generated maps lack has count 0). Report the mean
   over k.
 * **Uniqueness**: for s in sizes, the percentage of distinct s x s patches
-  (stride 1) among all s x s patches of the pooled generated maps.
+  (stride 1) among all s x s patches of the pooled generated maps
+  (:func:`uniqueness_report`: NaN, not applicable, when no map holds an s x s patch).
 """
 
 from __future__ import annotations
@@ -35,7 +36,9 @@ _TABLE_LIMIT = 1 << 22
 
 
 class UniquenessReport(NamedTuple):
-    """Uniqueness per patch side (percent) and their mean (percent)."""
+    """Uniqueness per patch side (percent) and their mean (percent). A side larger than every
+    map (no such patch) is NaN, not applicable, and so is the mean then: a mean over the
+    sides that fit would not compare with the mean of maps that hold every side."""
 
     per_size: dict[int, float]
     mean: float
@@ -280,6 +283,12 @@ def uniqueness_of_fitting_sizes(generated: Sequence[np.ndarray],
 
 def uniqueness_report(generated: Sequence[np.ndarray],
                       sizes: Sequence[int] = DEFAULT_UNIQUENESS_SIZES) -> UniquenessReport:
-    """:func:`uniqueness` per size plus the mean over sizes (the paper's Table 1)."""
-    per_size = uniqueness(generated, sizes)
+    """:func:`uniqueness` per size plus the mean over sizes (the paper's Table 1). A size
+    larger than every generated map (12 x 12 maps hold no 16 x 16 patch) is NaN, and so is
+    the mean then (:class:`UniquenessReport`), instead of a ValueError."""
+    _prepare(None, generated)  # the maps are checked even when no size fits
+    fitting = uniqueness_of_fitting_sizes(generated, sizes)
+    per_size = {int(side): fitting.get(int(side), math.nan) for side in sizes}
+    if not per_size:
+        raise ValueError('no uniqueness patch size given')
     return UniquenessReport(per_size, float(math.fsum(per_size.values()) / len(per_size)))

@@ -586,11 +586,16 @@ def csv_text(progresses: Sequence[ScenarioProgress]) -> str:
 
 
 def markdown_summary(suite: str, progresses: Sequence[ScenarioProgress], elapsed: float,
-                     command: str = '', interrupted: bool = False) -> str:
+                     command: str = '', interrupted: bool = False,
+                     notes: Sequence[str] = ()) -> str:
+    """``notes``: how the episodes ran (each external worker's mode and pace, the modes the
+    scenarios were recorded in), a line each."""
     counts = {verdict: sum(1 for p in progresses if p.verdict is verdict) for verdict in Verdict}
     lines = [f'# Regression suite: {suite}', '']
     if command:
         lines += [f'Command: `{command}`', '']
+    if notes:
+        lines += [*(f'* {note}' for note in notes), '']
     if interrupted:
         lines += ['**Interrupted**: scenarios without a verdict are marked not_run.', '']
     lines += [f'{len(progresses)} scenarios in {elapsed:.1f} s: '
@@ -620,7 +625,8 @@ class SuiteOutputs:
 
 
 def write_outputs(directory: Path, suite: str, progresses: Sequence[ScenarioProgress],
-                  elapsed: float, command: str = '', interrupted: bool = False) -> SuiteOutputs:
+                  elapsed: float, command: str = '', interrupted: bool = False,
+                  notes: Sequence[str] = ()) -> SuiteOutputs:
     """junit.xml, summary.md and scenarios.csv in ``directory``, each written atomically."""
     directory = Path(directory)
     outputs = SuiteOutputs(directory / 'junit.xml', directory / 'summary.md',
@@ -628,7 +634,7 @@ def write_outputs(directory: Path, suite: str, progresses: Sequence[ScenarioProg
     atomic_write_bytes(outputs.junit, junit_xml(suite, progresses, elapsed,
                                                 interrupted).encode('utf-8'))
     atomic_write_bytes(outputs.markdown, markdown_summary(suite, progresses, elapsed, command,
-                                                          interrupted).encode('utf-8'))
+                                                          interrupted, notes).encode('utf-8'))
     atomic_write_bytes(outputs.csv, csv_text(progresses).encode('utf-8'))
     return outputs
 

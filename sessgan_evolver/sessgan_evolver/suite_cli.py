@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import os
 import shlex
 import sys
@@ -234,13 +235,33 @@ def run_in_process(progresses: list[ScenarioProgress], prepared: list[PreparedEn
 # ---- external ----------------------------------------------------------------------------
 
 
+def worker_note(name: str, settings: Any) -> str:
+    """How worker ``name`` runs its episodes, from its settings (the ``bags`` service's JSON
+    description): a clocked worker's verdicts depend on its pace."""
+    if not isinstance(settings, dict) or not settings.get('mode'):
+        return f'worker {name}: its settings are unknown'
+    pace = (f' at {float(settings["real_time_factor"]):g}x real time'
+            if settings['mode'] == 'clocked' and 'real_time_factor' in settings else '')
+    return f'worker {name}: {settings["mode"]}{pace}'
+
+
+def recorded_modes(progresses: Sequence[ScenarioProgress]) -> str:
+    """'recorded: 5 lockstep, 1 clocked': the modes the scenarios' bags were recorded in."""
+    modes: dict[str, int] = {}
+    for progress in progresses:
+        modes[progress.entry.mode] = modes.get(progress.entry.mode, 0) + 1
+    return 'recorded: ' + ', '.join(f'{count} {mode}' for mode, count in sorted(modes.items()))
+
+
 def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: Path,
-                 run_bags: str, folders: dict[str, str], report: Callable[[], None]) -> None:
+                 run_bags: str, folders: dict[str, str], report: Callable[[], None],
+                 notes: list[str]) -> None:
     """Dispatch every scenario's attempts to the running simulators (the campaign's
     RosEvaluator: parallel, a worker that refuses or stalls gets the job taken away), in
     rounds until every scenario has its verdict. The simulators record failures under
     suite-<output's name>-``run_bags``/<scenario's folder>/attempt-N of their bags root; each
-    is copied to <output>/bags/``run_bags``/<scenario's folder>/attempt-N/<environment id>."""
+    is copied to <output>/bags/``run_bags``/<scenario's folder>/attempt-N/<environment id>.
+    How each worker runs its episodes goes to ``notes``."""
     import rclpy
 
     from sessgan_evolver.campaign import CampaignConfig, EpisodeJob
@@ -297,6 +318,19 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: 
         if args.worker:
             evaluator.allowed = {f'{name.rstrip("/")}/evaluate' for name in args.worker}
         evaluator.wait_for_workers(1, timeout=60.0)
+        from sessgan_evolver.errors import BagCollectionError
+        from sessgan_evolver.remote_bags import RemoteBagSource
+
+        for name in evaluator.discover_workers():
+            namespace = name.rsplit('/', 1)[0]
+            try:
+                description = RemoteBagSource(node, namespace, evaluator.spin).call_within(5.0)
+                notes.append(worker_note(namespace, json.loads(description.settings)))
+            except (BagCollectionError, ValueError):
+                notes.append(worker_note(namespace, None))
+        notes.append(recorded_modes(progresses))
+        for note in notes:
+            log(note)
 
         def on_result(job, metrics: dict) -> None:
             progress = progresses[job.member]
@@ -368,20 +402,22 @@ def run_suite(arguments: list[str]) -> int:
 
 def _run_suite(args: SuiteConfig, arguments: list[str], runner: InProcessRunner,
                held: ExitStack) -> int:
+    notes: list[str] = []  # how the episodes run (summary.md): set-up notes, workers' modes
     try:
         suite: Suite = load_suite_source(args.source)
         check_bags(suite)
         prepared: list[PreparedEntry] = []
         if not args.external:
             for entry in suite.entries:
-                item, notes = prepare_in_process(entry, args.controller)
+                item, entry_notes = prepare_in_process(entry, args.controller)
                 try:  # a controller that cannot drive the recorded robot, ...
                     runner.evaluator(item)
                 except SessganEvolverError as err:
                     raise SuiteError(f'scenario {entry.name} ({entry.bag}): {err}') from err
                 prepared.append(item)
-                for note in notes:
+                for note in entry_notes:
                     print(f'note: {note}', file=sys.stderr)
+                notes += entry_notes
         # Resolved: a simulator refuses to write a bag to a path with '..' in it.
         output = (args.output_dir or Path('runs') / f'suite-{safe_name(suite.name)}').resolve()
         held.enter_context(lock_output(output))
@@ -419,7 +455,7 @@ def _run_suite(args: SuiteConfig, arguments: list[str], runner: InProcessRunner,
     status = None
     try:
         if args.external:
-            run_external(progresses, args, output, run_bags, folders, report)
+            run_external(progresses, args, output, run_bags, folders, report, notes)
         else:
             run_in_process(progresses, prepared, runner, report)
     except KeyboardInterrupt:
@@ -434,7 +470,7 @@ def _run_suite(args: SuiteConfig, arguments: list[str], runner: InProcessRunner,
     elapsed = time.monotonic() - started
     command = 'ros2 run sessgan_evolver suite ' + shlex.join(arguments)
     outputs = write_outputs(output, suite.name, progresses, elapsed, command,
-                            interrupted or status is not None)
+                            interrupted or status is not None, notes)
     counts = {v: sum(1 for p in progresses if p.verdict is v) for v in Verdict}
     print(f'{len(progresses)} scenarios: ' + ', '.join(
         f'{counts[v]} {v.value}' for v in Verdict if counts[v]))

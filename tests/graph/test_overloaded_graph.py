@@ -116,6 +116,10 @@ def test_a_clocked_suite_never_fails_a_scenario_on_an_overloaded_attempt(node_pr
     outcomes = props['attempt_outcomes'].split()
     assert props['verdict'] == 'pass' and outcomes[0] == 'harness:overloaded', props
     assert outcomes[-1] == 'pass:goal_reached', props
+    # The summary says how the worker ran the scenarios, and how they were recorded.
+    summary = (tmp_path / 'slowed' / 'summary.md').read_text()
+    assert '* worker /w0: clocked at 4x real time' in summary, summary
+    assert '* recorded: 1 lockstep' in summary, summary
 
 
 def test_a_clocked_suite_does_not_judge_a_stack_s_late_first_command(node_processes, room_bag,

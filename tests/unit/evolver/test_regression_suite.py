@@ -27,6 +27,7 @@ from sessgan_evolver.regression_suite import (
     junit_xml,
     load_suite,
     load_suite_source,
+    markdown_summary,
     suite_from_bag_directory,
     write_suite_file,
 )
@@ -420,3 +421,15 @@ def test_a_worker_that_is_no_namespace_is_refused(given, capsys):
         suite_cli.parse_args(['x', '--external', '--worker', given])
     assert exit_info.value.code == 2
     assert '--worker must be a ROS namespace such as /w0' in capsys.readouterr().err
+
+
+def test_the_summary_says_how_the_workers_ran_the_scenarios():
+    assert suite_cli.worker_note('/w0', {'mode': 'clocked', 'real_time_factor': 3.0}) == (
+        'worker /w0: clocked at 3x real time')
+    assert suite_cli.worker_note('/w1', {'mode': 'lockstep', 'real_time_factor': 1.0}) == (
+        'worker /w1: lockstep')
+    assert suite_cli.worker_note('/w2', None) == 'worker /w2: its settings are unknown'
+    progresses = [ScenarioProgress(entry(name), 1, 1) for name in 'ab']
+    assert suite_cli.recorded_modes(progresses) == 'recorded: 2 lockstep'
+    note = 'worker /w0: clocked at 3x real time'
+    assert f'* {note}' in markdown_summary('s', progresses, 1.0, notes=[note])

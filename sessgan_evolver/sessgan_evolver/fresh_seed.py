@@ -403,7 +403,8 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
 
 
 EPISODE_COLUMNS = ('generator', 'index', 'environment_id', 'map_seed', 'sim_seed', 'feasible',
-                   'route_length', 'route_min_clearance', 'outcome', 'fault_collisions',
+                   'route_length', 'route_min_clearance', 'outcome', 'detail',
+                   'fault_collisions',
                    'collisions', 'proximity_time', 'simulation_time', 'risk_score',
                    'fault_risk_score', *NAVIGATION_COLUMNS, 'invalid_commands',
                    'valid_failure', 'fault', 'harness_reruns', 'wall_time')
@@ -426,6 +427,8 @@ def episode_rows(result: FreshSeedResult) -> list[dict[str, Any]]:
             'route_length': record.environment.route_length,
             'route_min_clearance': record.environment.route_min_clearance,
             'outcome': metrics.get('outcome'),
+            # Why it ended, or why its map is no valid test (a fleet's names the robot).
+            'detail': metrics.get('detail'),
             'fault_collisions': metrics.get('fault_collisions'),
             'collisions': metrics.get('collisions'),
             'proximity_time': metrics.get('proximity_time'),

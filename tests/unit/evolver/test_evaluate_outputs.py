@@ -63,8 +63,9 @@ def test_a_harness_rerun_and_nan_commands_reach_the_episode_rows():
     rows = episode_rows(result)
     assert result.summary.harness_reruns == 1
     assert [row['harness_reruns'] for row in rows] == [1, 0]
-    assert {'invalid_commands', 'harness_reruns'} <= set(EPISODE_COLUMNS)
+    assert {'invalid_commands', 'harness_reruns', 'detail'} <= set(EPISODE_COLUMNS)
     assert [row['invalid_commands'] for row in rows] == [2, 2]
+    assert all(row['detail'] for row in rows)  # why each ended
     assert all(row['outcome'] != Outcome.CONTROLLER_UNRESPONSIVE.value for row in rows)
 
 

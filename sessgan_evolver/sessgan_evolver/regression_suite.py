@@ -279,12 +279,16 @@ def check_bags(suite: Suite) -> None:
     nothing re-runs a map that is not the one recorded."""
     from sessgan_evolver.bag_reading import check_bag_complete, verify_bag_files
 
+    checked: set[Path] = set()
     for entry in suite.entries:
+        if entry.bag.resolve() in checked:  # scenarios may share a bag
+            continue
         try:
             verify_bag_files(entry.bag)  # a bag older than the digests: nothing to check
             check_bag_complete(entry.bag)
         except BagReadError as err:
             raise SuiteError(f'scenario {entry.name}: {err}') from err
+        checked.add(entry.bag.resolve())
 
 
 def suite_document(name: str, bags: Sequence[Path], directory: Path,

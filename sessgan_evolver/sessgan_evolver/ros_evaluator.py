@@ -230,8 +230,9 @@ class RosEvaluator:
         from sessgan_evolver.worker_identity import worker_difference
 
         namespace = name.rsplit('/', 1)[0]
-        source = self.bag_sources.setdefault(
-            namespace, RemoteBagSource(self.node, namespace, self.spin))
+        if namespace not in self.bag_sources:  # one client a worker: not one a discovery
+            self.bag_sources[namespace] = RemoteBagSource(self.node, namespace, self.spin)
+        source = self.bag_sources[namespace]
         why = None
         if not source.client.service_is_ready():
             first_seen = self.unidentified.setdefault(name, time.monotonic())

@@ -323,8 +323,11 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: 
 
         for name in evaluator.discover_workers():
             namespace = name.rsplit('/', 1)[0]
+            if namespace not in evaluator.bag_sources:  # the one that collects its bags
+                evaluator.bag_sources[namespace] = RemoteBagSource(node, namespace,
+                                                                   evaluator.spin)
             try:
-                description = RemoteBagSource(node, namespace, evaluator.spin).call_within(5.0)
+                description = evaluator.bag_sources[namespace].call_within(5.0)
                 notes.append(worker_note(namespace, json.loads(description.settings)))
             except (BagCollectionError, ValueError):
                 notes.append(worker_note(namespace, None))

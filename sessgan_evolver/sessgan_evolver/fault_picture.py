@@ -139,6 +139,19 @@ def fault_place(contacts: Sequence[dict[str, Any]], trajectory: np.ndarray
     return None
 
 
+def fleet_fault_robot(contacts: Sequence[dict[str, Any]], metrics: dict[str, Any],
+                      robots: int) -> int | None:
+    """Which robot of a fleet showed the fault (None for one robot): the first contact a
+    robot caused, else the robot the episode's outcome comes from (``failed_leg``)."""
+    if robots < 2:
+        return None
+    for contact in contacts:
+        if contact.get('fault', True):
+            return int(contact.get('robot') or 0)
+    failed = int(metrics.get('failed_leg', -1))
+    return failed if 0 <= failed < robots else 0
+
+
 def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[str, Any],
                    fault: FaultKey | None = None, rule: FaultRule | None = None,
                    title: str = '') -> FaultScene:
@@ -147,21 +160,25 @@ def scene_from_run(environment: Environment, trace: EpisodeTrace, metrics: dict[
     goal = (environment.goal.x, environment.goal.y)
     contacts = sorted((contact.to_dict() for robot in (trace, *trace.fleet)
                        for contact in robot.contacts), key=lambda contact: contact['time'])
-    trajectory = np.asarray(trace.poses)[:, :2]
+    paths = [np.asarray(robot.poses)[:, :2] for robot in (trace, *trace.fleet)]
+    robot = fleet_fault_robot(contacts, metrics, len(paths))
     return FaultScene(
         environment.scenario, np.asarray(environment.occupancy), environment.resolution,
-        environment.origin, start, goal, trajectory, np.asarray(trace.agents), contacts,
+        environment.origin, start, goal, paths[0], np.asarray(trace.agents), contacts,
         certified_route(environment), fault, rule or FaultRule(),
-        title or default_title(metrics, fault), fault_place(contacts, trajectory),
+        title or default_title(metrics, fault, robot=robot),
+        fault_place(contacts, paths[robot or 0]),
         stations=[(pose.x, pose.y) for pose in environment.stations],
-        fleet=fleet_members(environment, [np.asarray(other.poses)[:, :2]
-                                          for other in trace.fleet]))
+        fleet=fleet_members(environment, paths[1:]))
 
 
 def default_title(metrics: dict[str, Any], fault: FaultKey | None,
-                  controller: str = '') -> str:
+                  controller: str = '', robot: int | None = None) -> str:
+    """'<kind> | <controller> | <outcome>, N fault collisions, fault risk R'; ``robot``: the
+    fleet's robot that showed the fault, named first ('r1: collision agent | ...')."""
     risk = metrics.get('fault_risk_score')
-    parts = [fault.kind.replace('_', ' ') if fault else str(metrics.get('outcome'))]
+    parts = [('' if robot is None else f'r{robot}: ')
+             + (fault.kind.replace('_', ' ') if fault else str(metrics.get('outcome')))]
     if controller:
         parts.append(controller)
     parts.append(f'{metrics.get("outcome")}, {metrics.get("fault_collisions")} fault '
@@ -216,13 +233,16 @@ def scene_from_bag(bag: str | Path) -> FaultScene:
     rule_data = episode.get('fault_rule')
     rule = FaultRule(**rule_data) if isinstance(rule_data, dict) else FaultRule()
     path = np.asarray(trajectory, dtype=float).reshape(-1, 2)
+    robot = fleet_fault_robot(contacts, metrics, len(robots) if fleet else 1)
+    failing = path if not robot else np.asarray(robots[robot], dtype=float).reshape(-1, 2)
     return FaultScene(
         scenario, occupancy, resolution, origin, (float(start[0]), float(start[1])),
         (float(goal[0]), float(goal[1])), path,
         np.asarray(trace.get('agents') or np.zeros((0, 0, 2)), dtype=float), contacts,
         certified_route(environment), fault, rule,
-        default_title(metrics, fault, str(episode.get('controller', ''))),
-        fault_place(contacts, path), stations=[(pose.x, pose.y) for pose in environment.stations],
+        default_title(metrics, fault, str(episode.get('controller', '')), robot),
+        fault_place(contacts, failing),
+        stations=[(pose.x, pose.y) for pose in environment.stations],
         fleet=fleet_members(environment, [np.asarray(path, dtype=float) for path in robots[1:]]))
 
 

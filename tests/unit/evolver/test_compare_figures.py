@@ -178,3 +178,16 @@ def test_the_second_rows_titles_clear_the_first_row():
             assert title.y1 <= above.y0, (column, title, above)
     finally:
         plt.close(figure)
+
+
+def test_a_fleet_fault_picture_names_the_robot_that_failed():
+    from sessgan_evolver.fault_picture import default_title, fleet_fault_robot
+
+    contacts = [{'kind': 'agent_into_robot', 'fault': False, 'robot': 0, 'x': 0.0, 'y': 0.0},
+                {'kind': 'static', 'fault': True, 'robot': 2, 'x': 5.0, 'y': 6.0}]
+    assert fleet_fault_robot(contacts, {}, 3) == 2  # the first contact a robot caused
+    assert fleet_fault_robot([], {'failed_leg': 1}, 3) == 1  # else the failing robot
+    assert fleet_fault_robot(contacts, {'failed_leg': 1}, 1) is None  # one robot: no name
+    metrics = {'outcome': 'stuck', 'fault_collisions': 0}
+    assert default_title(metrics, None, robot=1).startswith('r1: stuck | ')
+    assert default_title(metrics, None).startswith('stuck | ')

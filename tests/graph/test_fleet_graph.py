@@ -97,9 +97,11 @@ def test_a_missing_robot_controller_is_named(node_processes, ros_node):
     start_simulator(node_processes, namespace, 'dummy_agents:=0',
                     'controller_startup_timeout:=3.0')
     start_navigator(node_processes, f'{namespace}/r0', 'diff_drive')  # r1 has none
-    # r0's navigator up before the short start-up wait begins, so r1 is the one missing.
+    # r0's navigator up (its scan reader and cmd_vel writer) before the short start-up wait
+    # begins, so r1 is the one missing (a CI run under load found r0's writer not yet there).
     deadline = time.monotonic() + 60
-    while ros_node.count_subscribers(f'{namespace}/r0/scan') < 1:
+    while (ros_node.count_subscribers(f'{namespace}/r0/scan') < 1
+           or ros_node.count_publishers(f'{namespace}/r0/cmd_vel') < 1):
         assert time.monotonic() < deadline, 'the r0 navigator did not subscribe to scan'
         time.sleep(0.1)
     metrics, _ = evaluate(ros_node, namespace, environment_to_msg(crossing_environment()),

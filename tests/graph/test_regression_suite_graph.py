@@ -136,14 +136,20 @@ def test_ctrl_c_stops_an_external_suite_and_reports_what_ran(node_processes, roo
     assert 0 < skipped < count and suite_element.get('failures') == '0', suite_element.attrib
 
 
-def test_a_second_controller_driving_the_robot_is_warned_about(node_processes, room_bag,
-                                                               tmp_path):
+def test_a_second_controller_driving_the_robot_is_warned_about(node_processes, ros_node,
+                                                               room_bag, tmp_path):
     """Two stacks left running under one worker both drive its robot: the simulator's log
     says so (a user's mixed results had no other trace)."""
+    import time
+
     simulator = start_simulator(node_processes, '/w0', 'dummy_agents:=0',
                                 f'bags_root:={tmp_path / "sim"}')
     start_external(node_processes, '/w0', name='first_stack')
     start_external(node_processes, '/w0', name='second_stack')
+    deadline = time.monotonic() + 60  # both up before the episode (slow to start under load)
+    while ros_node.count_publishers('/w0/cmd_vel') < 2:
+        assert time.monotonic() < deadline, 'the two stacks did not both publish cmd_vel'
+        time.sleep(0.1)
     suite(str(room_bag), '--external', '--output', str(tmp_path / 'out'))
     simulator.wait_for_output(r'2 nodes publish on /w0/cmd_vel: more than one controller',
                               timeout=60)

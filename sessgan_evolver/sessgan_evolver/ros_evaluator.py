@@ -569,7 +569,10 @@ class RosEvaluator:
     def collect_bag(self, name: str, job: EpisodeJob, metrics: dict) -> None:
         """Copy the failure bag of a result into ``collect_into`` (verified:
         sessgan_evolver.bag_collection) and point ``metrics['bag_path']`` at the copy."""
-        if self.collect_into is None or not metrics.get('bag_path'):
+        if not metrics.get('bag_path'):
+            return
+        if self.collect_into is None:  # workers this campaign started write into its bags
+            self.overhead.bags_in_place += 1
             return
         remote, local = self.bag_places(job)
         final = local / job.environment.id

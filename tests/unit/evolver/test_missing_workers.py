@@ -72,3 +72,16 @@ def test_a_run_another_campaign_holds_is_refused_before_anything_runs(tmp_path, 
     again = lock_folder(runs / 'dup', campaign_cli.RUN_LOCK)  # let go
     assert again is not None
     again.close()
+
+
+def test_the_overhead_line_counts_bags_the_workers_wrote_in_place(tmp_path):
+    """A campaign's own workers write into its bags folder: nothing to copy, but not '0 bags'
+    (the demo said so with 17 failure bags)."""
+    from sessgan_evolver.ros_evaluator import CampaignOverhead
+
+    evaluator = object.__new__(RosEvaluator)
+    evaluator.overhead, evaluator.collect_into = CampaignOverhead(), None
+    evaluator.collect_bag('/w0/evaluate', None, {'bag_path': str(tmp_path / 'b0')})
+    evaluator.collect_bag('/w0/evaluate', None, {'bag_path': ''})  # a pass: no bag
+    assert '(0 bags copied, 0.0 ms each; 1 written in place by the workers)' in (
+        evaluator.overhead.summary())

@@ -39,7 +39,7 @@ from sessgan_core.valid_tests import (  # noqa: E402
 )
 from sessgan_evolver.bag_reading import iter_bag_messages, read_episode_json  # noqa: E402
 from sessgan_evolver.episode_runner import EpisodeTrace  # noqa: E402
-from sessgan_evolver.faults import FaultKey, FaultRule  # noqa: E402
+from sessgan_evolver.faults import FaultKey, FaultRule, failing_robot  # noqa: E402
 from sessgan_sim.bag_recording import jazzy_typestore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -148,7 +148,7 @@ def fleet_fault_robot(contacts: Sequence[dict[str, Any]], metrics: dict[str, Any
     for contact in contacts:
         if contact.get('fault', True):
             return int(contact.get('robot') or 0)
-    failed = int(metrics.get('failed_leg', -1))
+    failed = failing_robot(metrics, robots)
     return failed if 0 <= failed < robots else 0
 
 

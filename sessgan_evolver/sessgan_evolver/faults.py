@@ -122,6 +122,13 @@ FAULT_KIND_OF_CONTACT = {ContactKind.STATIC.value: 'collision_static',
 every kind but those in NOT_FAULT_KINDS)."""
 
 
+def failing_robot(metrics: Mapping[str, Any], robots: int) -> int:
+    """The robot a fleet episode's outcome comes from (its ``failed_leg``, which in a fleet
+    counts robots, in a mission legs); 0 for one robot; -1 when a fleet's robots all reached
+    their goals without a fault."""
+    return int(metrics.get('failed_leg', -1)) if robots > 1 else 0
+
+
 def first_fault_event(metrics: Mapping[str, Any], trace: EpisodeTrace) -> FaultEvent:
     """The first contact a robot under test caused (from the metrics' contact events, at
     that robot's place), else where the failing robot ended (kind = the outcome): in a fleet
@@ -134,7 +141,7 @@ def first_fault_event(metrics: Mapping[str, Any], trace: EpisodeTrace) -> FaultE
     if int(metrics.get('fault_collisions') or 0) > 0:
         raise FaultError('the metrics count a fault collision but list no contact event the '
                          'robot caused')
-    robot = int(metrics.get('failed_leg', -1)) if trace.fleet else 0
+    robot = failing_robot(metrics, len(trace.fleet) + 1)
     if robot > len(trace.fleet):
         raise FaultError(f'the metrics name robot r{robot} as failing, the trace has '
                          f'{len(trace.fleet) + 1} robots')

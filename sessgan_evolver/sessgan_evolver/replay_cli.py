@@ -2,7 +2,11 @@
 
 Replay republishes every recorded message with its recorded timing (scaled by ``--rate``),
 including ``/clock``, for RViz or any subscriber. Topics recorded under a worker namespace
-(``/w0/scan``) are republished under ``--namespace`` (default: the root, ``/scan``).
+(``/w0/scan``) are republished under ``--namespace`` (default: the root, ``/scan``). A fleet's
+bag has every topic once per robot (``/w0/r1/tf``): its robots' ``tf``, ``tf_static`` and
+``map`` go to the one ``/tf``, ``/tf_static`` and ``/map`` a viewer reads (the frames are
+already the robots' own, ``r1/odom``), r0's ``clock`` is ``/clock`` (the others tick the
+same times), and the rest stays per robot (``/r1/scan``).
 
 ``--resimulate`` runs the bag's map, start, goal and seed again and compares the outcome with
 the recorded one. It starts a simulator rebuilt from the settings episode.json records (mode,
@@ -23,6 +27,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import sys
 import tempfile
 import time
@@ -86,10 +91,23 @@ def message_class(msgtype: str):
     return getattr(importlib.import_module(f'{package}.{kind}'), name)
 
 
-def republished_topic(topic: str, recorded_namespace: str, namespace: str) -> str:
+FLEET_SHARED_TOPICS = ('clock', 'tf', 'tf_static', 'map')
+"""A fleet's per-robot topics that a viewer needs once, at the namespace's root."""
+
+
+def republished_topic(topic: str, recorded_namespace: str, namespace: str,
+                      fleet: bool = False) -> str | None:
+    """Where a recorded topic is republished; None for one that is not (a fleet's second
+    clock)."""
     recorded_namespace = recorded_namespace.rstrip('/')
     if recorded_namespace and topic.startswith(recorded_namespace + '/'):
         topic = topic[len(recorded_namespace):]
+    parts = topic.split('/')  # ['', 'r1', 'tf'] for a fleet robot's topic
+    if (fleet and len(parts) == 3 and re.fullmatch(r'r\d+', parts[1])
+            and parts[2] in FLEET_SHARED_TOPICS):
+        if parts[2] == 'clock' and parts[1] != 'r0':
+            return None
+        topic = '/' + parts[2]
     return namespace.rstrip('/') + topic
 
 
@@ -103,6 +121,7 @@ def replay(args: ReplayConfig, episode) -> int:
 
     topics = read_bag_topics(args.bag)
     recorded_namespace = (episode or {}).get('namespace', '')
+    fleet = bool((episode or {}).get('fleet'))
     init_rclpy()
     node = rclpy.create_node('sessgan_replay')
     try:
@@ -115,17 +134,21 @@ def replay(args: ReplayConfig, episode) -> int:
                 depth=max(1, topic.depth or 10), reliability=ReliabilityPolicy.RELIABLE,
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                 else DurabilityPolicy.VOLATILE)
-            name = republished_topic(topic.topic, recorded_namespace, args.namespace or '/')
-            publishers[topic.topic] = node.create_publisher(
-                message_class(topic.msgtype), name, qos)
-        total = sum(topic.message_count for topic in topics)
+            name = republished_topic(topic.topic, recorded_namespace, args.namespace or '/',
+                                     fleet)
+            if name is not None:
+                publishers[topic.topic] = node.create_publisher(
+                    message_class(topic.msgtype), name, qos)
+        total = sum(topic.message_count for topic in topics if topic.topic in publishers)
         node.get_logger().info(f'replaying {total} messages of {args.bag} at rate {args.rate}')
-        time.sleep(0.5)  # let subscribers match before the first message
+        wait_for_subscribers(node, publishers.values())
         while True:
             wall_start = time.monotonic()
             first_ns = None
             count = 0
             for message in iter_bag_messages(args.bag):
+                if message.topic not in publishers:
+                    continue
                 first_ns = message.timestamp_ns if first_ns is None else first_ns
                 due = wall_start + (message.timestamp_ns - first_ns) / 1e9 / args.rate
                 delay = due - time.monotonic()
@@ -142,6 +165,24 @@ def replay(args: ReplayConfig, episode) -> int:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+SUBSCRIBER_MATCH_WAIT = 5.0
+"""Most wall seconds to wait for subscribers already in the graph to match the replay's
+publishers: the first messages (a fleet's first second of /clock and /tf) went unheard with
+a fixed half second on a loaded 2-core machine."""
+
+
+def wait_for_subscribers(node, publishers) -> None:
+    """Until every subscriber discovery shows on a replayed topic is matched, at most
+    SUBSCRIBER_MATCH_WAIT s (one that is still starting up misses the start as it would with
+    `ros2 bag play`)."""
+    time.sleep(0.5)  # discovery of the subscribers that run already
+    deadline = time.monotonic() + SUBSCRIBER_MATCH_WAIT
+    while time.monotonic() < deadline and any(
+            node.count_subscribers(publisher.topic_name) > publisher.get_subscription_count()
+            for publisher in publishers):
+        time.sleep(0.05)
 
 
 def bag_environment(bag: Path, episode: dict):

@@ -107,3 +107,17 @@ def test_fleet_members_have_their_own_colours_and_routes(fleet):
         assert tuple(member.route[-1]) == pytest.approx((robot.goal.x, robot.goal.y))
     single = make_environment(load_example_map('factory').cells, 'factory', 'one', seed=0)
     assert fleet_members(single) == []
+
+
+def test_replay_gives_a_viewer_one_clock_tf_and_map_of_a_fleet():
+    """RViz reads /clock, /tf, /tf_static and /map: a fleet's are recorded once per robot."""
+    where = replay_cli.republished_topic
+    assert where('/w0/r1/tf', '/w0', '/', fleet=True) == '/tf'
+    assert where('/w0/r1/tf_static', '/w0', '/v', fleet=True) == '/v/tf_static'
+    assert where('/w0/r0/map', '/w0', '/', fleet=True) == '/map'
+    assert where('/w0/r0/clock', '/w0', '/', fleet=True) == '/clock'
+    assert where('/w0/r1/clock', '/w0', '/', fleet=True) is None  # r0's ticks the same times
+    assert where('/w0/r1/scan', '/w0', '/', fleet=True) == '/r1/scan'
+    # One robot: as recorded, under the namespace asked for.
+    assert where('/w0/tf', '/w0', '/', fleet=False) == '/tf'
+    assert where('/w0/r1/tf', '/w0', '/', fleet=False) == '/r1/tf'

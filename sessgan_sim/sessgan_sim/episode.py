@@ -738,7 +738,8 @@ class Episode:
             speed = math.hypot(*live.velocity)
             where = f'{self._distance_to_goal(record):.2f} m from it at {now:.2f} s'
             self._end(record, Outcome.STUCK,
-                      f'no progress toward the goal for {config.stuck_timeout:.2f} s; ' + (
+                      f'no progress toward the goal and no new ground for '
+                      f'{config.stuck_timeout:.2f} s; ' + (
                           f'stopped {where}' if speed <= STANDING_SPEED
                           else f'{where}, moving at {speed:.2f} m/s'))
 

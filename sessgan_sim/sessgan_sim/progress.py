@@ -1,8 +1,12 @@
 """Progress toward the goal and the stuck rule of one robot under test.
 
-An episode ends as stuck when the robot's distance to its goal, measured on a ProgressField of
-the certificate grid, has not reached a new minimum for ``stuck_timeout`` sim seconds, unless it
-waits for something that blocks its way (the episode says what) or dwells at a station.
+An episode ends as stuck when, for ``stuck_timeout`` sim seconds, the robot has neither come
+closer to its goal than ever before on this leg (measured on a ProgressField of the certificate
+grid) nor reached new ground (a NEW_GROUND_CELL square it has not been on during this leg),
+unless it waits for something that blocks its way (the episode says what) or dwells at a
+station. New ground counts because a planner may choose a way of its own: a longer one that
+costs less, one around an agent, a gap the certificate does not use. A robot driving that way
+is not stuck; one that stands, turns on the spot or goes to and fro over the same ground is.
 """
 
 from __future__ import annotations
@@ -65,9 +69,15 @@ def progress_field(grid: CertificateGrid, leg_start: Pose2D, leg_goal: Pose2D, f
     return ProgressField(grid, steps, route)
 
 
+NEW_GROUND_CELL = 0.5
+"""m, the side of the squares of new ground: the movement Nav2's progress checker asks for
+(``required_movement_radius``, 0.5 m), which, unlike ours, a robot going to and fro meets."""
+
+
 class ProgressMonitor:
-    """The stuck rule of one robot: the best distance to the current leg's goal so far and
-    when it was reached. ``stuck_timeout`` <= 0 disables the rule."""
+    """The stuck rule of one robot: the best distance to the current leg's goal so far, the
+    ground covered on this leg, and when the robot last got closer or onto new ground.
+    ``stuck_timeout`` <= 0 disables the rule."""
 
     def __init__(self, legs: Sequence[ProgressField], stuck_timeout: float) -> None:
         self.legs = list(legs)
@@ -77,27 +87,36 @@ class ProgressMonitor:
         self.stuck_timeout = stuck_timeout
         self.best = math.inf
         """m, the least distance to the current leg's goal so far."""
+        self.covered: set[tuple[int, int]] = set()
+        """The NEW_GROUND_CELL squares the robot has been on during this leg."""
         self.last_progress_time = 0.0
 
     def start_leg(self, leg: int, x: float, y: float) -> None:
         """Measure progress on leg ``leg`` from the robot at (``x``, ``y``) m on."""
         self.field = self.legs[leg]
         self.best = self.field.distance(x, y)
+        self.covered = {self._square(x, y)}
+
+    @staticmethod
+    def _square(x: float, y: float) -> tuple[int, int]:
+        return math.floor(x / NEW_GROUND_CELL), math.floor(y / NEW_GROUND_CELL)
 
     def hold(self, now: float) -> None:
         """Count sim time ``now`` as progress (arriving, setting off, dwelling)."""
         self.last_progress_time = now
 
     def stuck(self, now: float, x: float, y: float, waiting: Callable[[], bool]) -> bool:
-        """Whether the robot at (``x``, ``y``) m is stuck at sim time ``now``: no new least
-        distance for stuck_timeout seconds. ``waiting()`` (asked only without progress) says
-        whether something blocks its way; waiting is not being stuck (the time limit still
-        bounds the wait)."""
+        """Whether the robot at (``x``, ``y``) m is stuck at sim time ``now``: neither a new
+        least distance nor new ground for stuck_timeout seconds. ``waiting()`` (asked only
+        without progress) says whether something blocks its way; waiting is not being stuck
+        (the time limit still bounds the wait)."""
         if self.stuck_timeout <= 0:
             return False
         distance = self.field.distance(x, y)
-        if distance < self.best:
-            self.best = distance
+        square = self._square(x, y)
+        if distance < self.best or square not in self.covered:
+            self.best = min(self.best, distance)
+            self.covered.add(square)
             self.last_progress_time = now
             return False
         if waiting():

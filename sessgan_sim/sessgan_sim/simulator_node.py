@@ -299,6 +299,19 @@ class SimulatorNode(Node):
                 self.get_logger())
         return message
 
+    @staticmethod
+    def mistyped_commands(commands) -> str:
+        """Why a stack that publishes cmd_vel is not heard, when its type is the other one."""
+        others = commands.mistyped_writers()
+        if not others:
+            return ''
+        stamped = commands.msg_type.__name__ == 'TwistStamped'
+        return (f'; {commands.topic} is published as {", ".join(others)}, and this worker '
+                f'reads geometry_msgs/msg/{commands.msg_type.__name__}: start the worker with '
+                f'-p use_stamped_cmd_vel:={str(not stamped).lower()}, or publish '
+                f'{"Twist" if stamped else "TwistStamped"} (Nav2: enable_stamped_cmd_vel: '
+                f'{str(not stamped).lower()})')
+
     def run_ticks(self, episode: Episode, environment: Environment, clock: EpisodeClock,
                   settings: SimulatorSettings, recording: Recording | None, goal_handle):
         """The ticks of an episode that started: a single robot's topics in our namespace, a
@@ -313,7 +326,8 @@ class SimulatorNode(Node):
                 scan = stepper.channels[missing].topics.names['scan'] if fleet else 'scan'
                 episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
                               f'{stepper.who(missing)}no controller subscribed to {scan} and '
-                              f'published cmd_vel within {startup_timeout:.1f} s wall time')
+                              f'published cmd_vel within {startup_timeout:.1f} s wall time'
+                              + self.mistyped_commands(stepper.channels[missing].commands))
             else:
                 episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
             return episode.metrics()

@@ -149,7 +149,9 @@ class SimulatorSettings:
     """'blind' agents drive on whatever is ahead; 'cautious' ones wait while the robot or
     another agent is within 0.5 m ahead (an AGV with a safety scanner)."""
     stuck_timeout: float = 10.0
-    """Sim seconds without progress toward the goal that end an episode as stuck; 0 disables."""
+    """Sim seconds neither closer to the goal nor onto new ground that end an episode as stuck;
+    0 disables. A stack with recovery behaviours wants more than its progress checker's window
+    and a recovery (Nav2's launch file here: 30)."""
     collision_limit: int = 10
     """Collisions that end an episode (collision_limit); 0 disables."""
     free_mode: bool = False

@@ -75,6 +75,21 @@ def test_timer_driven_controller_reaches_goal_in_clocked_mode(node_processes, ro
         assert all(c.header.frame_id == 'base_footprint' for c in commands)
 
 
+def test_a_stack_publishing_the_other_command_type_is_named(node_processes, ros_node):
+    """ROS 2 matches no Twist reader to a TwistStamped writer and says nothing: the worker
+    names the type it sees and the option that fixes it (a harness outcome, never a result)."""
+    from tests.graph.test_simulator_graph import evaluate
+
+    namespace = '/mistyped'
+    start_simulator(node_processes, namespace, 'dummy_agents:=0',
+                    'controller_startup_timeout:=3.0')
+    start_stand_in(node_processes, namespace, '--stamped')  # the worker reads Twist
+    metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'room'))
+    assert metrics.outcome == 'controller_unresponsive', metrics.detail
+    assert ('cmd_vel is published as geometry_msgs/msg/TwistStamped' in metrics.detail
+            and 'use_stamped_cmd_vel:=true' in metrics.detail), metrics.detail
+
+
 @pytest.mark.parametrize('mode', ['lockstep', 'clocked'])
 def test_goal_reaches_subscribers_that_join_during_the_episode(node_processes, ros_node, mode):
     from geometry_msgs.msg import PoseStamped

@@ -82,5 +82,13 @@ class CommandReceiver:
         """cmd_vel writers discovery shows (matched or not)."""
         return self.node.count_publishers(self.topic)
 
+    def mistyped_writers(self) -> list[str]:
+        """The types of cmd_vel writers in the graph that this reader cannot match: Twist
+        against TwistStamped, either way round (ROS 2 matches no reader to them and says
+        nothing)."""
+        mine = f'{self.msg_type.__module__.split(".")[0]}/msg/{self.msg_type.__name__}'
+        return sorted({info.topic_type for info in self.node.get_publishers_info_by_topic(
+            self.topic) if info.topic_type != mine})
+
     def destroy(self) -> None:
         self.node.destroy_node()

@@ -191,6 +191,9 @@ def test_launch_file_starts_nav2_against_one_worker(nodes):
     assert settings.step_mode is StepMode.CLOCKED
     assert settings.goal_via is GoalInterface.NAVIGATE_TO_POSE
     assert settings.reset_costmaps is True
+    # A stuck window that outlasts Nav2's progress checker and a recovery after it.
+    checker = nodes['controller_server']['progress_checker']
+    assert settings.stuck_timeout >= checker['movement_time_allowance'] + 20.0
     dynamic = {ast.literal_eval(k) for k, v in zip(parameters.keys, parameters.values)
                if not isinstance(v, ast.Constant)}
     assert dynamic == {'real_time_factor'}

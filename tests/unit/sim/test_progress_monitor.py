@@ -42,6 +42,23 @@ def test_a_robot_without_a_new_least_distance_for_the_timeout_is_stuck():
     assert monitor.stuck(3.0, 1.25, 0.75, never)
 
 
+def test_new_ground_away_from_the_goal_is_progress_to_and_fro_is_not():
+    """A planner's own way (a longer one, round an agent) first leads away from the goal: the
+    robot is not stuck while it reaches ground it has not been on; going back over it, it is."""
+    monitor = ProgressMonitor([corridor()], stuck_timeout=2.0)
+    monitor.start_leg(0, 2.25, 0.75)
+    def never():
+        return False
+
+    assert not monitor.stuck(1.5, 1.75, 0.75, never)  # away, onto a new 0.5 m square
+    assert not monitor.stuck(3.0, 1.25, 0.75, never)  # further away, new again
+    assert not monitor.stuck(4.5, 0.75, 0.75, never)
+    # Back and forth over the squares it has covered: 2 s after the last new one, stuck.
+    assert not monitor.stuck(5.5, 1.25, 0.75, never)
+    assert not monitor.stuck(6.0, 1.75, 0.75, never)
+    assert monitor.stuck(6.5, 1.25, 0.75, never)
+
+
 def test_waiting_and_holding_are_not_being_stuck():
     monitor = ProgressMonitor([corridor()], stuck_timeout=2.0)
     monitor.start_leg(0, 0.75, 0.75)
@@ -64,6 +81,7 @@ def test_a_new_leg_measures_from_where_the_robot_is_and_a_zero_timeout_disables_
     monitor.start_leg(0, 0.75, 0.75)
     monitor.start_leg(1, 4.25, 0.75)
     assert monitor.best == pytest.approx(3.5)
+    assert monitor.covered == {(8, 1)}  # the ground of leg 0 is forgotten
     assert not monitor.stuck(1.0, 3.75, 0.75, lambda: False)  # toward the new goal
     off = ProgressMonitor([field], stuck_timeout=0.0)
     off.start_leg(0, 0.75, 0.75)

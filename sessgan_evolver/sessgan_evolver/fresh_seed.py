@@ -355,7 +355,8 @@ def evaluate_source(source: MapSource, plan: SeedPlan, evaluator: InProcessEvalu
     started = time.perf_counter()
     try:
         map_seeds = [map_seed for map_seed, _ in plan.pairs]
-        if isinstance(source, EnvironmentSource):
+        plain = not evaluator.mission.stations and evaluator.fleet.robots == 1
+        if isinstance(source, EnvironmentSource) and plain:
             tests = source.environments(map_seeds)
             maps = [cells for cells, _ in tests]
             environments = [replace(environment, id=f'fresh-{index:04d}-s{map_seed}')

@@ -592,7 +592,10 @@ class ScreenedSearch:
             if test.features is not None:
                 self.surrogate.add(self._row(test), failed)
             key = self._fault_key(result) if failed else None
-            route = _route_of(result.environment)
+            # The start and goal the search certified: a mission's or a fleet's episode draws
+            # its own from the seeds (a mission's goal is home, its start), on which no
+            # child's route could be certified.
+            route = _route_of(test.environment or result.environment)
             if key is not None:
                 self.archive.add(key)
                 self.route_faults.setdefault((route, test.sim_seed), set()).add(

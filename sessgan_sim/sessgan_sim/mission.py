@@ -84,11 +84,15 @@ class MissionTracker:
 
     @property
     def legs_completed(self) -> int:
-        return sum(1 for record in self.records if record.reached is not None)
+        """Legs done: a station's once the robot has dwelt there, the last once reached (a
+        robot that reached a station and failed before its dwell ended failed that leg)."""
+        return (sum(1 for record in self.records if record.departed is not None)
+                + int(self.complete))
 
     @property
     def leg_times(self) -> tuple[float, ...]:
-        """Sim seconds of every completed leg, in order."""
+        """Sim seconds from each leg's start to its waypoint, of every leg whose waypoint was
+        reached, in order."""
         return tuple(record.time for record in self.records if record.time is not None)
 
     def update(self, now: float, reached: bool, distance: float, speed: float,

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from sessgan_core.fleet import FleetSpec
 from sessgan_core.scenarios import get_scenario
 from sessgan_core.token_map import tokens_to_occupancy
 from sessgan_core.valid_tests import make_environment
@@ -624,3 +625,32 @@ def test_children_keep_their_parents_start_and_goal_when_the_map_runs_elsewhere(
     for child in children:
         start = child.environment.start
         assert (start.x, start.y, start.yaw) in starts and child.environment.origin == (0, 0)
+
+
+def test_a_mission_s_failures_make_children_and_an_archive_that_runs_missions():
+    from sessgan_core.missions import MissionSpec
+
+    # A mission's episode draws its own stations and ends at home, its start: the search's
+    # parents keep the start and goal it certified, so their children certify (they never
+    # did on home -> home), and the archive's fresh-seed evaluation draws missions too (it
+    # stopped with "an infeasible candidate has no environment to run").
+    mission = MissionSpec(stations=2)
+    search = ScreenedSearch('factory', 1, config=SMALL)
+    proposals = search.ask()
+    results = []
+    for index, proposal in enumerate(proposals):
+        environment = proposal.test_environment('factory', f'm{index}', mission, FleetSpec())
+        home, start = environment.goal, environment.start
+        assert environment.stations and (home.x, home.y) == (start.x, start.y)
+        results.append(Evaluated(proposal, environment, {
+            'feasible': True, 'collisions': 0, 'fault_collisions': 0, 'outcome': 'stuck'},
+            ended_at(environment.start.x + 1.0, environment.start.y)))
+    search.tell(results)
+    assert [parent.route[1][:2] for parent in search.parents] == [
+        (p.environment.goal.x, p.environment.goal.y) for p in proposals]
+    assert any(p.origin.startswith('child') for p in search.ask())
+
+    source = ArchiveSource(search, 'archive')
+    with InProcessEvaluator('factory', time_limit=1.0, mission=mission) as evaluator:
+        result = evaluate_source(source, SeedPlan([(21, 5), (22, 6)], 0, 0, 0), evaluator)
+    assert all(record.environment.stations for record in result.records)

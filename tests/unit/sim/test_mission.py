@@ -38,6 +38,8 @@ def test_the_next_goal_goes_out_after_standing_still_for_the_dwell_time():
     tracker = MissionTracker([STATION, PLACE, HOME], dwell_time=1.0, tolerance=0.5)
     assert tracker.update(4.0, True, 0.45, 0.3, PERIOD) is MissionEvent.ARRIVED
     assert tracker.dwelling and tracker.goal == STATION  # the station stays the goal
+    # Reached, not done: a failure before the dwell ends fails this leg.
+    assert tracker.legs_completed == 0 and tracker.leg_times == (4.0,)
     # Still rolling inside the tolerance: the dwell has not begun.
     events, now = run_ticks(tracker, 4.0, 40, distance=0.3, speed=STANDING_SPEED * 2)
     assert set(events) == {MissionEvent.NONE}

@@ -526,7 +526,7 @@ class Campaign:
                 f'generations, {60 / per_generation:.1f}/min, elapsed '
                 f'{format_duration(elapsed)}, ETA '
                 f'{format_duration(per_generation * (config.generations - done))}'
-                + harness_note(harness_reruns, lost_bags))
+                + harness_note(self.store, 'generation'))
             if generation == first_generation and summary['feasible_fraction'] < FEW_VALID_TESTS:
                 self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '
                          f'generation {generation} are valid tests (hold a route): episodes '
@@ -628,9 +628,10 @@ def harness_notes(store: RunStore) -> list[str]:
     notes = []
     if reruns:
         notes.append(f'Harness re-runs: {reruns} episodes were ended by the test harness '
-                     '(a silent controller, a dead process, a cancelled episode), not by '
-                     'the controller, and run again; none of them is a result (the '
-                     '`harness_reruns` column of metrics_generations.csv says when).')
+                     '(a silent or overloaded stack, a dead process, a cancelled episode), '
+                     'not by the controller, and run again; none of them is a result (the '
+                     '`harness_reruns` column of metrics_generations.csv says when, the '
+                     "campaign's log why).")
     if lost:
         notes.append(f'**WARNING: {len(lost)} failure bags were lost** (their metrics are '
                      'recorded; see the `bag_error` column of metrics_episodes.csv): '
@@ -640,14 +641,20 @@ def harness_notes(store: RunStore) -> list[str]:
     return notes
 
 
-def harness_note(harness_reruns: int, lost_bags: int) -> str:
-    """The console line's note of what went wrong around the episodes ('' when nothing)."""
+def harness_note(store: RunStore, step: str) -> str:
+    """The console line's note of what went wrong around the episodes of the last ``step``
+    ('batch', 'generation'), with the run's totals ('' when nothing); ``store`` holds that
+    step's row."""
+    rows = store.read_rows('generation')
+    reruns, lost = (int(rows[-1].get(column) or 0) for column in ('harness_reruns', 'lost_bags'))
     parts = []
-    if harness_reruns:
-        parts.append(f'harness re-runs {harness_reruns} (episodes the harness, not the '
-                     'controller, ended: run again)')
-    if lost_bags:
-        parts.append(f'WARNING: {lost_bags} failure bags lost')
+    if reruns:
+        parts.append(f'harness re-runs {reruns} in this {step}, '
+                     f'{sum(int(row.get("harness_reruns") or 0) for row in rows)} in the run '
+                     '(episodes the harness, not the controller, ended: run again)')
+    if lost:
+        parts.append(f'WARNING: {lost} failure bags lost in this {step}, '
+                     f'{sum(int(row.get("lost_bags") or 0) for row in rows)} in the run')
     return ''.join(f' | {part}' for part in parts)
 
 

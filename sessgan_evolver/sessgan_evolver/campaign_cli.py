@@ -341,6 +341,7 @@ def report_result(result: Any, log: Callable[[str], None], external: bool = Fals
     faults = int(last.get('distinct_faults_so_far') or 0)
     unplaced = int(last.get('unplaced_failures_so_far') or 0)
     per = 1.0 / episodes if episodes else 0.0
+    reruns = sum(int(row.get('harness_reruns') or 0) for row in result.generations)
     log(f'done in {result.wall_time / 60:.1f} min: {failures} valid failures '
         f'({failures * per:.3f}/episode), {faults} distinct faults ({faults * per:.3f}/episode)'
         + (f', {last["fault_situations_so_far"]} fault situations'
@@ -349,7 +350,8 @@ def report_result(result: Any, log: Callable[[str], None], external: bool = Fals
         f'fault risk {first.get("mean_fault_risk_score") or 0:.3f} (generation 0) -> '
         f'{last.get("mean_fault_risk_score") or 0:.3f} (generation {last["generation"]}); '
         f'risk {first.get("mean_risk_score") or 0:.3f} -> '
-        f'{last.get("mean_risk_score") or 0:.3f}')
+        f'{last.get("mean_risk_score") or 0:.3f}'
+        + (f'; harness re-runs {reruns} (run again, not results)' if reruns else ''))
     print(f'report: {result.report_path}')
     if result.bags_dir.is_dir() and any(result.bags_dir.iterdir()):
         print(f'failure bags: {result.bags_dir}')

@@ -270,7 +270,7 @@ class MethodCampaign:
                 f'cheap work {cheap_total / max(elapsed, 1e-9):.0%} of the wall time, '
                 f'elapsed {format_duration(elapsed)}, ETA '
                 f'{format_duration(per_episode * (budget - tally.episodes))}'
-                + harness_note(harness_reruns, lost_bags))
+                + harness_note(self.store, 'batch'))
             if tally.episodes - len(cut) == first_episode and \
                     summary['feasible_fraction'] < FEW_VALID_TESTS:
                 self.log(f'WARNING: only {summary["feasible_fraction"]:.0%} of the maps of '

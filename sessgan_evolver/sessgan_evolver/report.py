@@ -34,7 +34,7 @@ from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from sessgan_evolver.errors import ReportError, RunStoreError  # noqa: E402
-from sessgan_evolver.fault_tally import FaultTally  # noqa: E402
+from sessgan_evolver.fault_tally import UNPLACED, FaultTally  # noqa: E402
 from sessgan_evolver.run_store import RunStore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -298,7 +298,41 @@ def faults_found_lines(episode_rows: Sequence[Mapping[str, Any]],
         lines[-1] += (f' {tally.unplaced} valid failures could not be placed (no failure '
                       'bag to read their contacts from) and are not among the distinct '
                       'faults.')
-    return lines + ['', '![faults found](faults_found.png)', '']
+    return lines + ['', *failure_kind_lines(episode_rows), '![faults found](faults_found.png)',
+                    '']
+
+
+FAULT_KIND_MEANINGS = {
+    'collision_static': 'drove into a wall, barrier or low obstacle',
+    'collision_agent': 'drove into a moving agent',
+    'collision_robot': 'drove into another robot under test',
+    'stuck': 'neither closer to the goal nor onto new ground for the stuck window',
+    'timeout': 'the goal not reached within the time limit',
+    UNPLACED: 'no failure bag to place it by',
+}
+"""What each fault kind of an episode's ``fault`` label means (sessgan_evolver.faults)."""
+
+
+def failure_kind_lines(episode_rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """A table of the valid failures by fault kind: a stack that stops in narrow passages
+    and one that clips wall corners have different bugs."""
+    kinds: dict[str, tuple[int, set[str], str]] = {}
+    for row in episode_rows:
+        label = str(row.get('fault') or '')
+        if not label:
+            continue
+        kind = label if label == UNPLACED else label.rpartition('-r')[0]
+        count, labels, first = kinds.get(kind, (0, set(), str(row.get('environment_id'))))
+        kinds[kind] = (count + 1, labels | {label}, first)
+    if not kinds:
+        return []
+    lines = ['| fault kind | what | valid failures | distinct faults | first episode |',
+             '|---|---|---:|---:|---|']
+    for kind, (count, labels, first) in sorted(kinds.items(), key=lambda item: -item[1][0]):
+        distinct = 0 if kind == UNPLACED else len(labels)
+        lines.append(f'| `{kind}` | {FAULT_KIND_MEANINGS.get(kind, "")} | {count} | '
+                     f'{distinct} | `{first}` |')
+    return [*lines, '']
 
 
 def plot_faults_found(generation_rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:

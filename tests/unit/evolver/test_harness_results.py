@@ -89,7 +89,9 @@ def rows(path) -> list[dict]:
 
 
 def test_an_unresponsive_episode_is_rerun_not_recorded(tmp_path):
-    config = small_config(record_failures=True)
+    from sessgan_evolver.campaign_cli import report_result
+
+    config = small_config(record_failures=True, generations=2)
     logs: list[str] = []
     campaign = Campaign(config, 'rerun', tmp_path / 'runs', tmp_path / 'bags', logs.append)
     observed = []
@@ -97,18 +99,23 @@ def test_an_unresponsive_episode_is_rerun_not_recorded(tmp_path):
                             log=logs.append,
                             observer=lambda env, seed, run, origin: observed.append(
                                 run.metrics['outcome'])) as evaluator:
-        calls = silent_runner(evaluator, {1})
+        calls = silent_runner(evaluator, {1, 4})  # one in each generation
         result = campaign.run(evaluator)
     episodes = rows(result.run_dir / 'metrics_episodes.csv')
-    assert len(calls) == 3 and calls[0] == calls[1]  # the first episode ran twice
-    assert len(episodes) == 2
+    assert len(calls) == 6 and calls[0] == calls[1]  # the first episode ran twice
+    assert len(episodes) == 4
     assert 'controller_unresponsive' not in {row['outcome'] for row in episodes}
     assert 'controller_unresponsive' not in observed
     assert [row['harness_reruns'] for row in rows(result.run_dir / 'metrics_generations.csv')] \
-        == ['1']
-    assert any('harness re-runs 1' in line for line in logs), logs
+        == ['1', '1']
+    # Each generation's line gives its own and the run's, as its failures are the run's.
+    lines = [line for line in logs if line.startswith('generation ')]
+    assert 'harness re-runs 1 in this generation, 1 in the run' in lines[0], lines
+    assert 'harness re-runs 1 in this generation, 2 in the run' in lines[1], lines
     assert any('a harness failure, not a result; running it again' in line for line in logs)
-    assert 'Harness re-runs: 1 episodes' in result.report_path.read_text()
+    assert 'Harness re-runs: 2 episodes' in result.report_path.read_text()
+    report_result(result, logs.append)
+    assert 'harness re-runs 2 (run again, not results)' in logs[-1], logs[-1]
 
 
 def test_a_method_campaign_counts_its_harness_re_runs_too(tmp_path):
@@ -127,7 +134,7 @@ def test_a_method_campaign_counts_its_harness_re_runs_too(tmp_path):
     assert len(calls) == 3 and calls[0] == calls[1]
     assert [row['harness_reruns'] for row in rows(result.run_dir / 'metrics_generations.csv')] \
         == ['1']
-    assert any('harness re-runs 1' in line for line in logs), logs
+    assert any('harness re-runs 1 in this batch, 1 in the run' in line for line in logs), logs
     assert 'Harness re-runs: 1 episodes' in result.report_path.read_text()
 
 

@@ -39,6 +39,7 @@ from sessgan_evolver.faults import FaultKey, FaultRule, key_of_failure, place_co
 from sessgan_evolver.fresh_seed import campaign_sources, used_seeds
 from sessgan_evolver.in_process import InProcessEvaluator
 from sessgan_evolver.method_campaign import MethodCampaign, method_of
+from sessgan_evolver.report import FAULT_KIND_MEANINGS
 from sessgan_evolver.run_store import RunStore
 
 pytestmark = pytest.mark.unit
@@ -123,6 +124,13 @@ def test_a_method_campaign_spends_its_budget_and_counts_the_faults(tmp_path):
             f"(`{failing[0]['environment_id']}`)") in report
     assert '| mean fault risk score |' in report
     assert (result.report_path.parent / 'faults_found.png').stat().st_size > 0
+    # What kind of failures: a row per kind, its failures and distinct faults.
+    kinds = {row['fault'].rpartition('-r')[0] for row in failing}
+    for kind in kinds:
+        labels = {row['fault'] for row in failing if row['fault'].startswith(kind + '-r')}
+        count = sum(row['fault'].startswith(kind + '-r') for row in failing)
+        assert f'| `{kind}` | {FAULT_KIND_MEANINGS[kind]} | {count} | {len(labels)} |' \
+            in report, report
 
 
 def test_an_interrupted_method_campaign_resumes_with_identical_rows(tmp_path):

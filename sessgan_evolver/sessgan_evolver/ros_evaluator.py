@@ -157,6 +157,8 @@ class RosEvaluator:
         """The robot a worker's simulator must host (its version must be ours), or None:
         workers are not checked (sessgan_evolver.worker_identity)."""
         self.refused: set[str] = set()
+        self.said_shared: set[str] = set()
+        """Workers served by several simulators at the last look (said once)."""
         self.unidentified: dict[str, float] = {}
         """Workers whose bags service was not up yet, with when that was first seen."""
 
@@ -209,13 +211,25 @@ class RosEvaluator:
             if self.allowed is not None and name not in self.allowed:
                 continue
             if name not in self.clients and name not in self.starting:
-                if name in self.refused or not self.identity_checked(name):
+                if name in self.refused or self.shared(name) \
+                        or not self.identity_checked(name):
                     continue
                 from sessgan_interfaces.action import EvaluateEnvironment
                 self.clients[name] = self.action_client_class(
                     self.node, EvaluateEnvironment, name)
                 self.log(f'worker found: {name}')
         return sorted(self.clients)
+
+    def shared(self, name: str) -> bool:
+        """Whether more than one simulator serves ``name`` (two started under one namespace):
+        each goal would go to both, and their answers would cross. Said once; looked at
+        again at each discovery, so the worker is used once the others are stopped."""
+        servers = self.node.count_publishers(f'{name}/_action/status')
+        if servers > 1 and name not in self.said_shared:
+            self.log(f'not using worker {name} while {servers} simulators serve it (started '
+                     'twice under one namespace?): stop all but one')
+        (self.said_shared.add if servers > 1 else self.said_shared.discard)(name)
+        return servers > 1
 
     def identity_checked(self, name: str) -> bool:
         """True if worker ``name`` may be used (or is not checked). One of another version or

@@ -368,3 +368,26 @@ def test_a_worker_is_used_only_if_it_says_it_matches(evaluator, monkeypatch, sou
     assert found == [] and evaluator.refused == {'/w0/evaluate'}
     assert any(line.startswith('refusing worker /w0/evaluate') and refusal in line
                for line in evaluator.logs), evaluator.logs
+
+
+def test_a_worker_two_simulators_serve_is_not_used_until_one_stops(evaluator, ros_node):
+    """Two simulators started under one namespace both take each goal, and their answers
+    cross ("harness failure ... ended the goal with status 0"): say so, use it once one is
+    left."""
+    from rclpy.action import ActionServer
+
+    from sessgan_interfaces.action import EvaluateEnvironment
+    from tests.ros_processes import spin_until
+
+    servers = [ActionServer(ros_node, EvaluateEnvironment, '/dup/evaluate', lambda h: None)
+               for _ in range(2)]
+    status = '/dup/evaluate/_action/status'
+    assert spin_until(ros_node, lambda: ros_node.count_publishers(status) == 2, timeout=20)
+    evaluator.allowed = None
+    evaluator.evaluate_servers = lambda: ['/dup/evaluate']
+    assert evaluator.discover_workers() == [] and evaluator.discover_workers() == []
+    said = [line for line in evaluator.logs if 'not using worker /dup/evaluate' in line]
+    assert len(said) == 1 and 'while 2 simulators serve it' in said[0], evaluator.logs
+    servers[1].destroy()
+    assert spin_until(ros_node, lambda: ros_node.count_publishers(status) == 1, timeout=20)
+    assert evaluator.discover_workers() == ['/dup/evaluate']

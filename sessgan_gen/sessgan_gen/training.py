@@ -250,6 +250,23 @@ def validate_config(config: TrainConfig) -> None:
     for ok, message in checks:
         if not ok:
             raise ValueError(message)
+    check_device(config.device)
+
+
+def check_device(device: str) -> None:
+    """Raise ValueError unless ``device`` is one training can use here."""
+    try:
+        resolved = resolve_device(device)
+    except RuntimeError:
+        raise ValueError(f'device must be auto, cpu, cuda or cuda:N, got {device!r}') from None
+    if resolved.type not in ('cpu', 'cuda'):
+        raise ValueError(f'device must be auto, cpu, cuda or cuda:N, got {device!r}')
+    if resolved.type == 'cuda' and not torch.cuda.is_available():
+        raise ValueError(f'device {device!r}: this torch sees no CUDA device (a CPU-only '
+                         'build, or no GPU); use --device cpu or auto')
+    if resolved.type == 'cuda' and (resolved.index or 0) >= torch.cuda.device_count():
+        raise ValueError(f'device {device!r}: this machine has {torch.cuda.device_count()} '
+                         'CUDA devices')
 
 
 def config_dict(config: TrainConfig) -> dict[str, Any]:

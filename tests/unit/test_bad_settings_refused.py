@@ -103,7 +103,9 @@ def test_compare_tells_a_usage_error_from_a_failed_comparison(tmp_path, capsys, 
 @pytest.mark.parametrize(('arguments', 'named'), [
     (['--beta1', 'nan'], 'beta1'), (['--lr-decay', '0'], 'lr_decay'),
     (['--coarsest-coverage', 'inf'], 'coarsest_coverage'), (['--seed', '-1'], 'seed'),
-    (['--max-scales', '-2'], 'max_scales'),
+    (['--max-scales', '-2'], 'max_scales'), (['--device', 'bogus'], 'device must be'),
+    # A device this torch cannot use (CPU-only, as ./sessgan installs it; a 99th GPU).
+    (['--device', 'cuda:99'], "device 'cuda:99'"),
     # The inputs an option names count as options: read before anything is written.
     (['--map-file', '/nonexistent.txt'], '/nonexistent.txt'),
     (['--map-yaml', '/nonexistent.yaml'], '/nonexistent.yaml'), (['--resume'], '--resume')])

@@ -356,7 +356,10 @@ def report_result(result: Any, log: Callable[[str], None], external: bool = Fals
     if result.bags_dir.is_dir() and any(result.bags_dir.iterdir()):
         print(f'failure bags: {result.bags_dir}')
     else:
-        print('failure bags: none (no failure was recorded)')
+        lost = sum(int(row.get('lost_bags') or 0) for row in result.generations)
+        print('failure bags: none' + (f' ({lost} were lost: see bag_error in '
+                                      'metrics_episodes.csv)' if lost else
+                                      ' (no failure was recorded)'))
     from sessgan_evolver.regression_suite import SUITE_FILE, suite_line, write_suite_of_bags_below
 
     suite = write_suite_of_bags_below(result.run_dir / SUITE_FILE, result.run_dir.name,

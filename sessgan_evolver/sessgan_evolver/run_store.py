@@ -162,8 +162,8 @@ class RunStore:
             raise RunStoreError(
                 f'run {self.run_name!r} already exists with a different config: '
                 f'{"; ".join(differences[:10])}' + (
-                    f'; it was made with `{shlex.join(made_with)}` (add --resume to continue '
-                    'it)' if isinstance(made_with, list) else ''))
+                    f'; it was made with `{shlex.join(made_with)}` (that command with '
+                    '--resume continues it)' if isinstance(made_with, list) else ''))
 
     def read_config(self) -> dict[str, Any]:
         """The config.json document: {'config', 'seed', 'software_version'}."""

@@ -89,6 +89,8 @@ def check_options(config: ExportConfig) -> Path:
         from sessgan_core.token_map import read_token_map
 
         read_token_map(config.map_file)
+    if config.bag and not Path(config.bag).is_dir():
+        raise SessganGenError(f'--bag {config.bag}: no such directory')
     if config.bag and not (Path(config.bag) / 'map.yaml').is_file():
         raise SessganGenError(f'{config.bag} is no failure bag: it has no map.yaml')
     if config.generate:  # another scenario's checkpoint, a size it cannot make: bad options

@@ -245,6 +245,33 @@ def worker_note(name: str, settings: Any) -> str:
     return f'worker {name}: {settings["mode"]}{pace}'
 
 
+def setting_differences(name: str, settings: Any,
+                        progresses: Sequence[ScenarioProgress]) -> list[str]:
+    """A note for each setting that shapes an episode (a longer stuck window, other agents,
+    another lidar) in which worker ``name`` differs from the scenarios' recordings: a
+    verdict may change for that reason, not the stack's."""
+    from sessgan_sim.simulator_settings import EPISODE_SETTINGS
+
+    if not isinstance(settings, dict):
+        return []
+    notes = []
+    for key in sorted(EPISODE_SETTINGS & settings.keys()):
+        recorded: dict[str, int] = {}
+        for progress in progresses:
+            simulator = progress.entry.episode.get('simulator')
+            if isinstance(simulator, dict) and key in simulator \
+                    and simulator[key] != settings[key]:
+                value = json.dumps(simulator[key], sort_keys=True)
+                recorded[value] = recorded.get(value, 0) + 1
+        if recorded:
+            notes.append(f'WARNING: worker {name} runs with {key} '
+                         f'{json.dumps(settings[key], sort_keys=True)}, recorded: '
+                         + ', '.join(f'{value} in {count} scenarios'
+                                     for value, count in sorted(recorded.items()))
+                         + ' (a verdict may change for that, not for the stack)')
+    return notes
+
+
 def recorded_modes(progresses: Sequence[ScenarioProgress]) -> str:
     """'recorded: 5 lockstep, 1 clocked': the modes the scenarios' bags were recorded in."""
     modes: dict[str, int] = {}
@@ -328,7 +355,9 @@ def run_external(progresses: list[ScenarioProgress], args: SuiteConfig, output: 
                                                                    evaluator.spin)
             try:
                 description = evaluator.bag_sources[namespace].call_within(5.0)
-                notes.append(worker_note(namespace, json.loads(description.settings)))
+                settings = json.loads(description.settings)
+                notes.append(worker_note(namespace, settings))
+                notes += setting_differences(namespace, settings, progresses)
             except (BagCollectionError, ValueError):
                 notes.append(worker_note(namespace, None))
         notes.append(recorded_modes(progresses))

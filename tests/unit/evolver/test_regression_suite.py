@@ -433,3 +433,23 @@ def test_the_summary_says_how_the_workers_ran_the_scenarios():
     assert suite_cli.recorded_modes(progresses) == 'recorded: 2 lockstep'
     note = 'worker /w0: clocked at 3x real time'
     assert f'* {note}' in markdown_summary('s', progresses, 1.0, notes=[note])
+
+
+def test_the_summary_warns_of_a_worker_whose_episodes_differ_from_the_recordings():
+    """A worker started with a longer stuck window turns recorded `stuck` failures green:
+    the summary says so, where the verdicts' reason is read."""
+    def recorded(name: str, stuck_timeout: float) -> ScenarioProgress:
+        episode = {'scenario': 'factory', 'environment_id': name,
+                   'simulator': {'mode': 'clocked', 'stuck_timeout': stuck_timeout,
+                                 'real_time_factor': 1.0, 'dummy_agents': 2}}
+        return ScenarioProgress(SuiteEntry(name, Path('/nowhere'), episode, 'stuck'), 1, 1)
+
+    progresses = [recorded('a', 10.0), recorded('b', 10.0), recorded('c', 60.0)]
+    worker = {'mode': 'clocked', 'real_time_factor': 2.0, 'stuck_timeout': 60.0,
+              'dummy_agents': 2}
+    assert suite_cli.setting_differences('/w0', worker, progresses) == [
+        'WARNING: worker /w0 runs with stuck_timeout 60.0, recorded: 10.0 in 2 scenarios (a '
+        'verdict may change for that, not for the stack)']  # pace and mode: worker_note
+    assert suite_cli.setting_differences('/w0', {**worker, 'stuck_timeout': 10.0},
+                                         progresses[:2]) == []
+    assert suite_cli.setting_differences('/w0', None, progresses) == []

@@ -64,9 +64,8 @@ def generate_launch_description() -> LaunchDescription:
             'controller_startup_timeout': 60.0,
             'stack_timeout': 10.0,
             # Nav2's default tree recovers (clear, spin, wait, back up) only once its
-            # progress checker (0.5 m in 10 s) has failed: the default stuck window of 10 s
-            # would end every such episode stuck before its first recovery, and 30 s leaves
-            # it a recovery and 10 s to get going again.
+            # progress checker (0.5 m in 10 s) has failed: 30 s (the simulator's default,
+            # kept here for Nav2's sake) leave it a recovery and 10 s to get going again.
             'stuck_timeout': 30.0,
         }])
     nav2 = [Node(package=package, executable=executable, name=name, namespace=namespace,

@@ -71,9 +71,11 @@ class EpisodeConfig:
     dummy_agents: int | None = None
     """Number of moving dummy agents."""
     agents: AgentConfig = field(default_factory=AgentConfig)
-    stuck_timeout: float = 10.0
-    """Sim seconds without progress toward the goal (a new minimum of the geodesic distance
-    on the grid) before the episode ends with outcome stuck; <= 0 disables it."""
+    stuck_timeout: float = 30.0
+    """Sim seconds neither closer to the goal (a new minimum of the geodesic distance on the
+    grid) nor onto new ground before the episode ends with outcome stuck (sessgan_sim.progress);
+    <= 0 disables it. 30: a stack with recoveries (Nav2's progress checker gives up after
+    10 s, then clears, spins, waits, backs up) gets to recover; until 2026-11-28 it was 10."""
     goal_tolerance: float | None = None
     """Distance of the robot's centre to the goal that counts as reached; None: one cell of
     the scenario."""

@@ -73,7 +73,8 @@ where the simulator writes)."""
 EPISODE_SETTINGS = frozenset({
     'robot', 'robot_params', 'time_limit', 'control_rate', 'physics_rate', 'lidar_beams',
     'lidar_fov_deg', 'lidar_range_min', 'lidar_range_max', 'lidar_rate', 'lidar_noise_std',
-    'dummy_agents', 'agent_speed', 'agent_behaviour', 'stuck_timeout', 'collision_limit'})
+    'dummy_agents', 'agent_speed', 'agent_behaviour', 'stuck_timeout', 'collision_limit',
+    'goal_tolerance'})
 """Settings that shape an episode's simulation (its EpisodeConfig); the others say how the
 node steps, talks to the stack under test and records."""
 
@@ -148,12 +149,15 @@ class SimulatorSettings:
     agent_behaviour: str = 'blind'
     """'blind' agents drive on whatever is ahead; 'cautious' ones wait while the robot or
     another agent is within 0.5 m ahead (an AGV with a safety scanner)."""
-    stuck_timeout: float = 10.0
+    stuck_timeout: float = 30.0
     """Sim seconds neither closer to the goal nor onto new ground that end an episode as stuck;
-    0 disables. A stack with recovery behaviours wants more than its progress checker's window
-    and a recovery (Nav2's launch file here: 30)."""
+    0 disables. Room for a stack's recoveries after its progress checker gives up (Nav2's:
+    10 s); until 2026-11-28 it was 10."""
     collision_limit: int = 10
     """Collisions that end an episode (collision_limit); 0 disables."""
+    goal_tolerance: float = 0.0
+    """m between the robot's centre and the goal that count as reached (heading not judged,
+    the robot need not stop); 0: one map cell of the scenario (0.5 m in the factory)."""
     free_mode: bool = False
     """Run an episode for every map on the environment topic (fixed at start-up)."""
     seed: int = 0
@@ -214,7 +218,7 @@ class SimulatorSettings:
                      'agent_speed'):
             _positive(name, getattr(self, name))
         for name in ('sim_time_origin', 'time_limit', 'lidar_rate', 'lidar_noise_std',
-                     'lidar_range_min', 'stuck_timeout'):
+                     'lidar_range_min', 'stuck_timeout', 'goal_tolerance'):
             _not_negative(name, getattr(self, name))
         self.pace_rule()
         check_time_limit(self.time_limit, "parameter 'time_limit'")
@@ -337,6 +341,7 @@ class SimulatorSettings:
             agents=AgentConfig(speed=float(self.agent_speed), behaviour=self.agent_behaviour),
             stuck_timeout=float(self.stuck_timeout),
             collision_limit=int(self.collision_limit),
+            goal_tolerance=float(self.goal_tolerance) or None,
             seed=int(seed),
         )
 

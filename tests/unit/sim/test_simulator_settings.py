@@ -76,8 +76,13 @@ def test_non_default_settings_reach_the_episode_config():
         'control_rate': 10.0, 'physics_rate': 50.0, 'lidar_beams': 90, 'lidar_fov_deg': 180.0,
         'lidar_range_min': 0.2, 'lidar_range_max': 4.0, 'lidar_rate': 5.0,
         'lidar_noise_std': 0.0, 'dummy_agents': 1, 'agent_speed': 0.3, 'stuck_timeout': 4.0,
-        'collision_limit': 3, 'time_limit': 30.0, 'agent_behaviour': 'cautious'})
+        'collision_limit': 3, 'time_limit': 30.0, 'agent_behaviour': 'cautious',
+        'goal_tolerance': 0.25})
     config = settings.episode_config(seed=7)
+    assert config.goal_tolerance == 0.25  # 0 (the default): the scenario's one cell
+    assert SimulatorSettings().episode_config().goal_tolerance is None
+    with pytest.raises(InvalidConfigError, match='goal_tolerance'):
+        SimulatorSettings.from_values({'goal_tolerance': -1.0})
     assert config.robot == 'diff_drive'
     assert config.robot_params == {'max_linear_speed': 0.5, 'max_angular_speed': 1.5}
     assert (config.control_rate_hz, config.physics_rate_hz) == (10.0, 50.0)

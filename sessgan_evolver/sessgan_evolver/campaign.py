@@ -89,6 +89,14 @@ MAX_EPISODE_TIMEOUT = 7 * 86400.0
 """Wall seconds: the longest --episode-timeout accepted (a week; 0 derives it)."""
 
 
+def check_episode_timeout(seconds: float) -> float:
+    """``seconds`` (an ``--episode-timeout``) when it is one, else CampaignError naming it."""
+    if not (math.isfinite(seconds) and 0.0 <= seconds <= MAX_EPISODE_TIMEOUT):
+        raise CampaignError(f'episode_timeout must lie in [0, {MAX_EPISODE_TIMEOUT:.0f}] wall '
+                            f'seconds (0: derived from the time limit), got {seconds}')
+    return seconds
+
+
 def check_controller(scenario: str, controller: str) -> None:
     """CampaignError unless ``controller`` ('' = the scenario's) is a built-in controller that
     drives the scenario's robot (or a robot of its own that the simulators then host)."""
@@ -230,11 +238,7 @@ class CampaignConfig:
             check_time_limit(self.time_limit, 'time_limit')
         except InvalidConfigError as err:
             raise CampaignError(str(err)) from err
-        if not (math.isfinite(self.episode_timeout)
-                and 0.0 <= self.episode_timeout <= MAX_EPISODE_TIMEOUT):
-            raise CampaignError(f'episode_timeout must lie in [0, {MAX_EPISODE_TIMEOUT:.0f}] '
-                                f'wall seconds (0: derived from the time limit), got '
-                                f'{self.episode_timeout}')
+        check_episode_timeout(self.episode_timeout)
         check_harness_tries(self.harness_tries)
         if not self.external:
             check_controller(self.scenario, self.controller)

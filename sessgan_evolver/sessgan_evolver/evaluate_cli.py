@@ -185,7 +185,7 @@ def run_directory(name: str, runs_root: Path, option: str = '--run') -> Path:
     """The folder of the run ``name`` under ``runs_root``. A path to a run folder is still
     taken (what ``option`` was before it became a name), with a note naming ``option``-dir."""
     folder = runs_root / name
-    if folder.is_dir():
+    if len(Path(name).parts) == 1 and not Path(name).is_absolute() and folder.is_dir():
         return folder
     if Path(name).is_dir():
         print(f'note: {option} {name}: {option} takes a run name under --runs-root '

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Literal
 
 from sessgan_core.config_cli import cli, parse_valid_config
-from sessgan_core.ros_spin import init_rclpy, run_command
+from sessgan_core.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
 from sessgan_core.validation import ros_namespace
 
 EXIT_AS_EXPECTED, EXIT_DIFFERENT, EXIT_ERROR = 0, 1, 2
@@ -55,7 +55,7 @@ class ReplayConfig:
     """Replay: namespace to republish under (default /); --resimulate --external: namespace
     of your controller (default: the recorded one)."""
     loop: bool = False
-    """Replay until interrupted."""
+    """Replay until interrupted (SIGINT or SIGTERM then ends it with exit 0, not 130)."""
     resimulate: bool = False
     """Run the bag's map again against a live controller and compare."""
     worker: str = ''
@@ -161,7 +161,10 @@ def replay(args: ReplayConfig, episode) -> int:
             if not args.loop:
                 return EXIT_AS_EXPECTED
     except KeyboardInterrupt:
-        return EXIT_AS_EXPECTED
+        if args.loop:  # how a loop ends
+            return EXIT_AS_EXPECTED
+        node.get_logger().info('interrupted before the end of the bag')
+        return INTERRUPTED_STATUS
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
@@ -234,9 +237,11 @@ def resimulate(args: ReplayConfig, episode: dict) -> int:
         namespace = args.namespace or episode.get('namespace') or '/'
     else:
         if controller not in CONTROLLERS:
-            print(f'error: {args.bag} was recorded with controller {controller!r}, which is not '
-                  f'a built-in one ({", ".join(sorted(CONTROLLERS))}): start your controller '
-                  'under a namespace and pass --external --namespace <it>', file=sys.stderr)
+            which = (f'--controller {controller!r} is' if args.controller else
+                     f'{args.bag} was recorded with controller {controller!r}, which is')
+            print(f'error: {which} not a built-in one ({", ".join(sorted(CONTROLLERS))}): '
+                  'start your controller under a namespace and pass --external --namespace '
+                  '<it>', file=sys.stderr)
             return EXIT_ERROR
         namespace = f'/replay_{os.getpid()}'
     action_name = f'{namespace.rstrip("/")}/evaluate'
@@ -358,7 +363,7 @@ def start_resimulation_graph(supervisor, settings, namespace: str, log_directory
 
 def main(argv=None) -> int:
     arguments = sys.argv[1:] if argv is None else argv
-    # SIGINT and SIGTERM: a replay stops as expected, a re-simulation exits 130 (run_command).
+    # SIGINT and SIGTERM: 130 (run_command), except for a --loop replay, which ends so.
     return run_command(lambda: replay_or_resimulate(arguments))
 
 

@@ -112,6 +112,12 @@ class SuiteConfig:
             raise SuiteError('--controller picks a built-in controller; with --external the '
                              'controller is the one running beside each simulator')
         self.worker = tuple(ros_namespace('--worker', name, SuiteError) for name in self.worker)
+        from sessgan_evolver.campaign import check_episode_timeout
+
+        try:
+            check_episode_timeout(self.episode_timeout)
+        except SessganEvolverError as err:
+            raise SuiteError(str(err)) from err
 
 
 def parse_args(argv: Sequence[str]) -> SuiteConfig:

@@ -144,6 +144,18 @@ def test_failure_bag_replays_and_resimulates_to_the_same_outcome(ros_workspace, 
                              '50'], capture_output=True, text=True, timeout=120)
     assert replay.returncode == 0, replay.stderr[-2000:]
     assert 'replayed' in replay.stderr
+    # Interrupted before the bag's end: 130, as every command; a --loop ends so: 0.
+    for loop, status in (([], 130), (['--loop'], 0)):
+        slow = subprocess.Popen(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag),
+                                 '--rate', '0.05', *loop], stderr=subprocess.PIPE, text=True)
+        try:
+            while 'replaying' not in (line := slow.stderr.readline()):
+                assert line, 'replay ended before it began'
+            slow.send_signal(signal.SIGINT)
+            assert slow.wait(timeout=60) == status, loop
+        finally:
+            slow.kill()
+            slow.wait()
 
     again = subprocess.run(['ros2', 'run', 'sessgan_evolver', 'replay', str(bag),
                             '--resimulate'], capture_output=True, text=True, timeout=300)

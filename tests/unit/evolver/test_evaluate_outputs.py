@@ -155,3 +155,16 @@ def test_a_one_robot_evaluation_against_a_fleet_stack_suggests_robots():
     assert fleet_stack_hint(count, ['/w0/evaluate'], robots=2) == ''
     assert fleet_stack_hint(lambda topic: 0, ['/w0/evaluate'], robots=1) == ''
     assert issubclass(HarnessFailureError, evaluate_cli.SessganEvolverError)
+
+
+def test_a_run_folder_given_as_a_run_name_is_taken_with_a_note(tmp_path, capsys):
+    """--run takes a name under --runs-root; a folder (relative or absolute) still works, and
+    says where it belongs."""
+    from sessgan_evolver.evaluate_cli import run_directory
+
+    runs = tmp_path / 'runs'
+    (runs / 'x').mkdir(parents=True)
+    assert run_directory('x', runs) == runs / 'x'
+    assert capsys.readouterr().err == ''
+    assert run_directory(str(runs / 'x'), runs) == runs / 'x'  # absolute
+    assert 'a run folder goes to --run-dir' in capsys.readouterr().err

@@ -453,3 +453,11 @@ def test_the_summary_warns_of_a_worker_whose_episodes_differ_from_the_recordings
     assert suite_cli.setting_differences('/w0', {**worker, 'stuck_timeout': 10.0},
                                          progresses[:2]) == []
     assert suite_cli.setting_differences('/w0', None, progresses) == []
+
+
+@pytest.mark.parametrize('timeout', ['-5', 'nan', 'inf'])
+def test_an_episode_timeout_that_is_none_is_refused(timeout, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        suite_cli.parse_args(['x', '--external', '--episode-timeout', timeout])
+    assert exit_info.value.code == 2
+    assert 'episode_timeout must lie in [0, ' in capsys.readouterr().err

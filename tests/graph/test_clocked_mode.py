@@ -138,13 +138,13 @@ def test_goal_reaches_subscribers_that_join_during_the_episode(node_processes, r
 
 
 def test_a_stack_that_falls_silent_mid_episode_gives_no_test_result(node_processes, ros_node):
-    # At 8x real time the stuck rule (10 sim s) ends a standing robot after 1.25 wall s, before
+    # At 8x real time a stuck rule of 10 sim s ends a standing robot after 1.25 wall s, before
     # the wall-clock silence rule (controller_timeout, 2 s) could: the stack stopped the robot
     # and fell silent (its controller died), which must end controller_unresponsive (re-run,
     # never a result), not stuck.
     namespace = '/fell_silent'
     start_simulator(node_processes, namespace, 'dummy_agents:=0', 'mode:=clocked',
-                    'real_time_factor:=8.0')
+                    'real_time_factor:=8.0', 'stuck_timeout:=10.0')
     stand_in = start_stand_in(node_processes, namespace, '--fall-silent-after', '20')
     metrics, _, attempt = evaluate_with_reruns(
         ros_node, namespace, environment_msg(room(), 'factory', 'fell'), time_limit=60.0)

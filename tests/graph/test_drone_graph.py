@@ -130,7 +130,9 @@ def test_a_flyer_below_the_low_obstacles_sees_them_as_walls_and_its_bag_has_rang
     from sessgan_sim.bag_recording import jazzy_typestore
 
     namespace = '/drone_low'
-    start_simulator(node_processes, namespace, 'dummy_agents:=0', f'bags_root:={tmp_path}')
+    # A 10 s stuck window: stuck well within the 30 s the episode gets.
+    start_simulator(node_processes, namespace, 'dummy_agents:=0', f'bags_root:={tmp_path}',
+                    'stuck_timeout:=10.0')
     # Told to cruise at 5 cm: its route crosses the band as free space, but flying below the
     # obstacles its scan plane meets them: it stops in front of the band and never gets over.
     start_controller(node_processes, namespace, 'velocity_projection', 'cruise_altitude:=0.05',

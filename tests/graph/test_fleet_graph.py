@@ -96,8 +96,10 @@ def test_a_missing_robot_controller_is_named(node_processes, ros_node):
     from sessgan_core.ros_conversion import environment_to_msg
 
     namespace = '/fleet_missing'
+    # 8 s: long enough for the simulator to match r0's navigator on a loaded machine (3 s
+    # were not, with a CI run beside two benchmarks), short enough to wait for r1's.
     start_simulator(node_processes, namespace, 'dummy_agents:=0',
-                    'controller_startup_timeout:=3.0')
+                    'controller_startup_timeout:=8.0')
     start_navigator(node_processes, f'{namespace}/r0', 'diff_drive')  # r1 has none
     # r0's navigator up (its scan reader and cmd_vel writer) before the short start-up wait
     # begins, so r1 is the one missing (a CI run under load found r0's writer not yet there).

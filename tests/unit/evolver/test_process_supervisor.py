@@ -100,7 +100,13 @@ def test_a_child_is_stopped_by_sigint_even_where_its_parent_ignores_it(tmp_path)
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         with ProcessSupervisor(tmp_path) as supervisor:
-            child = supervisor.start('sleeper', SLEEPER)
+            child = supervisor.start('sleeper', [
+                sys.executable, '-c', "import time; print('asleep', flush=True); time.sleep(60)"])
+            # Past the interpreter's start-up (a SIGINT there can end it with 1, under load).
+            deadline = time.monotonic() + 60
+            while 'asleep' not in child.output():
+                assert time.monotonic() < deadline, child.output()
+                time.sleep(0.05)
             started = time.monotonic()
     finally:
         signal.signal(signal.SIGINT, previous)

@@ -78,8 +78,6 @@ def test_timer_driven_controller_reaches_goal_in_clocked_mode(node_processes, ro
 def test_a_stack_publishing_the_other_command_type_is_named(node_processes, ros_node):
     """ROS 2 matches no Twist reader to a TwistStamped writer and says nothing: the worker
     names the type it sees and the option that fixes it (a harness outcome, never a result)."""
-    import time
-
     from tests.graph.test_simulator_graph import evaluate
 
     namespace = '/mistyped'
@@ -88,10 +86,8 @@ def test_a_stack_publishing_the_other_command_type_is_named(node_processes, ros_
     start_stand_in(node_processes, namespace, '--stamped')  # the worker reads Twist
     # The stand-in's writer in the graph before the start-up wait begins (a loaded machine
     # took over 3 s to discover it).
-    deadline = time.monotonic() + 60
-    while not ros_node.get_publishers_info_by_topic(f'{namespace}/cmd_vel'):
-        assert time.monotonic() < deadline, 'the stand-in never advertised cmd_vel'
-        time.sleep(0.1)
+    assert spin_until(ros_node, lambda: ros_node.get_publishers_info_by_topic(
+        f'{namespace}/cmd_vel'), timeout=60), 'the stand-in never advertised cmd_vel'
     metrics, _ = evaluate(ros_node, namespace, environment_msg(room(), 'factory', 'room'))
     assert metrics.outcome == 'controller_unresponsive', metrics.detail
     assert ('cmd_vel is published as geometry_msgs/msg/TwistStamped' in metrics.detail

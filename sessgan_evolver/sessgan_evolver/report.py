@@ -304,7 +304,7 @@ def faults_found_lines(episode_rows: Sequence[Mapping[str, Any]],
 
 FAULT_KIND_MEANINGS = {
     'collision_static': 'drove into a wall, barrier or low obstacle',
-    'collision_agent': 'drove into a moving agent',
+    'collision_agent': 'drove into an agent',
     'collision_robot': 'drove into another robot under test',
     'stuck': 'neither closer to the goal nor onto new ground for the stuck window',
     'timeout': 'the goal not reached within the time limit',

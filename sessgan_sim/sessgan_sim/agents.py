@@ -9,12 +9,17 @@ push. They move in the robot's plane (ground agents for ground robots, flyers at
 flyer's traffic altitude) and are seen by its lidar when its scan plane cuts them. No
 agent starts within ``min_start_distance`` of the robot's start, and no patrol begins or
 ends inside the ``keep_clear`` discs the episode names (around the goal and on the certified
-route's narrow passages, so an agent never parks where the robot must pass).
+route's narrow passages, so an agent never parks where the robot must pass). A patrol may
+cross a narrow passage but not run along it: an agent shuttling inside a passage the robot
+cannot share with it would hold the robot up until the time limit, a fault of the test.
 
 Two behaviours (``AgentConfig.behaviour``): ``blind`` agents (the default, the paper's) keep
 moving whatever is in their way; ``cautious`` agents behave like factory AGVs with a safety
 scanner: an agent waits while the robot or another agent stands within ``safety_distance``
-ahead of it along its motion, so any contact with a cautious agent is the robot's doing.
+ahead of it along its motion, so any contact with a cautious agent is the robot's doing. A
+blind agent that touches a robot under test while moving toward it turns back along its
+patrol, as a person who bumps into a robot steps back: it never drags or shoves the robot
+further (a kinematic body would push it metres, into a wall or a dead end).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pybullet as p
@@ -39,6 +45,16 @@ AGENT_BEHAVIOURS = ('blind', 'cautious')
 
 PATH_TRIES = 8
 """Random destinations tried per agent before it settles for the best path found."""
+
+
+class KeepClear(NamedTuple):
+    """A disc (metres, map frame) where no patrol starts or ends; across a ``narrow`` one (a
+    narrow passage of a route) a patrol may pass, but not run along it."""
+
+    x: float
+    y: float
+    radius: float
+    narrow: bool = False
 
 
 @dataclass(frozen=True)
@@ -116,11 +132,10 @@ class PatrolSpace:
     """Where the agents of an episode may patrol (the class docstring's rule): the part of
     their patrols that no random draw decides, so patrols for many seeds cost only their
     draws. ``passable_values``: the occupancy values the robot's plane passes;
-    ``keep_clear``: discs (x, y, radius) in metres where no patrol starts or ends."""
+    ``keep_clear``: where no patrol starts or ends (KeepClear)."""
 
     def __init__(self, environment: Environment, passable_values: Sequence[int],
-                 config: AgentConfig, keep_clear: Sequence[tuple[float, float, float]] = ()
-                 ) -> None:
+                 config: AgentConfig, keep_clear: Sequence[KeepClear] = ()) -> None:
         self.environment, self.config = environment, config
         resolution = environment.resolution
         passable = np.isin(environment.occupancy, passable_values)
@@ -131,11 +146,21 @@ class PatrolSpace:
         centres_y = environment.origin[1] + (self.rows + 0.5) * resolution
         start: Pose2D = environment.start
         allowed = np.ones(len(self.rows), dtype=bool)
-        for x, y, radius in keep_clear:
-            allowed &= np.hypot(centres_x - x, centres_y - y) >= radius
+        narrow = np.zeros(len(self.rows), dtype=bool)
+        widest = 0.0
+        for disc in keep_clear:
+            inside = np.hypot(centres_x - disc.x, centres_y - disc.y) < disc.radius
+            allowed &= ~inside
+            if disc.narrow:
+                narrow |= inside
+                widest = max(widest, disc.radius)
         far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
         self.spawn_cells = np.flatnonzero(far & allowed)
         self.end_cells = np.flatnonzero(allowed)
+        self.narrow = np.zeros(self.free.shape, dtype=bool)
+        self.narrow[self.rows[narrow], self.cols[narrow]] = True
+        self.crossing_cells = math.ceil(2.0 * widest / resolution) + 1
+        """Most cells of narrow passage a patrol may hold: a crossing, diagonal at worst."""
 
     def patrols(self, count: int, rng: np.random.Generator) -> list[PatrolPath]:
         """The patrols of up to ``count`` agents, drawn from ``rng``: what DummyAgents.spawn
@@ -152,13 +177,18 @@ class PatrolSpace:
             for _ in range(PATH_TRIES):
                 other = int(rng.choice(self.end_cells))
                 path = path_to((int(rows[other]), int(cols[other])))
-                if len(path) > len(best):
+                if len(path) > len(best) and self.crosses_at_most(path):
                     best = path
                 if len(best) >= self.config.min_patrol_cells:
                     break
             paths.append(PatrolPath(np.array([self.environment.cell_center(row, col)
                                               for row, col in best])))
         return paths
+
+    def crosses_at_most(self, path: Sequence[tuple[int, int]]) -> bool:
+        """Whether ``path`` (cells) only crosses the narrow passages, not runs along one."""
+        narrow = self.narrow
+        return sum(bool(narrow[cell]) for cell in path) <= self.crossing_cells
 
 
 class DummyAgents:
@@ -170,6 +200,8 @@ class DummyAgents:
         self.body_ids: list[int] = []
         self.paths: list[PatrolPath] = []
         self.positions = np.zeros((0, 2))
+        self.velocities = np.zeros((0, 2))
+        """m/s, each agent's motion over the last ``advance``."""
         self._client = -1
         self._height = 0.0
         self._travelled: list[float] = []
@@ -179,10 +211,10 @@ class DummyAgents:
 
     def spawn(self, client: int, environment: Environment, robot: Robot, count: int,
               rng: np.random.Generator,
-              keep_clear: Sequence[tuple[float, float, float]] = ()) -> int:
+              keep_clear: Sequence[KeepClear] = ()) -> int:
         """Create up to ``count`` agents; return how many found room.
 
-        ``keep_clear``: discs (x, y, radius) in metres where no patrol starts or ends.
+        ``keep_clear``: where no patrol starts or ends (KeepClear).
         """
         if count < 0:
             raise InvalidConfigError(f'agents: count must be >= 0, got {count}')
@@ -192,12 +224,12 @@ class DummyAgents:
         self.body_ids, self.paths = [], []
         self._index_of_body = {}
         if count == 0:
-            self.positions = np.zeros((0, 2))
+            self.positions, self.velocities = np.zeros((0, 2)), np.zeros((0, 2))
             return 0
         self.paths = PatrolSpace(environment, robot.passable_values, self.config,
                                  keep_clear).patrols(count, rng)
         if not self.paths:
-            self.positions = np.zeros((0, 2))
+            self.positions, self.velocities = np.zeros((0, 2)), np.zeros((0, 2))
             return 0
         config = self.config
         shape = p.createCollisionShape(p.GEOM_CYLINDER, radius=config.radius,
@@ -211,6 +243,7 @@ class DummyAgents:
                 int(CollisionGroup.ROBOT | CollisionGroup.RAY), physicsClientId=client)
             self.body_ids.append(body)
         self.positions = np.array([path.position(0.0) for path in self.paths])
+        self.velocities = np.zeros((len(self.paths), 2))
         self._travelled = [0.0] * len(self.paths)
         self._index_of_body = {body: index for index, body in enumerate(self.body_ids)}
         return len(self.body_ids)
@@ -228,22 +261,41 @@ class DummyAgents:
                 robot_positions: Sequence[tuple[float, float]] = ()) -> None:
         """Move every agent ``dt`` seconds further along its patrol (a cautious agent waits
         while a robot under test at one of ``robot_positions`` or another agent is ahead of
-        it)."""
+        it; a blind one touching one of those robots turns back)."""
         if not self.body_ids:
             return
         step = self.config.speed * dt
         cautious = self.config.behaviour == 'cautious'
         client, height, travelled = self._client, self._height, self._travelled
-        positions = self.positions
+        positions, velocities = self.positions, self.velocities
         for index, (body, path) in enumerate(zip(self.body_ids, self.paths, strict=True)):
             x, y = path.position(travelled[index] + step)
             if cautious and self._blocked(index, x, y, robot_positions):
+                velocities[index] = 0.0
                 continue
+            if not cautious and self._pressing(index, x, y, robot_positions):
+                # The same point, walked the other way (PatrolPath.position).
+                travelled[index] = 2 * path.length - travelled[index] % (2 * path.length)
+                x, y = path.position(travelled[index] + step)
             travelled[index] += step
+            velocities[index, 0] = (x - positions[index, 0]) / dt
+            velocities[index, 1] = (y - positions[index, 1]) / dt
             positions[index, 0] = x
             positions[index, 1] = y
             p.resetBasePositionAndOrientation(body, [x, y, height], [0.0, 0.0, 0.0, 1.0],
                                               physicsClientId=client)
+
+    def _pressing(self, index: int, next_x: float, next_y: float,
+                  robot_positions: Sequence[tuple[float, float]]) -> bool:
+        """Whether agent ``index`` touches a robot at one of ``robot_positions`` and its move
+        to (next_x, next_y) would press into it."""
+        x, y = self.positions[index]
+        touch = self.config.radius + self._robot_radius  # bodies touching: the contact is made
+        for robot_x, robot_y in robot_positions:
+            distance = math.hypot(robot_x - x, robot_y - y)
+            if distance <= touch and math.hypot(robot_x - next_x, robot_y - next_y) < distance:
+                return True
+        return False
 
     def _blocked(self, index: int, next_x: float, next_y: float,
                  robot_positions: Sequence[tuple[float, float]]) -> bool:

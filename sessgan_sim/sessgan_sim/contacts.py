@@ -7,7 +7,13 @@ import math
 from collections.abc import Callable, Iterable
 
 from sessgan_sim.agents import DummyAgents
-from sessgan_sim.metrics import CONTACT_DEBOUNCE, STANDING_SPEED, ContactKind, MetricsRecorder
+from sessgan_sim.metrics import (
+    CONTACT_DEBOUNCE,
+    FASTER_PARTNER,
+    STANDING_SPEED,
+    ContactKind,
+    MetricsRecorder,
+)
 
 RobotLookup = Callable[[int], 'tuple[int, tuple[float, float]] | None']
 """A pybullet body id -> (index, position) of the robot under test with that body, else None."""
@@ -18,7 +24,9 @@ class ContactClassifier:
     whoever drove into it.
 
     The robot drove into a partner (an agent, another robot under test) if it moved toward it
-    faster than a standing robot would just before or during the contact step. While an agent
+    faster than a standing robot would just before or during the contact step; into an agent
+    only if the agent did not close in more than ``FASTER_PARTNER`` times as fast (a blind
+    agent ramming a robot that brakes or creeps drove into it). While an agent
     or another robot drives into it (and CONTACT_DEBOUNCE after), whatever else the robot
     touches is that partner's doing too: it was shoved.
     """
@@ -56,7 +64,10 @@ class ContactClassifier:
             approach = max((vx * dx + vy * dy) / distance for vx, vy in velocities)
             pushed = self.pushed_by is not None and time <= self.pushed_until
             if agent is not None:
-                if approach > STANDING_SPEED and not pushed:
+                agent_vx, agent_vy = agents.velocities[agent]
+                agent_approach = -(agent_vx * dx + agent_vy * dy) / distance
+                if approach > STANDING_SPEED and not pushed \
+                        and FASTER_PARTNER * approach >= agent_approach:
                     kind = ContactKind.ROBOT_INTO_AGENT
                 else:
                     kind = ContactKind.AGENT_INTO_ROBOT

@@ -46,7 +46,7 @@ from sessgan_core.environment import Environment, Pose2D
 from sessgan_core.errors import SessganCoreError
 from sessgan_core.route_certificate import CertificateGrid, map_clearance, required_clearances
 from sessgan_core.scenarios import get_scenario
-from sessgan_sim.agents import DummyAgents, PatrolPath, PatrolSpace
+from sessgan_sim.agents import DummyAgents, KeepClear, PatrolPath, PatrolSpace
 from sessgan_sim.contacts import ContactClassifier
 from sessgan_sim.episode_config import (  # noqa: F401 (also imported from here)
     MAX_TIME_LIMIT,
@@ -384,7 +384,7 @@ class Episode:
         grid = map_clearance(environment.occupancy, environment.resolution,
                              environment.origin, spec)
         route_need = required_clearances(spec)[1]
-        keep_clear: list[tuple[float, float, float]] = []
+        keep_clear: list[KeepClear] = []
         for each, body in zip(records, robots, strict=True):
             waypoints = each.waypoints
             feasible = environment.feasible
@@ -862,12 +862,12 @@ class Episode:
 
 
 def leg_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig, progress: ProgressField,
-                   route_need: float) -> list[tuple[float, float, float]]:
-    """Discs (x, y, radius) where agents may neither start nor end a patrol leg: around a
-    leg's goal, and on its certified route's narrow passages (where the robot could not pass
-    an agent standing there)."""
+                   route_need: float) -> list[KeepClear]:
+    """Discs where agents may neither start nor end a patrol leg: around a leg's goal, and
+    on its certified route's narrow passages (where the robot could not pass an agent
+    standing there; a patrol may cross those, not run along them)."""
     agents = config.agents
-    discs = [(goal.x, goal.y, agents.min_start_distance)]
+    discs = [KeepClear(goal.x, goal.y, agents.min_start_distance)]
     # Narrow: the robot on the route could not pass an agent standing beside it.
     narrow_below = agents.radius + route_need
     reach = agents.radius + robot.footprint_radius
@@ -876,19 +876,19 @@ def leg_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig, progress: 
     for row, col in progress.route[::step]:
         if grid.clearance[row, col] < narrow_below:
             x, y = grid.centre((row, col))
-            discs.append((x, y, reach))
+            discs.append(KeepClear(x, y, reach, narrow=True))
     return discs
 
 
 def robot_keep_clear(index: int, start: Pose2D, waypoints: Sequence[Pose2D],
                      legs: Sequence[ProgressField], robot: Robot, config: EpisodeConfig,
-                     route_need: float) -> list[tuple[float, float, float]]:
+                     route_need: float) -> list[KeepClear]:
     """The keep-clear discs of robot under test ``index`` (0: r0) for its legs to
     ``waypoints``; agents also start away from every other robot's start, as from r0's."""
     discs = [disc for goal, progress in zip(waypoints, legs, strict=True)
              for disc in leg_keep_clear(goal, robot, config, progress, route_need)]
     if index > 0:
-        discs.append((start.x, start.y, config.agents.min_start_distance))
+        discs.append(KeepClear(start.x, start.y, config.agents.min_start_distance))
     return discs
 
 
@@ -905,7 +905,7 @@ class PatrolPlanner:
         self.config = config = config.resolved(spec)
         self.count = int(config.dummy_agents or 0)
         robot = create_robot(str(config.robot), config.robot_params)
-        keep_clear: list[tuple[float, float, float]] = []
+        keep_clear: list[KeepClear] = []
         self.space: PatrolSpace | None = None
         if self.count == 0:
             return

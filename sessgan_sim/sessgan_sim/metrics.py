@@ -7,8 +7,9 @@
   with it, so sliding along a wall, or a contact flickering on and off, is one event.
 * Each event is attributed (:class:`ContactKind`): the robot against a static obstacle, the
   robot moving into an agent (its velocity toward the agent above ``STANDING_SPEED`` at the
-  event's start), or an agent driving into a robot that stood still or moved away (or shoving
-  it into a wall or another agent), which is not the controller's fault.
+  event's start, and at least 1 / ``FASTER_PARTNER`` of the agent's toward it), or an agent
+  driving into a robot that stood still, moved away, braked or crept (or shoving it into a
+  wall or another agent), which is not the controller's fault.
   ``fault_collisions`` counts the first two.
 * In a fleet episode (several robots under test), a contact between two of them is the fault
   of the one that moved into the other (``robot_into_robot``, by the same approach-speed rule;
@@ -40,6 +41,11 @@ CONTACT_DEBOUNCE = 0.5
 
 STANDING_SPEED = 0.05
 """m/s: a robot approaching an agent slower than this at contact did not drive into it."""
+
+FASTER_PARTNER = 2.0
+"""Nor did a robot whose agent closed in more than this many times as fast as it did: a
+blind agent ramming a robot that was braking or creeping (the robot's share of the closing
+speed under a third)."""
 
 
 class Outcome(enum.StrEnum):

@@ -117,7 +117,8 @@ def test_as_in_a_campaign_the_controller_gets_the_map_and_its_robot(factory):
     # The node gets the map topic (the paper's controllers steer along a route on it), and a
     # campaign hosts the tricycle for the tricycle controller: in process the same.
     with EpisodeRunner('factory') as runner:
-        routed = runner.run(factory, seed=0)
+        # Seed 1: with seed 0 an agent holds the robot (test_controller_episodes says how).
+        routed = runner.run(factory, seed=1)
     # Without the map, Nearness-Diagram is stuck in a dead end of this map.
     assert routed.metrics['outcome'] == 'goal_reached', routed.metrics['detail']
     with EpisodeRunner('factory', 'tricycle_nearness_diagram') as runner:

@@ -8,9 +8,10 @@ import pytest
 from sessgan_core.environment import Environment, Pose2D
 from sessgan_core.token_map import load_example_map
 from sessgan_core.valid_tests import make_environment
-from sessgan_sim.agents import AgentConfig, DummyAgents, PatrolPath
+from sessgan_sim.agents import AgentConfig, DummyAgents, KeepClear, PatrolPath, PatrolSpace
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError
+from sessgan_sim.metrics import ContactKind
 from sessgan_sim.robots import BodyCommand, create_robot
 from sessgan_sim.sensors import LidarConfig
 from sessgan_sim.world import World
@@ -124,16 +125,17 @@ def test_an_agent_running_into_the_robot_is_a_collision():
                            lidar=LidarConfig(noise_std=0.0))
     with Episode() as episode:
         episode.reset(environment, config)
-        hit = False
         for _ in range(1000):
             observation = episode.step(BodyCommand(0.3, 0.0, 0.0)).observation
-            if observation.in_contact:
-                hit = True
+            if episode.metrics().collisions:
                 break
-        assert hit
         x_agent = episode.agents.positions[0, 0]
         assert observation.pose.x < x_agent
-        assert episode.metrics().collisions == 1
+        # Met head-on (the agent is faster): the robot drove into it, and the agent turned
+        # back rather than push it (the contact lasted a physics step or two).
+        (contact,) = episode.metrics().contacts
+        assert contact.kind == ContactKind.ROBOT_INTO_AGENT
+        assert episode.agents.velocities[0, 0] > 0.0
 
 
 @pytest.mark.parametrize('scenario,kind', [('factory', 'plain'), ('drone', 'plain'),
@@ -179,3 +181,26 @@ def test_patrol_positions_of_many_distances_are_those_of_one():
                                [path.position(d) for d in distances], atol=1e-12)
     still = PatrolPath(np.array([[1.0, 2.0]]))
     np.testing.assert_array_equal(still.positions(np.array([0.0, 3.0])), [[1.0, 2.0]] * 2)
+
+
+def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it():
+    # Two rooms joined by a 3 m passage; the passage is narrow on some robot's route.
+    rows = np.full((12, 24), 100, dtype=np.int8)
+    rows[1:11, 1:9] = rows[1:11, 15:23] = 0
+    rows[5:8, 9:15] = 0
+    environment = Environment('rooms', 'factory', rows, 0.5, Pose2D(1.0, 1.0),
+                              Pose2D(11.0, 1.0))
+    passage = [(x, 3.25) for x in np.arange(4.5, 7.75, 0.25)]
+
+    def patrols(narrow: bool) -> list[PatrolPath]:
+        space = PatrolSpace(environment, (0,), AgentConfig(),
+                            [KeepClear(x, y, 0.45, narrow) for x, y in passage])
+        return [path for seed in range(30)
+                for path in space.patrols(3, np.random.default_rng(seed))]
+
+    def passage_points(path: PatrolPath) -> int:
+        return sum(4.3 < x < 7.7 and 2.8 < y < 3.7 for x, y in path.points)
+    # Discs that only keep patrols from ending there: agents shuttle through the passage.
+    assert max(passage_points(path) for path in patrols(narrow=False)) == 6
+    # Narrow ones: a patrol at most crosses it (here: runs in one room).
+    assert max(passage_points(path) for path in patrols(narrow=True)) <= 3

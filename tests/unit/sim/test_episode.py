@@ -198,6 +198,8 @@ def test_an_agent_driving_into_a_standing_robot_is_not_its_fault(episode):
             assert {event.kind for event in metrics.contacts} == {ContactKind.AGENT_INTO_ROBOT}
             assert metrics.fault_collisions == 0 and metrics.fault_risk_score == 0.0
             assert metrics.agent_into_robot_collisions == metrics.collisions
+            # The agent turned back: it did not shove or drag the robot along the corridor.
+            assert metrics.distance_travelled < 0.01
         if touched >= 2:
             break
     assert touched >= 2

@@ -48,13 +48,14 @@ PATH_TRIES = 8
 
 
 class KeepClear(NamedTuple):
-    """A disc (metres, map frame) where no patrol starts or ends; across a ``narrow`` one (a
-    narrow passage of a route) a patrol may pass, but not run along it."""
+    """A disc (metres, map frame) where no patrol starts or ends. On a narrow passage of a
+    route, ``passage`` > 0: the passage's cells lie within that many metres of (x, y), and a
+    patrol may cross the passage but not run along it."""
 
     x: float
     y: float
     radius: float
-    narrow: bool = False
+    passage: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -149,22 +150,26 @@ class PatrolSpace:
         narrow = np.zeros(len(self.rows), dtype=bool)
         widest = 0.0
         for disc in keep_clear:
-            inside = np.hypot(centres_x - disc.x, centres_y - disc.y) < disc.radius
-            allowed &= ~inside
-            if disc.narrow:
-                narrow |= inside
-                widest = max(widest, disc.radius)
+            distance = np.hypot(centres_x - disc.x, centres_y - disc.y)
+            allowed &= distance >= disc.radius
+            if disc.passage > 0.0:
+                # Half a cell more: a cell whose centre is that far still reaches into it.
+                narrow |= distance < disc.passage + 0.5 * resolution
+                widest = max(widest, disc.passage)
         far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
         self.spawn_cells = np.flatnonzero(far & allowed)
         self.end_cells = np.flatnonzero(allowed)
         self.narrow = np.zeros(self.free.shape, dtype=bool)
         self.narrow[self.rows[narrow], self.cols[narrow]] = True
         self.crossing_cells = math.ceil(2.0 * widest / resolution) + 1
-        """Most cells of narrow passage a patrol may hold: a crossing, diagonal at worst."""
+        """Most cells of narrow passage a patrol may hold: a crossing (the passage is
+        narrower than twice its ``passage``), one more for a slant."""
 
     def patrols(self, count: int, rng: np.random.Generator) -> list[PatrolPath]:
         """The patrols of up to ``count`` agents, drawn from ``rng``: what DummyAgents.spawn
-        places (none where no cell is far enough from the start)."""
+        places (none where no cell is far enough from the start; no agent where no patrol
+        was found: one standing still would hold a robot that waits for it until the time
+        limit, as waiting beside an agent never counts as stuck)."""
         if not len(self.spawn_cells):
             return []
         rows, cols = self.rows, self.cols
@@ -181,8 +186,9 @@ class PatrolSpace:
                     best = path
                 if len(best) >= self.config.min_patrol_cells:
                     break
-            paths.append(PatrolPath(np.array([self.environment.cell_center(row, col)
-                                              for row, col in best])))
+            if len(best) > 1:
+                paths.append(PatrolPath(np.array([self.environment.cell_center(row, col)
+                                                  for row, col in best])))
         return paths
 
     def crosses_at_most(self, path: Sequence[tuple[int, int]]) -> bool:

@@ -868,7 +868,8 @@ def leg_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig, progress: 
     standing there; a patrol may cross those, not run along them)."""
     agents = config.agents
     discs = [KeepClear(goal.x, goal.y, agents.min_start_distance)]
-    # Narrow: the robot on the route could not pass an agent standing beside it.
+    # Narrow: the robot on the route could not pass an agent standing beside it; the
+    # passage's free space lies within its clearance (below narrow_below) of the route.
     narrow_below = agents.radius + route_need
     reach = agents.radius + robot.footprint_radius
     grid = progress.grid
@@ -876,7 +877,7 @@ def leg_keep_clear(goal: Pose2D, robot: Robot, config: EpisodeConfig, progress: 
     for row, col in progress.route[::step]:
         if grid.clearance[row, col] < narrow_below:
             x, y = grid.centre((row, col))
-            discs.append(KeepClear(x, y, reach, narrow=True))
+            discs.append(KeepClear(x, y, reach, narrow_below))
     return discs
 
 

@@ -8,8 +8,9 @@
 * Each event is attributed (:class:`ContactKind`): the robot against a static obstacle, the
   robot moving into an agent (its velocity toward the agent above ``STANDING_SPEED`` at the
   event's start, and at least 1 / ``FASTER_PARTNER`` of the agent's toward it), or an agent
-  driving into a robot that stood still, moved away, braked or crept (or shoving it into a
-  wall or another agent), which is not the controller's fault.
+  driving into a robot that stood still, moved away, or closed in less than half as fast as
+  the agent (or shoving it into a wall or another agent), which is not the controller's
+  fault.
   ``fault_collisions`` counts the first two.
 * In a fleet episode (several robots under test), a contact between two of them is the fault
   of the one that moved into the other (``robot_into_robot``, by the same approach-speed rule;
@@ -44,8 +45,8 @@ STANDING_SPEED = 0.05
 
 FASTER_PARTNER = 2.0
 """Nor did a robot whose agent closed in more than this many times as fast as it did: a
-blind agent ramming a robot that was braking or creeping (the robot's share of the closing
-speed under a third)."""
+blind agent ramming a robot that was braking, creeping or passing across its way (the
+robot's share of the closing speed under a third)."""
 
 
 class Outcome(enum.StrEnum):

@@ -322,13 +322,14 @@ def test_a_failure_without_trace_or_bag_is_unplaced_and_a_success_has_no_fault(t
 
 
 @pytest.mark.parametrize(('time_limit', 'seeds', 'kinds'), [
-    (3.0, [2, 3], {'timeout'}), (40.0, [1, 36], {'collision_agent', 'collision_static'})])
+    (3.0, [2, 3], {'timeout'}), (40.0, [11, 36], {'collision_static'})])
 def test_the_fault_key_of_a_failure_bag_is_the_key_of_its_trace(tmp_path, time_limit, seeds,
                                                                 kinds):
     """A ROS worker's result carries no contact places: the campaign reads them from the
     failure bag. Keys from bags equal keys from the traces of the same episodes (timeouts:
-    where the robot ended; map seeds 1 and 36 at 40 s: Nearness-Diagram's contacts with an
-    agent and a wall)."""
+    where the robot ended; map seeds 11 and 36 at 40 s: Nearness-Diagram's contacts with a
+    wall. Map seed 1 gave a drive into an agent until the agent rules of 2026-11-28; with
+    simulator seed 7 none of the first 79 maps does now.)"""
     from sessgan_gen.environment_sampler import EnvironmentSampler
 
     rule = FaultRule()

@@ -572,7 +572,7 @@ def test_a_child_that_keeps_a_sibling_s_fault_place_is_not_run():
     for proposal, child in children:
         parent = search.parents[child.parent]
         sibling = ScreenedTest(child.noise, child.cells, -1, parent.test.environment_seed,
-                               parent.test.sim_seed, 'child', child.parent, 'local',
+                               child.sim_seed, 'child', child.parent, 'local',
                                parent.route)
         # A sibling on this child's map keeps the map around the child's failing place: run
         # again with the same start, goal and simulator seed it would most likely repeat it.

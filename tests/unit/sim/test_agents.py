@@ -183,18 +183,21 @@ def test_patrol_positions_of_many_distances_are_those_of_one():
     np.testing.assert_array_equal(still.positions(np.array([0.0, 3.0])), [[1.0, 2.0]] * 2)
 
 
-def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it():
-    # Two rooms joined by a 3 m passage; the passage is narrow on some robot's route.
+@pytest.mark.parametrize('route_y', [3.25, 3.75])
+def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it(route_y):
+    # Two rooms joined by a 3 m passage; the passage is narrow on some robot's route, which
+    # runs along its middle or (3.75) half a metre beside the agents' only free row there
+    # (y = 3.25), which the passage's discs around the route must still cover.
     rows = np.full((12, 24), 100, dtype=np.int8)
     rows[1:11, 1:9] = rows[1:11, 15:23] = 0
     rows[5:8, 9:15] = 0
     environment = Environment('rooms', 'factory', rows, 0.5, Pose2D(1.0, 1.0),
                               Pose2D(11.0, 1.0))
-    passage = [(x, 3.25) for x in np.arange(4.5, 7.75, 0.25)]
+    passage = [(x, route_y) for x in np.arange(4.5, 7.75, 0.25)]
 
     def patrols(narrow: bool) -> list[PatrolPath]:
         space = PatrolSpace(environment, (0,), AgentConfig(),
-                            [KeepClear(x, y, 0.45, narrow) for x, y in passage])
+                            [KeepClear(x, y, 0.4, 0.5 if narrow else 0.0) for x, y in passage])
         return [path for seed in range(30)
                 for path in space.patrols(3, np.random.default_rng(seed))]
 
@@ -202,5 +205,8 @@ def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it():
         return sum(4.3 < x < 7.7 and 2.8 < y < 3.7 for x, y in path.points)
     # Discs that only keep patrols from ending there: agents shuttle through the passage.
     assert max(passage_points(path) for path in patrols(narrow=False)) == 6
-    # Narrow ones: a patrol at most crosses it (here: runs in one room).
-    assert max(passage_points(path) for path in patrols(narrow=True)) <= 3
+    # Narrow ones: a patrol at most crosses it (here: runs in one room), and an agent that
+    # found no patrol is not placed (standing, it would hold up a robot waiting for it).
+    kept = patrols(narrow=True)
+    assert max(passage_points(path) for path in kept) <= 3
+    assert all(path.length > 0 for path in kept)

@@ -9,9 +9,11 @@ push. They move in the robot's plane (ground agents for ground robots, flyers at
 flyer's traffic altitude) and are seen by its lidar when its scan plane cuts them. No
 agent starts within ``min_start_distance`` of the robot's start, and no patrol begins or
 ends inside the ``keep_clear`` discs the episode names (around the goal and on the certified
-route's narrow passages, so an agent never parks where the robot must pass). A patrol may
-cross a narrow passage but not run along it: an agent shuttling inside a passage the robot
-cannot share with it would hold the robot up until the time limit, a fault of the test.
+route's narrow passages, so an agent never parks where the robot must pass) or anywhere in
+such a passage. A patrol may cross a narrow passage but not run along it: an agent shuttling
+inside a passage the robot cannot share with it would hold the robot up until the time
+limit, a fault of the test. An agent that finds no patrol of ``min_patrol_cells`` is not
+placed.
 
 Two behaviours (``AgentConfig.behaviour``): ``blind`` agents (the default, the paper's) keep
 moving whatever is in their way; ``cautious`` agents behave like factory AGVs with a safety
@@ -68,8 +70,7 @@ class AgentConfig:
     min_start_distance: float = 2.0
     """No agent starts closer than this to the robot's start (centre to centre)."""
     min_patrol_cells: int = 4
-    """Shortest patrol path sought, in cells; shorter ones are kept only when nothing longer
-    is found."""
+    """Shortest patrol path, in cells: an agent that finds none is not placed."""
     behaviour: str = 'blind'
     """'blind' (drive on whatever is ahead) or 'cautious' (wait while something is ahead)."""
     safety_distance: float = 0.5
@@ -156,6 +157,8 @@ class PatrolSpace:
                 # Half a cell more: a cell whose centre is that far still reaches into it.
                 narrow |= distance < disc.passage + 0.5 * resolution
                 widest = max(widest, disc.passage)
+        # No patrol turns around inside a passage either: there an agent would block it.
+        allowed &= ~narrow
         far = np.hypot(centres_x - start.x, centres_y - start.y) >= config.min_start_distance
         self.spawn_cells = np.flatnonzero(far & allowed)
         self.end_cells = np.flatnonzero(allowed)
@@ -167,9 +170,10 @@ class PatrolSpace:
 
     def patrols(self, count: int, rng: np.random.Generator) -> list[PatrolPath]:
         """The patrols of up to ``count`` agents, drawn from ``rng``: what DummyAgents.spawn
-        places (none where no cell is far enough from the start; no agent where no patrol
-        was found: one standing still would hold a robot that waits for it until the time
-        limit, as waiting beside an agent never counts as stuck)."""
+        places (none where no cell is far enough from the start; no agent where no patrol of
+        ``min_patrol_cells`` was found: one standing still or shuttling on the spot would
+        hold a robot that waits for it until the time limit, as waiting beside an agent never
+        counts as stuck)."""
         if not len(self.spawn_cells):
             return []
         rows, cols = self.rows, self.cols
@@ -186,7 +190,7 @@ class PatrolSpace:
                     best = path
                 if len(best) >= self.config.min_patrol_cells:
                     break
-            if len(best) > 1:
+            if len(best) >= self.config.min_patrol_cells:
                 paths.append(PatrolPath(np.array([self.environment.cell_center(row, col)
                                                   for row, col in best])))
         return paths

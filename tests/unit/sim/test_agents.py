@@ -209,4 +209,7 @@ def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it(route_y):
     # found no patrol is not placed (standing, it would hold up a robot waiting for it).
     kept = patrols(narrow=True)
     assert max(passage_points(path) for path in kept) <= 3
-    assert all(path.length > 0 for path in kept)
+    assert all(len(path.points) >= AgentConfig().min_patrol_cells for path in kept)
+    # Nor does one turn around inside the passage (where it would block it).
+    ends = [point for path in kept for point in (path.points[0], path.points[-1])]
+    assert not any(4.3 < x < 7.7 and 2.8 < y < 3.7 for x, y in ends)

@@ -26,9 +26,9 @@ class ContactClassifier:
     The robot drove into a partner (an agent, another robot under test) if it moved toward it
     faster than a standing robot would just before or during the contact step; into an agent
     only if the agent did not close in more than ``FASTER_PARTNER`` times as fast (a blind
-    agent ramming a robot that brakes or creeps drove into it). While an agent
-    or another robot drives into it (and CONTACT_DEBOUNCE after), whatever else the robot
-    touches is that partner's doing too: it was shoved.
+    agent ramming a robot that brakes, creeps or passes across its way drove into it). While
+    an agent or another robot drives into it (and CONTACT_DEBOUNCE after), whatever else the
+    robot touches is that partner's doing too: it was shoved.
     """
 
     def __init__(self, recorder: MetricsRecorder, agents: DummyAgents,

@@ -74,11 +74,11 @@ def test_ctrl_c_stops_the_suite_and_reports_what_ran(ros_workspace, tmp_path):
     import sys
     import time
 
-    from sessgan_core.token_map import load_example_map
-    from sessgan_core.valid_tests import make_environment
     from sessgan_evolver.in_process import InProcessEvaluator
+    from sessgan_gen.environment_sampler import EnvironmentSampler
 
-    environment = make_environment(load_example_map('factory').cells, 'factory', 'example')
+    # A fresh map where Nearness-Diagram clips a wall (tests/unit/evolver's suite fixture).
+    (environment,) = EnvironmentSampler().sample([1_000_000], scenario='factory')
     with InProcessEvaluator('factory', 'nearness_diagram',
                             record_directory=tmp_path / 'bags') as evaluator:
         bag = evaluator.run_environment(environment, 0).metrics['bag_path']

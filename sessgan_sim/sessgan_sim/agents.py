@@ -45,6 +45,9 @@ from sessgan_sim.world import CollisionGroup
 
 AGENT_BEHAVIOURS = ('blind', 'cautious')
 
+PASSAGE_SHARE = 3
+"""A patrol holding cells of a narrow passage is at least this many times as long."""
+
 PATH_TRIES = 8
 """Random destinations tried per agent before it settles for the best path found."""
 
@@ -186,7 +189,7 @@ class PatrolSpace:
             for _ in range(PATH_TRIES):
                 other = int(rng.choice(self.end_cells))
                 path = path_to((int(rows[other]), int(cols[other])))
-                if len(path) > len(best) and self.crosses_at_most(path):
+                if len(path) > len(best) and self.only_crosses(path):
                     best = path
                 if len(best) >= self.config.min_patrol_cells:
                     break
@@ -195,10 +198,13 @@ class PatrolSpace:
                                                   for row, col in best])))
         return paths
 
-    def crosses_at_most(self, path: Sequence[tuple[int, int]]) -> bool:
-        """Whether ``path`` (cells) only crosses the narrow passages, not runs along one."""
-        narrow = self.narrow
-        return sum(bool(narrow[cell]) for cell in path) <= self.crossing_cells
+    def only_crosses(self, path: Sequence[tuple[int, int]]) -> bool:
+        """Whether ``path`` (cells) only crosses the narrow passages, not runs along one,
+        and is long beside its cells there: an agent on it is in a passage for at most a
+        third of its time, so a robot waiting at the passage gets windows to pass (a 4-cell
+        patrol with 2 cells across a passage held a robot beside it until the time limit)."""
+        held = sum(bool(self.narrow[cell]) for cell in path)
+        return held <= self.crossing_cells and len(path) >= PASSAGE_SHARE * held
 
 
 class DummyAgents:

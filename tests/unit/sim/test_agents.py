@@ -8,7 +8,14 @@ import pytest
 from sessgan_core.environment import Environment, Pose2D
 from sessgan_core.token_map import load_example_map
 from sessgan_core.valid_tests import make_environment
-from sessgan_sim.agents import AgentConfig, DummyAgents, KeepClear, PatrolPath, PatrolSpace
+from sessgan_sim.agents import (
+    PASSAGE_SHARE,
+    AgentConfig,
+    DummyAgents,
+    KeepClear,
+    PatrolPath,
+    PatrolSpace,
+)
 from sessgan_sim.episode import Episode, EpisodeConfig
 from sessgan_sim.errors import InvalidConfigError
 from sessgan_sim.metrics import ContactKind
@@ -210,6 +217,26 @@ def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it(route_y):
     kept = patrols(narrow=True)
     assert max(passage_points(path) for path in kept) <= 3
     assert all(len(path.points) >= AgentConfig().min_patrol_cells for path in kept)
+    # And is long beside what it holds of the passage.
+    assert all(len(path.points) >= PASSAGE_SHARE * passage_points(path) for path in kept)
     # Nor does one turn around inside the passage (where it would block it).
     ends = [point for path in kept for point in (path.points[0], path.points[-1])]
     assert not any(4.3 < x < 7.7 and 2.8 < y < 3.7 for x, y in ends)
+
+
+def test_a_short_patrol_across_a_narrow_passage_is_refused():
+    # A 4-cell patrol with 2 cells in a passage kept an agent there half its time: a robot
+    # waiting beside it never got through (audit of 2026-11-28, a timeout judged unclear).
+    rows = np.full((12, 24), 100, dtype=np.int8)
+    rows[1:11, 1:9] = rows[1:11, 15:23] = 0
+    rows[5:8, 9:15] = 0
+    environment = Environment('rooms', 'factory', rows, 0.5, Pose2D(1.0, 1.0),
+                              Pose2D(11.0, 1.0))
+    space = PatrolSpace(environment, (0,), AgentConfig(),
+                        [KeepClear(x, 3.25, 0.4, 0.5) for x in np.arange(4.5, 7.75, 0.25)])
+    first = min(col for col in range(24) if space.narrow[6, col])
+    into = [(6, col) for col in range(first - 2, first + 2)]
+    assert sum(space.narrow[cell] for cell in into) == 2
+    assert not space.only_crosses(into)
+    assert space.only_crosses([(6, col) for col in range(first - 4, first + 2)])
+    assert not space.only_crosses([(6, col) for col in range(first - 8, first + 4)])

@@ -57,6 +57,7 @@ from sessgan_sim.episode_config import (  # noqa: F401 (also imported from here)
 from sessgan_sim.errors import EpisodeError, InvalidConfigError, UnknownRobotError
 from sessgan_sim.metrics import (
     STANDING_SPEED,
+    ContactKind,
     EpisodeMetrics,
     MetricsRecorder,
     Outcome,
@@ -81,6 +82,12 @@ from sessgan_sim.world import ObstacleKind, World, WorldLayout
 
 AGENT_WAIT_DISTANCE = 1.0
 """m between bodies within which a robot waiting for an agent is not counted stuck."""
+
+AGENT_BUMP_LIMIT = 3
+"""Times agents may drive into a robot under test before the episode ends as
+collision_limit (with the collision limit on): a blind agent whose patrol runs through a
+robot waiting for it would ram it until the time limit, a timeout the robot is not to blame
+for. A fault collision before it still makes the episode a failure."""
 
 START_OVERLAP_TOLERANCE = 1e-4
 """m: a start footprint penetrating an obstacle deeper than this is invalid."""
@@ -704,6 +711,12 @@ class Episode:
             self._end(record, Outcome.COLLISION_LIMIT,
                       f'{recorder.collisions} collisions reached the limit of '
                       f'{config.collision_limit} at {now:.2f} s')
+            return
+        bumps = sum(event.kind is ContactKind.AGENT_INTO_ROBOT for event in recorder.contacts)
+        if config.collision_limit and bumps >= AGENT_BUMP_LIMIT:
+            self._end(record, Outcome.COLLISION_LIMIT,
+                      f'agents drove into the robot {bumps} times by {now:.2f} s (the limit '
+                      f'for agents): the test, not the robot, ends it')
             return
         event = mission.update(now, reached, distance, math.hypot(*live.velocity),
                                config.control_period)

@@ -13,7 +13,7 @@ from sessgan_core.grid_search import distance_field
 from sessgan_core.token_map import load_example_map
 from sessgan_core.valid_tests import make_environment
 from sessgan_sim.agents import AgentConfig
-from sessgan_sim.episode import Episode, EpisodeConfig, Observation
+from sessgan_sim.episode import AGENT_BUMP_LIMIT, Episode, EpisodeConfig, Observation
 from sessgan_sim.errors import EpisodeError, InvalidConfigError
 from sessgan_sim.metrics import ContactKind, Outcome, is_controller_failure
 from sessgan_sim.robots import BodyCommand
@@ -203,6 +203,27 @@ def test_an_agent_driving_into_a_standing_robot_is_not_its_fault(episode):
         if touched >= 2:
             break
     assert touched >= 2
+
+
+def test_agents_ramming_a_waiting_robot_end_the_episode_without_a_failure(episode):
+    # A robot that waits for a blind agent whose patrol runs through it is rammed until the
+    # time limit: a timeout the robot is not to blame for (audit of 2026-11-28).
+    env = corridor(feasible=False)
+    for seed in range(40):
+        rammed = config(dummy_agents=1, seed=seed, stuck_timeout=0.0, time_limit=60.0)
+        episode.reset(env, dataclasses.replace(rammed, collision_limit=0))
+        unlimited = run(episode, BodyCommand())
+        if unlimited.agent_into_robot_collisions >= AGENT_BUMP_LIMIT:
+            break
+    else:
+        pytest.fail('no seed had an agent ram the standing robot repeatedly')
+    assert unlimited.outcome == Outcome.TIMEOUT  # with the limits off
+    episode.reset(env, rammed)
+    metrics = run(episode, BodyCommand())
+    assert metrics.outcome == Outcome.COLLISION_LIMIT
+    assert metrics.agent_into_robot_collisions == metrics.collisions == AGENT_BUMP_LIMIT
+    assert metrics.simulation_time < unlimited.simulation_time
+    assert not is_controller_failure(metrics)
 
 
 def test_cautious_agents_wait_instead_of_driving_into_a_standing_robot(episode):

@@ -190,16 +190,20 @@ def test_patrol_positions_of_many_distances_are_those_of_one():
     np.testing.assert_array_equal(still.positions(np.array([0.0, 3.0])), [[1.0, 2.0]] * 2)
 
 
+def two_rooms() -> Environment:
+    """Two rooms joined by a 3 m passage, 1.5 m wide (y 2.5-4.0 m)."""
+    rows = np.full((12, 24), 100, dtype=np.int8)
+    rows[1:11, 1:9] = rows[1:11, 15:23] = 0
+    rows[5:8, 9:15] = 0
+    return Environment('rooms', 'factory', rows, 0.5, Pose2D(1.0, 1.0), Pose2D(11.0, 1.0))
+
+
 @pytest.mark.parametrize('route_y', [3.25, 3.75])
 def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it(route_y):
     # Two rooms joined by a 3 m passage; the passage is narrow on some robot's route, which
     # runs along its middle or (3.75) half a metre beside the agents' only free row there
     # (y = 3.25), which the passage's discs around the route must still cover.
-    rows = np.full((12, 24), 100, dtype=np.int8)
-    rows[1:11, 1:9] = rows[1:11, 15:23] = 0
-    rows[5:8, 9:15] = 0
-    environment = Environment('rooms', 'factory', rows, 0.5, Pose2D(1.0, 1.0),
-                              Pose2D(11.0, 1.0))
+    environment = two_rooms()
     passage = [(x, route_y) for x in np.arange(4.5, 7.75, 0.25)]
 
     def patrols(narrow: bool) -> list[PatrolPath]:
@@ -227,11 +231,7 @@ def test_a_patrol_may_cross_a_narrow_passage_but_never_runs_along_it(route_y):
 def test_a_short_patrol_across_a_narrow_passage_is_refused():
     # A 4-cell patrol with 2 cells in a passage kept an agent there half its time: a robot
     # waiting beside it never got through (audit of 2026-11-28, a timeout judged unclear).
-    rows = np.full((12, 24), 100, dtype=np.int8)
-    rows[1:11, 1:9] = rows[1:11, 15:23] = 0
-    rows[5:8, 9:15] = 0
-    environment = Environment('rooms', 'factory', rows, 0.5, Pose2D(1.0, 1.0),
-                              Pose2D(11.0, 1.0))
+    environment = two_rooms()
     space = PatrolSpace(environment, (0,), AgentConfig(),
                         [KeepClear(x, 3.25, 0.4, 0.5) for x in np.arange(4.5, 7.75, 0.25)])
     first = min(col for col in range(24) if space.narrow[6, col])

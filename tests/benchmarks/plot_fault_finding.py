@@ -82,7 +82,7 @@ def plot(values: dict[Key, dict[int, float]], png: Path, columns: int, goal: flo
             base_mean = np.mean(list(baseline.values())) if baseline else None
             if goal and base_mean:
                 ax.hlines(goal * base_mean, b - 0.45, b + 0.45, colors='k', linestyles='--',
-                          linewidth=1, label=f'{goal:g}× random' if b == 0 else None)
+                          linewidth=1, label=f'{goal:g}× random')
             for m, method in enumerate(methods):
                 seeds = values.get((robot, budget, method))
                 if not seeds:
@@ -90,8 +90,10 @@ def plot(values: dict[Key, dict[int, float]], png: Path, columns: int, goal: flo
                 x = b + (m - (len(methods) - 1) / 2) * width
                 points = np.array(list(seeds.values()))
                 mean = float(points.mean())
+                # Every bar labelled: a method run at one budget only is in the legend too
+                # (the figure's legend keeps one handle a label).
                 ax.bar(x, mean, width * 0.9, color=METHOD_COLOURS.get(method, '#17becf'),
-                       label=method if b == 0 else None)
+                       label=method)
                 ax.plot(np.full(len(points), x), points, 'k.', ms=4)
                 if method != 'random' and base_mean:
                     ax.annotate(f'{mean / base_mean:.1f}×', (x, max(mean, points.max())),

@@ -12,8 +12,9 @@ ends inside the ``keep_clear`` discs the episode names (around the goal and on t
 route's narrow passages, so an agent never parks where the robot must pass) or anywhere in
 such a passage. A patrol may cross a narrow passage but not run along it: an agent shuttling
 inside a passage the robot cannot share with it would hold the robot up until the time
-limit, a fault of the test. An agent that finds no patrol of ``min_patrol_cells`` is not
-placed.
+limit, a fault of the test; for the same reason a patrol is at least ``PASSAGE_SHARE`` times
+as long as what it holds of a passage. An agent that finds no patrol of
+``min_patrol_cells`` is not placed.
 
 Two behaviours (``AgentConfig.behaviour``): ``blind`` agents (the default, the paper's) keep
 moving whatever is in their way; ``cautious`` agents behave like factory AGVs with a safety

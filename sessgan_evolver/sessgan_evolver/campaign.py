@@ -46,7 +46,7 @@ from sessgan_evolver.genome_operators import OperatorConfig
 from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES, check_harness_tries
 from sessgan_evolver.report import report_generations, write_report
 from sessgan_evolver.run_store import RunStore
-from sessgan_evolver.search_methods import METHODS, screening_effort
+from sessgan_evolver.search_methods import METHODS, check_exploration, screening_effort
 from sessgan_evolver.seeding import SeedStream, shared_seeds
 from sessgan_gen.checkpoint import (
     checkpoint_bytes,
@@ -128,6 +128,11 @@ class CampaignConfig:
     """[0: 2 where the episodes have agents, else 1; 3 with --external] The screened
     method's work per test: candidate maps and simulator seeds screened, times its defaults
     (milliseconds each; worth more where an episode of the robot under test costs seconds)."""
+    exploration: float = 0.0
+    """[0: 0.2] The screened method's least share of tests that are fresh samples of the
+    generator (the rest are children of failing tests, near them in the generator's latent
+    space); 1: fresh samples only, fewer faults but more different ones (README, *How much
+    it finds*)."""
     generations: int = 30
     """[30] Generations to evaluate (generation 0 is the mutated pre-trained generator)."""
     population: int = 12
@@ -213,8 +218,12 @@ class CampaignConfig:
                                 f'per member), got {self.budget}')
         try:
             screening_effort(self.screening_effort, self.external, self.scenario)
+            check_exploration(self.exploration)
         except SearchMethodError as err:
             raise CampaignError(str(err)) from err
+        if self.exploration and self.method != 'screened':
+            raise CampaignError(f'exploration is a setting of the screened method, not of '
+                                f'{self.method}')
         if (self.method == SESSGAN_METHOD and self.budget
                 and self.budget < self.population * self.maps_per_member):
             raise CampaignError(f'a budget of {self.budget} episodes pays for no sessgan '

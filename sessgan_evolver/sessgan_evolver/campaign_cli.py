@@ -326,7 +326,9 @@ def plan_of(config: CampaignConfig) -> str:
                 f'{config.maps_per_member} maps')
     if config.method == 'screened':
         effort = screening_effort(config.screening_effort, config.external, config.scenario)
-        return f'screened (screening effort {effort}), {config.resolved_budget()} episodes'
+        exploration = (f', exploration {config.exploration:g}' if config.exploration else '')
+        return (f'screened (screening effort {effort}{exploration}), '
+                f'{config.resolved_budget()} episodes')
     return f'{config.method}, {config.resolved_budget()} episodes'
 
 

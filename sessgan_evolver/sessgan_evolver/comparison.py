@@ -48,7 +48,7 @@ from sessgan_core.missions import DEFAULT_DWELL_TIME, MissionSpec
 from sessgan_core.scenarios import get_scenario
 from sessgan_core.token_map import occupancy_to_tokens
 from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig, check_controller
-from sessgan_evolver.errors import CompareError
+from sessgan_evolver.errors import CompareError, SearchMethodError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
 from sessgan_evolver.fault_records import confirm_faults
 from sessgan_evolver.faults import FaultEntry, FaultRule, group_faults
@@ -68,7 +68,13 @@ from sessgan_evolver.fresh_seed import (
 from sessgan_evolver.in_process import EpisodeObserver, InProcessEvaluator
 from sessgan_evolver.screened_search import ArchiveSource, ScreenedSearch
 from sessgan_evolver.search import EpisodeLog, EpisodeRecord, run_search, run_sessgan_search
-from sessgan_evolver.search_methods import METHODS, GAConfig, make_baseline, screening_effort
+from sessgan_evolver.search_methods import (
+    METHODS,
+    GAConfig,
+    check_exploration,
+    make_baseline,
+    screening_effort,
+)
 from sessgan_evolver.worker_episodes import external_record_subdirectory, worker_evaluator
 from sessgan_gen.checkpoint import checkpoint_metadata, checkpoint_training_map, map_origin
 from sessgan_gen.environment_metrics import tile_pattern_kl, uniqueness_report
@@ -95,6 +101,9 @@ class CompareConfig:
     """The screened method's work per test: candidate maps and simulator seeds screened,
     times its defaults. (default: 0: 2 where the episodes have agents, else 1; 3 with
     --external)"""
+    exploration: float = 0.0
+    """The screened method's least share of tests that are fresh samples of the generator,
+    the rest children of failing tests; 1: fresh samples only. (default: 0: 0.2)"""
     fresh_episodes: int = 30
     """Fresh seed pairs per final generator. (default: 30)"""
     repeats: int = 3
@@ -171,6 +180,10 @@ class CompareConfig:
         for name in ('repeats', 'confirm_limit', 'screening_effort'):
             if getattr(self, name) < 0:
                 raise CompareError(f'{name} must be >= 0, got {getattr(self, name)}')
+        try:
+            check_exploration(self.exploration)
+        except SearchMethodError as err:
+            raise CompareError(str(err)) from err
         if self.seed_schedule not in SEED_SCHEDULES:
             raise CompareError(f'seed schedule must be one of {SEED_SCHEDULES}')
         if 'sessgan' in self.methods and self.budget < self.population * self.maps_per_member:
@@ -340,7 +353,8 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
                                      config.ga_config(), config.map_size(),
                                      '' if config.external else config.controller,
                                      screening_effort(config.screening_effort,
-                                                      config.external, config.scenario))
+                                                      config.external, config.scenario),
+                                     config.exploration)
             origin = map_origin(checkpoint_metadata(config.scenario, config.checkpoint or None))
             run_search(searcher, evaluator, config.budget, label, origin)
             cheap_wall = float(getattr(searcher, 'cheap_wall_time', 0.0))

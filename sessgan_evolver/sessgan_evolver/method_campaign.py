@@ -97,7 +97,7 @@ def method_of(config: CampaignConfig) -> SearchMethod:
                              config.checkpoint or None, ga, (config.height, config.width),
                              '' if config.external else config.controller,
                              screening_effort(config.screening_effort, config.external,
-                                              config.scenario))
+                                              config.scenario), config.exploration)
     except SearchMethodError as err:
         raise CampaignError(f'method {config.method}: {err}') from err
 

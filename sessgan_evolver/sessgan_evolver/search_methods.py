@@ -415,27 +415,31 @@ class LatentEvolution(MapSearchGA[NoiseMaps]):
 
 
 def _screened(scenario: str, seed: int, checkpoint: str | bytes | None, ga: GAConfig | None,
-              size: tuple[int, int] | None, controller: str, effort: int) -> SearchMethod:
+              size: tuple[int, int] | None, controller: str, effort: int,
+              exploration: float) -> SearchMethod:
     # Imported here: sessgan_evolver.screened_search builds on this module's types.
     from sessgan_evolver.screened_search import ScreenedConfig, ScreenedSearch
 
-    return ScreenedSearch(scenario, seed, checkpoint, ScreenedConfig(effort=effort), size,
-                          controller)
+    config = ScreenedConfig(effort=effort)
+    if exploration:
+        config = replace(config, exploration=exploration)
+    return ScreenedSearch(scenario, seed, checkpoint, config, size, controller)
 
 
 BaselineFactory = Callable[[str, int, 'str | bytes | None', 'GAConfig | None',
-                            'tuple[int, int] | None', str, int], SearchMethod]
+                            'tuple[int, int] | None', str, int, float], SearchMethod]
 """(scenario, search seed, generator checkpoint or None, GA settings or None, map size or
-None: the generator's, controller under test or '', screening effort) -> method."""
+None: the generator's, controller under test or '', screening effort, exploration share or
+0: the method's default) -> method."""
 
 BASELINES: dict[str, BaselineFactory] = {
-    'random': lambda scenario, seed, checkpoint, ga, size, controller, effort: RandomSampling(
+    'random': lambda scenario, seed, checkpoint, ga, size, *screening: RandomSampling(
         scenario, seed, checkpoint, size=size),
-    'grid_ga': lambda scenario, seed, checkpoint, ga, size, controller, effort: GridGA(
+    'grid_ga': lambda scenario, seed, checkpoint, ga, size, *screening: GridGA(
         scenario, seed, ga, checkpoint=checkpoint, size=size),
-    'cellular_automaton': lambda scenario, seed, checkpoint, ga, size, controller, effort:
+    'cellular_automaton': lambda scenario, seed, checkpoint, ga, size, *screening:
         CellularAutomatonSampling(scenario, seed, checkpoint=checkpoint, size=size),
-    'latent': lambda scenario, seed, checkpoint, ga, size, controller, effort: LatentEvolution(
+    'latent': lambda scenario, seed, checkpoint, ga, size, *screening: LatentEvolution(
         scenario, seed, ga, checkpoint, size),
     'screened': _screened,
 }
@@ -451,6 +455,13 @@ agents. An episode costs 0.1-0.7 s there; effort 2 found more faults than 1 on s
 eight robot x budget pairs measured (13 % fewer with the reference navigator on the factory,
 within the seeds' spread), at a tenth to 29 % of the search's wall time; on the race track
 (no agents) effort 3 found no more than 1 (README, *Screening effort*)."""
+
+
+def check_exploration(exploration: float) -> None:
+    """SearchMethodError unless ``exploration`` is a share of tests (0: the default)."""
+    if not 0.0 <= exploration <= 1.0:
+        raise SearchMethodError(f"exploration must lie in [0, 1] (0: the screened method's "
+                                f'default), got {exploration}')
 
 
 def screening_effort(requested: int, external: bool, scenario: str) -> int:
@@ -471,14 +482,18 @@ METHODS = ('sessgan', 'random', 'grid_ga', 'cellular_automaton', 'latent', 'scre
 
 def make_baseline(name: str, scenario: str, seed: int, checkpoint: str | bytes | None = None,
                   ga_config: GAConfig | None = None, size: tuple[int, int] | None = None,
-                  controller: str = '', screening_effort: int = 1) -> SearchMethod:
+                  controller: str = '', screening_effort: int = 1,
+                  exploration: float = 0.0) -> SearchMethod:
     """A baseline by name (SearchMethodError lists the known ones); ``size``: (height, width)
     of its maps (None or a zero side: the generator's training map's); ``controller``: the
     one under test ('' for the scenario's or another stack), for a method that screens
-    tests by its robot; ``screening_effort``: the screened method's (ScreenedConfig.effort)."""
+    tests by its robot; ``screening_effort`` and ``exploration`` (0: its default): the
+    screened method's (ScreenedConfig.effort and .exploration)."""
     try:
         factory = BASELINES[name]
     except KeyError as err:
         raise SearchMethodError(f'unknown search method {name!r}; known: '
                                 f'{", ".join(METHODS)}') from err
-    return factory(scenario, seed, checkpoint, ga_config, size, controller, screening_effort)
+    check_exploration(exploration)
+    return factory(scenario, seed, checkpoint, ga_config, size, controller, screening_effort,
+                   exploration)

@@ -145,6 +145,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--screening-effort', type=int, default=0,
                         help="the screened method's (0: its in-process default: 2 where the "
                         'episodes have agents, else 1)')
+    parser.add_argument('--exploration', type=float, default=0.0,
+                        help="the screened method's least share of fresh samples (0: its default)")
     parser.add_argument('--output', type=Path, default=Path('runs/bench-fault-finding'))
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
@@ -164,8 +166,10 @@ def run_one(args: argparse.Namespace, controller: str, budget: int, command: str
         budget=budget, fresh_episodes=args.fresh, repeats=args.repeats,
         confirm_limit=args.confirm_limit, time_limit=args.time_limit,
         seed_schedule=args.seed_schedule, population=args.population,
-        maps_per_member=args.maps_per_member, screening_effort=args.screening_effort)
+        maps_per_member=args.maps_per_member, screening_effort=args.screening_effort,
+        exploration=args.exploration)
     effort = f'-effort{args.screening_effort}' if args.screening_effort else ''
+    effort += f'-exploration{args.exploration:g}' if args.exploration else ''
     output = args.output / f'{args.scenario}-{controller or "default"}-{budget}{effort}'
     result = run_comparison(
         config, output, f'python tests/benchmarks/bench_fault_finding.py {command}',

@@ -69,6 +69,8 @@ def test_bad_settings_and_the_spread():
         CompareConfig(budget=10).validate()
     with pytest.raises(CompareError, match='screening_effort must be >= 0'):
         CompareConfig(methods=('screened',), screening_effort=-1).validate()
+    with pytest.raises(CompareError, match='exploration must lie in'):
+        CompareConfig(methods=('screened',), exploration=-1.0).validate()
     assert spread([1.0, 3.0, None]) == (2.0, pytest.approx(2 ** 0.5), 2)
     assert spread([None]) == (None, None, 0)
 

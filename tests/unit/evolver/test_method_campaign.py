@@ -194,6 +194,10 @@ def test_methods_are_validated_and_each_runs_as_its_own_campaign(tmp_path):
         CampaignConfig(screening_effort=-1).validate()
     with pytest.raises(CampaignError, match='pays for no sessgan generation'):
         CampaignConfig(budget=5, population=3, maps_per_member=2).validate()
+    with pytest.raises(CampaignError, match='exploration must lie in'):
+        CampaignConfig(method='screened', exploration=2.0).validate()
+    with pytest.raises(CampaignError, match='setting of the screened method, not of random'):
+        CampaignConfig(method='random', exploration=1.0).validate()
     with pytest.raises(CampaignError, match='MethodCampaign'):
         Campaign(method_config(), 'a', tmp_path, tmp_path)
     with pytest.raises(CampaignError, match='sessgan runs as'):

@@ -188,6 +188,21 @@ def test_children_of_failures_get_the_budget_and_exploration_keeps_its_share():
     assert sum(p.origin == 'fresh sample' for p in flat) >= 0.5 * len(flat)
 
 
+def test_exploration_one_runs_fresh_samples_only_and_is_a_campaign_setting():
+    """--exploration 1 (campaign, compare): every test a screened fresh sample, though
+    failing tests were there to make children of; 0 keeps the method's default."""
+    search, asked = run_with_oracle(1, 4, ScreenedConfig(batch=4, reference_maps=4,
+                                                         exploration=1.0))
+    assert search.parents
+    assert all(p.origin == 'fresh sample' for batch in asked for p in batch)
+    assert make_baseline('screened', 'factory', 0, exploration=1.0).config.exploration == 1.0
+    assert make_baseline('screened', 'factory', 0).config.exploration == \
+        ScreenedConfig().exploration
+    for wrong in (-0.1, 1.5, float('nan')):
+        with pytest.raises(SearchMethodError, match='exploration must lie in'):
+            make_baseline('screened', 'factory', 0, exploration=wrong)
+
+
 def test_relocated_children_keep_the_map_and_draw_new_seeds():
     config = ScreenedConfig(batch=4, reference_maps=4, operators=(RELOCATE,),
                             exploration=0.25)

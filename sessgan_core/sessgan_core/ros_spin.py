@@ -17,7 +17,11 @@ Commands (campaign, evaluate, replay, ...) stop the other way, through
 :func:`run_command`: SIGINT and SIGTERM raise KeyboardInterrupt in the main thread, the
 command cleans up where it stands and exits 130, and a command that uses rclpy starts it with
 :func:`init_rclpy`, without rclpy's own handlers (which shut the context down under a
-spinning command, so it ended with an ExternalShutdownException traceback and exit 1).
+spinning command, so it ended with an ExternalShutdownException traceback and exit 1). Such a
+command spins through :func:`spin_interruptibly`: a KeyboardInterrupt raised while rclpy's
+native code was calling back into Python reaches the spin as another error (pybind11 reports
+it as "Unable to convert function return value to a Python type"), so the command would skip
+its clean-up and exit 1.
 """
 
 from __future__ import annotations
@@ -74,6 +78,10 @@ class _InterruptOnSignals(StopRequest):
         raise KeyboardInterrupt
 
 
+_command_request: StopRequest | None = None
+"""The signal record of the running :func:`run_command` (signals are the process's)."""
+
+
 def run_command(body: Callable[[], int], interrupted: str = 'interrupted',
                 stream: Any = None) -> int:
     """Run a command's ``body`` and return its exit status; on SIGINT or SIGTERM print
@@ -81,8 +89,10 @@ def run_command(body: Callable[[], int], interrupted: str = 'interrupted',
     ``body`` may catch KeyboardInterrupt itself to clean up or say more (a --resume hint).
     argparse's exit (--help: 0, a usage error: 2) is returned as the status too, so a caller of
     ``main`` gets every outcome as its return value."""
+    global _command_request
     request = _InterruptOnSignals()
     request.install()
+    _command_request = request
     try:
         return body()
     except SystemExit as stop:
@@ -93,7 +103,20 @@ def run_command(body: Callable[[], int], interrupted: str = 'interrupted',
         print(interrupted, file=stream or sys.stderr, flush=True)
         return INTERRUPTED_STATUS
     finally:
+        _command_request = None
         request.restore()
+
+
+def spin_interruptibly(spin: Callable[[], Any]) -> Any:
+    """Return ``spin()`` (an rclpy spin call of a command under :func:`run_command`); an error
+    it raises after SIGINT or SIGTERM arrived is the signal's KeyboardInterrupt, mangled by the
+    native code it was raised under, and is raised as KeyboardInterrupt."""
+    try:
+        return spin()
+    except Exception as error:
+        if _command_request is not None and _command_request.requested:
+            raise KeyboardInterrupt from error
+        raise
 
 
 def init_rclpy(args: list[str] | None = None) -> None:

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Literal
 
 from sessgan_core.config_cli import cli, parse_valid_config
-from sessgan_core.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command
+from sessgan_core.ros_spin import INTERRUPTED_STATUS, init_rclpy, run_command, spin_interruptibly
 from sessgan_core.validation import ros_namespace
 
 EXIT_AS_EXPECTED, EXIT_DIFFERENT, EXIT_ERROR = 0, 1, 2
@@ -279,13 +279,15 @@ def resimulate(args: ReplayConfig, episode: dict) -> int:
             goal.robot = episode.get('robot', '')
             goal.controller = controller
             send = client.send_goal_async(goal)
-            rclpy.spin_until_future_complete(node, send, timeout_sec=30.0)
+            spin_interruptibly(lambda: rclpy.spin_until_future_complete(node, send,
+                                                                        timeout_sec=30.0))
             handle = send.result()
             if handle is None or not handle.accepted:
                 print('error: the simulator refused the goal', file=sys.stderr)
                 return EXIT_ERROR
             result_future = handle.get_result_async()
-            rclpy.spin_until_future_complete(node, result_future, timeout_sec=args.timeout)
+            spin_interruptibly(lambda: rclpy.spin_until_future_complete(
+                node, result_future, timeout_sec=args.timeout))
             if not result_future.done():
                 print(f'error: no result within {args.timeout} s', file=sys.stderr)
                 return EXIT_ERROR

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sessgan_core.environment import Environment
+from sessgan_core.ros_spin import spin_interruptibly
 from sessgan_evolver.campaign import CampaignConfig, CampaignError, EpisodeJob
 from sessgan_evolver.errors import BagCollectionError
 from sessgan_evolver.harness import HarnessRetries
@@ -172,7 +173,7 @@ class RosEvaluator:
 
     def spin(self, seconds: float = 0.02) -> None:
         import rclpy
-        rclpy.spin_once(self.node, timeout_sec=seconds)
+        spin_interruptibly(lambda: rclpy.spin_once(self.node, timeout_sec=seconds))
 
     def check_children(self) -> None:
         """Fail fast when a process this campaign started has died (while starting up)."""

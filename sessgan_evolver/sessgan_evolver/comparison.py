@@ -20,7 +20,11 @@ episode, for every method). Per run:
   ``grid_ga`` leaves none. Every generator is evaluated on the same fresh seed pairs,
   disjoint from all seeds of all runs, once per distinct generator;
 * **TPKL and uniqueness of the failing maps**: of the maps of its distinct faults (first
-  occurrence each), to the example map.
+  occurrence each), to the example map;
+* **fault situations per 1,000 episodes**: its confirmed distinct faults grouped where they
+  have the same kind and coarse cell on maps that differ in fewer than 10 % (and, stricter,
+  25 %) of their cells (sessgan_evolver.faults.same_situation): a local variant of a failing
+  map is a new distinct fault but the same situation.
 
 Figures are reported per method as mean ± sample standard deviation over the search seeds,
 with every seed's value in runs.csv; a figure of the final generator counts each distinct
@@ -51,7 +55,14 @@ from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig, check_contr
 from sessgan_evolver.errors import CompareError, SearchMethodError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
 from sessgan_evolver.fault_records import confirm_faults
-from sessgan_evolver.faults import FaultEntry, FaultRule, group_faults
+from sessgan_evolver.faults import (
+    SITUATION_CELLS,
+    STRICT_SITUATION_CELLS,
+    FaultEntry,
+    FaultRule,
+    SituationArchive,
+    group_faults,
+)
 from sessgan_evolver.fitness import FitnessConfig
 from sessgan_evolver.fresh_seed import (
     AutomatonSource,
@@ -298,6 +309,11 @@ class RunFigures:
     cheap_wall: float = 0.0
     """Wall seconds the method spent on cheap work (screening, surrogate; within
     search_wall)."""
+    situations_per_1000: float = 0.0
+    """Fault situations of the confirmed faults (maps < 10 % of cells apart: one) per 1,000
+    episodes."""
+    strict_situations_per_1000: float = 0.0
+    """The same with maps < 25 % of cells apart one situation."""
 
     def row(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -376,6 +392,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
              and entry.confirmation.exact == entry.confirmation.repeats]
     first = min(confirmed, key=lambda entry: entry.first, default=None)
     episodes = len(records)
+    per_1000 = 1000.0 / episodes if episodes else 0.0
     tokens = _example_tokens(records, faults, config.scenario)
     example = checkpoint_training_map(config.scenario, config.checkpoint or None)
     figures = RunFigures(
@@ -384,8 +401,7 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
         valid_failures=sum(r.valid_failure for r in records), distinct_faults=len(faults),
         checked_faults=len(checked), confirmed_faults=len(confirmed),
         exact_faults=len(exact),
-        confirmed_per_1000=1000.0 * len(confirmed) / episodes if episodes else 0.0,
-        distinct_per_1000=1000.0 * len(faults) / episodes if episodes else 0.0,
+        confirmed_per_1000=per_1000 * len(confirmed), distinct_per_1000=per_1000 * len(faults),
         first_confirmed_episode=None if first is None else first.first + 1,
         first_confirmed_wall=None if first is None else
         records[first.first].elapsed + first.confirmation.wall_time,  # type: ignore[union-attr]
@@ -394,11 +410,24 @@ def run_method(config: CompareConfig, method: str, seed: int, output: Path,
         generator=source.label if source is not None else '',
         failing_tpkl=tile_pattern_kl(example, tokens) if tokens else None,
         failing_uniqueness=uniqueness_report(tokens).mean if tokens else None,
-        fault_records=[str(path) for path in written], cheap_wall=cheap_wall)
+        fault_records=[str(path) for path in written], cheap_wall=cheap_wall,
+        situations_per_1000=per_1000 * fault_situations(confirmed, records),
+        strict_situations_per_1000=per_1000 * fault_situations(confirmed, records,
+                                                               STRICT_SITUATION_CELLS))
     log(f'{label}: {episodes} episodes, {figures.valid_failures} valid failures, '
         f'{len(faults)} distinct faults, {len(confirmed)}/{len(checked)} confirmed, '
         f'{search_wall:.0f} s')
     return MethodRun(figures, records, faults, source, source_key)
+
+
+def fault_situations(faults: Sequence[FaultEntry], records: Sequence[EpisodeRecord],
+                     share: float = SITUATION_CELLS) -> int:
+    """How many fault situations ``faults`` (in the order found) make: faults of one kind in
+    one coarse cell on maps that differ in fewer than ``share`` of their cells are one."""
+    situations = SituationArchive(share)
+    for entry in faults:
+        situations.add(entry.key, records[entry.first].environment.occupancy)
+    return len(situations)
 
 
 def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None, str]:
@@ -518,6 +547,10 @@ def method_table(config: CompareConfig, runs: Sequence[MethodRun]) -> str:
                              ('valid_failures', 'valid failures (episodes)', '{:.1f}'),
                              ('distinct_faults', 'distinct faults', '{:.1f}'),
                              ('confirmed_faults', 'confirmed distinct faults', '{:.1f}'),
+                             ('situations_per_1000', 'fault situations / 1,000 episodes '
+                              '(maps < 10 % apart: one)', '{:.1f}'),
+                             ('strict_situations_per_1000', 'fault situations / 1,000 '
+                              'episodes (maps < 25 % apart: one)', '{:.1f}'),
                              ('search_wall', 'search wall s', '{:.0f}'),
                              ('cheap_wall', 'cheap work wall s (within search)', '{:.1f}'),
                              ('search_cpu', 'search CPU s', '{:.0f}')]

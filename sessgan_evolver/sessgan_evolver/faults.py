@@ -266,6 +266,9 @@ def confirm(entry: FaultEntry, original_metrics: Mapping[str, Any], rerun: Rerun
 
 SITUATION_CELLS = 0.1
 """Share of map cells two failing maps must differ in to be different fault situations."""
+STRICT_SITUATION_CELLS = 0.25
+"""A stricter share, reported beside SITUATION_CELLS, so a gain that holds only at the
+search's own threshold shows."""
 
 
 def same_situation(key: FaultKey, occupancy: np.ndarray, other: FaultKey,

@@ -46,7 +46,7 @@ from sessgan_evolver.comparison import (  # noqa: E402
     method_table,
     run_comparison,
 )
-from sessgan_evolver.faults import SITUATION_CELLS, SituationArchive  # noqa: E402
+from sessgan_evolver.faults import SITUATION_CELLS, STRICT_SITUATION_CELLS  # noqa: E402
 from sessgan_evolver.search_methods import METHODS  # noqa: E402
 
 
@@ -73,33 +73,20 @@ def describe_ratio(runs, method: str, other: str, key: str) -> str:
             f'{", ".join(per_seed)})')
 
 
-def fault_situations(run, share: float = SITUATION_CELLS) -> int:
-    """Confirmed distinct faults of a run grouped into situations (module docstring;
-    sessgan_evolver.faults.same_situation, the rule the screened search's novelty uses);
-    ``share``: the map difference below which two faults at one place are one situation."""
-    situations = SituationArchive(share)
-    for entry in run.faults:
-        if entry.confirmation is not None and entry.confirmation.confirmed:
-            situations.add(entry.key, run.records[entry.first].environment.occupancy)
-    return len(situations)
-
-
-STRICT_SHARE = 0.25
-"""A stricter situation rule, printed beside the project's, so a gain that only holds at the
-project's threshold shows."""
+SITUATION_FIGURES = (('situations_per_1000', SITUATION_CELLS),
+                     ('strict_situations_per_1000', STRICT_SITUATION_CELLS))
+"""RunFigures' fault situations by the project's rule and the stricter one, with the share of
+cells below which two failing maps are one situation."""
 
 
 def situation_ratios(runs, method: str) -> str:
     """A method's fault situations against random sampling's (ratio of the means over
-    seeds), by the project's rule and the stricter one."""
-    def mean(name: str, share: float) -> float:
-        values = [fault_situations(r, share) / r.figures.episodes for r in runs
-                  if r.figures.method == name]
-        return float(np.mean(values)) if values else float('nan')
+    seeds), by the project's rule and the stricter one, so a gain that only holds at the
+    project's threshold shows."""
     parts = []
-    for share in (SITUATION_CELLS, STRICT_SHARE):
-        mine, theirs = mean(method, share), mean('random', share)
-        ratio = f'{mine / theirs:.2f}x' if theirs > 0 else 'n/a'
+    for key, share in SITUATION_FIGURES:
+        mine, theirs = mean_of(runs, method, key), mean_of(runs, 'random', key)
+        ratio = f'{mine / theirs:.2f}x' if mine is not None and theirs else 'n/a'
         parts.append(f'< {share:.0%} of cells: {ratio}')
     return f'{method} vs random, fault situations: ' + ', '.join(parts)
 
@@ -110,8 +97,8 @@ def describe_method(runs, method: str) -> str:
     mine = sorted((r for r in runs if r.figures.method == method),
                   key=lambda r: r.figures.search_seed)
     confirmed = [r.figures.confirmed_per_1000 for r in mine]
-    situations = [1000.0 * fault_situations(r) / r.figures.episodes for r in mine]
-    strict = [1000.0 * fault_situations(r, STRICT_SHARE) / r.figures.episodes for r in mine]
+    situations = [r.figures.situations_per_1000 for r in mine]
+    strict = [r.figures.strict_situations_per_1000 for r in mine]
     first = [r.figures.first_confirmed_episode for r in mine]
     share = [100.0 * r.figures.cheap_wall / r.figures.search_wall for r in mine
              if r.figures.search_wall > 0]
@@ -124,8 +111,9 @@ def describe_method(runs, method: str) -> str:
         return f'{np.mean(present):.1f} ± {std:.1f} ({", ".join(f"{v:.0f}" for v in present)})'
     return (f'{method}: confirmed distinct faults / 1,000 episodes {spread(confirmed)}; fault '
             f'situations / 1,000 episodes {spread(situations)} (maps differing in < '
-            f'{STRICT_SHARE:.0%} of cells one situation: {spread(strict)}); episodes to the first '
-            f'confirmed fault {spread(first)}; cheap work % of search wall {spread(share)}')
+            f'{STRICT_SITUATION_CELLS:.0%} of cells one situation: {spread(strict)}); episodes '
+            f'to the first confirmed fault {spread(first)}; cheap work % of search wall '
+            f'{spread(share)}')
 
 
 def main(argv: list[str] | None = None) -> int:

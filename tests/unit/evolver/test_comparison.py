@@ -4,11 +4,20 @@ the report's files."""
 from __future__ import annotations
 
 import csv
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 import torch
 
-from sessgan_evolver.comparison import CompareConfig, CompareError, run_comparison, spread
+from sessgan_evolver.comparison import (
+    CompareConfig,
+    CompareError,
+    fault_situations,
+    run_comparison,
+    spread,
+)
+from sessgan_evolver.faults import STRICT_SITUATION_CELLS, FaultEntry, FaultKey
 from sessgan_evolver.search_methods import METHODS
 
 pytestmark = pytest.mark.unit
@@ -32,6 +41,9 @@ def test_every_method_runs_at_equal_budget_and_is_reported(tmp_path):
         assert figures.confirmed_faults <= figures.checked_faults == figures.distinct_faults
         assert figures.distinct_faults <= figures.valid_failures <= figures.valid_maps <= 4
         assert figures.confirmed_per_1000 == pytest.approx(250 * figures.confirmed_faults)
+        assert figures.strict_situations_per_1000 <= figures.situations_per_1000 \
+            <= figures.confirmed_per_1000
+        assert figures.situations_per_1000 > 0 or not figures.confirmed_faults
         if figures.confirmed_faults:
             assert 1 <= figures.first_confirmed_episode <= 4
             assert figures.first_confirmed_wall > 0
@@ -58,6 +70,22 @@ def test_every_method_runs_at_equal_budget_and_is_reported(tmp_path):
     assert 'compare --tiny' in report and all(method in report for method in METHODS)
     with pytest.raises(CompareError, match='holds a comparison'):
         run_comparison(config, output, log=lambda _: None)
+
+
+def test_a_local_variant_of_a_failing_map_is_a_new_fault_but_the_same_situation():
+    """Three faults of one kind in one coarse cell: on the map, on a variant 5 % of cells
+    apart, on a map 20 % apart; and one of another kind on the first map."""
+    base = np.zeros((10, 10), dtype=np.int8)
+    near, far = base.copy(), base.copy()
+    near.flat[:5] = 100
+    far.flat[:20] = 100
+    maps = [base, near, far, base]
+    records = [SimpleNamespace(environment=SimpleNamespace(occupancy=grid)) for grid in maps]
+    faults = [FaultEntry(FaultKey(kind, 1, 2, str(index)), [index])
+              for index, kind in enumerate(['collision_static'] * 3 + ['stuck'])]
+    assert fault_situations(faults, records) == 3  # the variant 5 % apart is one
+    assert fault_situations(faults, records, STRICT_SITUATION_CELLS) == 2  # 20 % too
+    assert fault_situations([], records) == 0
 
 
 def test_bad_settings_and_the_spread():

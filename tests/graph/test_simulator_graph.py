@@ -154,7 +154,12 @@ def test_bad_input_gets_clear_results_and_node_keeps_serving(node_processes, ros
     node_processes.start([sys.executable, str(EXTERNAL_CONTROLLER), '--nan', '--ros-args', '-r',
                           '__ns:=/bad'], name='nan_controller')
     assert spin_until(ros_node, lambda: ros_node.count_publishers('/bad/cmd_vel') > 0, 30)
-    metrics, _ = evaluate(ros_node, '/bad', good, time_limit=3.0)
+    # The simulator may discover the new controller later than this node did (a CI run under
+    # load: over its 2 s start-up window); that is the harness outcome a campaign re-runs.
+    for _ in range(5):
+        metrics, _ = evaluate(ros_node, '/bad', good, time_limit=3.0)
+        if metrics.outcome != 'controller_unresponsive':
+            break
     assert metrics.outcome in ('timeout', 'stuck'), metrics.detail
     assert 'NaN' in metrics.detail
     assert metrics.distance_travelled < 0.05

@@ -75,13 +75,13 @@ def evaluate(ros_node, namespace: str, environment_msg, time_limit: float = 0.0,
 
 
 def evaluate_with_reruns(ros_node, namespace: str, environment_msg, tries: int = 3,
-                         **options):
-    """``evaluate`` for a clocked worker, with the harness's re-run rule for an overloaded
-    episode (on a busy machine the stack may not keep pace with sim time: no result, run
-    again at half the pace, as campaigns do with --adaptive-rtf; sessgan_evolver.harness).
-    Returns the metrics and feedback of the first try that was not overloaded and the number of
-    tries;
-    HarnessFailureError when every try is overloaded. Other outcomes are the test's to judge."""
+                         rerun: tuple[str, ...] = ('overloaded',), **options):
+    """``evaluate`` with the harness's re-run rule for the harness outcomes ``rerun`` (default:
+    an overloaded episode of a clocked worker: on a busy machine the stack may not keep pace
+    with sim time: no result, run again at half the pace, as campaigns do with --adaptive-rtf;
+    sessgan_evolver.harness). Returns the metrics and feedback of the first try whose outcome
+    is not in ``rerun`` and the number of tries; HarnessFailureError when every try's is.
+    Other outcomes are the test's to judge."""
     from sessgan_evolver.harness import HarnessRetries
 
     retries = HarnessRetries(tries, print, adaptive_rtf=True)
@@ -89,7 +89,7 @@ def evaluate_with_reruns(ros_node, namespace: str, environment_msg, tries: int =
         metrics, feedback = evaluate(
             ros_node, namespace, environment_msg,
             real_time_factor_scale=retries.real_time_factor_scale(namespace), **options)
-        if metrics.outcome != 'overloaded':
+        if metrics.outcome not in rerun:
             return metrics, feedback, attempt
         retries.failed(namespace, environment_msg.id, metrics.outcome, metrics.detail)
     raise AssertionError('unreachable: HarnessRetries raises on the last overloaded try')
@@ -156,10 +156,8 @@ def test_bad_input_gets_clear_results_and_node_keeps_serving(node_processes, ros
     assert spin_until(ros_node, lambda: ros_node.count_publishers('/bad/cmd_vel') > 0, 30)
     # The simulator may discover the new controller later than this node did (a CI run under
     # load: over its 2 s start-up window); that is the harness outcome a campaign re-runs.
-    for _ in range(5):
-        metrics, _ = evaluate(ros_node, '/bad', good, time_limit=3.0)
-        if metrics.outcome != 'controller_unresponsive':
-            break
+    metrics, _, _ = evaluate_with_reruns(ros_node, '/bad', good, tries=5, time_limit=3.0,
+                                         rerun=('controller_unresponsive',))
     assert metrics.outcome in ('timeout', 'stuck'), metrics.detail
     assert 'NaN' in metrics.detail
     assert metrics.distance_travelled < 0.05

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from sessgan_core.environment import Environment
 from sessgan_core.ros_spin import spin_interruptibly
 from sessgan_evolver.campaign import CampaignConfig, CampaignError, EpisodeJob
-from sessgan_evolver.errors import BagCollectionError
+from sessgan_evolver.errors import BagCollectionError, HarnessFailureError
 from sessgan_evolver.harness import HarnessRetries
 from sessgan_evolver.process_supervisor import (
     ChildProcess,
@@ -317,6 +317,14 @@ class RosEvaluator:
                 f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "unset: SUBNET"}) as this '
                 'command')
 
+    def no_worker_hint(self) -> str:
+        """What to do when every worker is gone mid-run."""
+        if self.pool.pairs:  # workers we started: restarted by the supervisor, logs say why
+            return f'the logs of the workers this command started: {self.supervisor.log_directory}'
+        return ('start a simulator again beside your controller (e.g. `ros2 run sessgan_sim '
+                'simulator --ros-args -r __ns:=/w0`, in this ROS_DOMAIN_ID) and check the log of '
+                'the one that left')
+
     def sample(self, weights: bytes, seeds: Sequence[int], generation: int,
                member: int) -> list[Environment]:
         from sessgan_core.ros_conversion import environment_from_msg
@@ -472,6 +480,7 @@ class RosEvaluator:
         pending = deque(jobs)
         last_discovery = 0.0
         last_worker_seen = time.monotonic()
+        announced_wait = False
         while pending or running:
             now = time.monotonic()
             if now - last_discovery > 2.0:
@@ -488,9 +497,15 @@ class RosEvaluator:
             if running or self.starting or any(
                     c.server_is_ready() for c in self.clients.values()):
                 last_worker_seen = now
+                announced_wait = False
             elif now - last_worker_seen > NO_WORKER_TIMEOUT:
-                raise CampaignError(f'no simulator worker has been available for '
-                                    f'{NO_WORKER_TIMEOUT:.0f} s')
+                raise HarnessFailureError(
+                    f'no simulator worker has been available for {NO_WORKER_TIMEOUT:.0f} s '
+                    f'({len(pending)} episodes left to run); {self.no_worker_hint()}')
+            elif not announced_wait and now - last_worker_seen > 3.0:
+                self.log(f'no simulator worker answers: waiting up to '
+                         f'{NO_WORKER_TIMEOUT:.0f} s for one; {self.no_worker_hint()}')
+                announced_wait = True
             self.spin(0.01)
             for job in self.take_back_from_dead_pairs(running):
                 self.retries.failed(job.key, job.environment.id, 'a worker process died',

@@ -285,6 +285,32 @@ def test_an_episode_whose_worker_left_the_graph_is_taken_back_and_rerun(evaluato
     assert evaluator.harness_reruns == 1
 
 
+def test_a_worker_gone_for_good_stops_the_run_as_a_harness_failure(evaluator, monkeypatch):
+    """A worker that leaves mid-episode and never comes back, with no other one: the wait for a
+    worker is said in the log, then the run stops as a harness failure (the campaign prints its
+    --resume line), with what to do."""
+    from sessgan_evolver import ros_evaluator
+    from sessgan_evolver.errors import HarnessFailureError
+
+    monkeypatch.setattr(ros_evaluator, 'NO_WORKER_TIMEOUT', 4.0)
+    present = [True]
+
+    class VanishingClient(FakeClient):
+        def server_is_ready(self) -> bool:
+            return present[0]
+
+    evaluator.action_client_class = lambda node, kind, name: VanishingClient(evaluator.goals)
+
+    def script(number, result):
+        present[0] = False  # the host drops off during the first episode, for good
+
+    with pytest.raises(HarnessFailureError, match=r'no simulator worker has been available '
+                       r'for 4 s \(1 episodes left to run\); the logs of the workers'):
+        run_with(evaluator, script)
+    assert any('no simulator worker answers: waiting up to 4 s' in line
+               for line in evaluator.logs), evaluator.logs
+
+
 def test_an_unanswered_goal_is_sent_again_through_a_new_client(evaluator, monkeypatch):
     """A goal the worker never answers (lost on its way) goes again through a new client: its
     DDS endpoints are matched afresh, where the old ones may never deliver."""

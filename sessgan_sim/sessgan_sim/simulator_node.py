@@ -301,7 +301,14 @@ class SimulatorNode(Node):
 
     @staticmethod
     def mistyped_commands(commands) -> str:
-        """Why a stack that publishes cmd_vel is not heard, when its type is the other one."""
+        """Why a stack that publishes cmd_vel is not heard, when its type is the other one or
+        it publishes under another namespace."""
+        elsewhere = commands.writers_elsewhere()
+        if elsewhere and not commands.writers_in_graph():
+            return (f'; {", ".join(elsewhere)} {"has" if len(elsewhere) == 1 else "have"} a '
+                    f'writer, this worker reads {commands.topic}: start the controller in '
+                    "the worker's namespace (-r __ns:=...) or the worker in the "
+                    "controller's")
         others = commands.mistyped_writers()
         if not others:
             return ''

@@ -94,6 +94,22 @@ def test_a_stack_publishing_the_other_command_type_is_named(node_processes, ros_
             and 'use_stamped_cmd_vel:=true' in metrics.detail), metrics.detail
 
 
+def test_a_stack_in_another_namespace_is_named(node_processes, ros_node):
+    """A controller started under another namespace than the worker's: the worker names the
+    cmd_vel that has a writer and the one it reads (a harness outcome, never a result)."""
+    from tests.graph.test_simulator_graph import evaluate
+
+    start_simulator(node_processes, '/here', 'dummy_agents:=0',
+                    'controller_startup_timeout:=8.0')
+    start_stand_in(node_processes, '/there')
+    assert spin_until(ros_node, lambda: ros_node.get_publishers_info_by_topic(
+        '/there/cmd_vel'), timeout=60), 'the stand-in never advertised cmd_vel'
+    metrics, _ = evaluate(ros_node, '/here', environment_msg(room(), 'factory', 'room'))
+    assert metrics.outcome == 'controller_unresponsive', metrics.detail
+    assert ('/there/cmd_vel has a writer, this worker reads /here/cmd_vel' in metrics.detail
+            and '-r __ns:=' in metrics.detail), metrics.detail
+
+
 @pytest.mark.parametrize('mode', ['lockstep', 'clocked'])
 def test_goal_reaches_subscribers_that_join_during_the_episode(node_processes, ros_node, mode):
     from geometry_msgs.msg import PoseStamped

@@ -90,5 +90,13 @@ class CommandReceiver:
         return sorted({info.topic_type for info in self.node.get_publishers_info_by_topic(
             self.topic) if info.topic_type != mine})
 
+    def writers_elsewhere(self) -> list[str]:
+        """Other topics of the same last name (``/w1/cmd_vel`` beside this ``/w0/cmd_vel``)
+        that have writers: a controller started under another namespace, most likely."""
+        name = self.topic.rsplit('/', 1)[-1]
+        return sorted(topic for topic, _ in self.node.get_topic_names_and_types()
+                      if topic != self.topic and topic.rsplit('/', 1)[-1] == name
+                      and self.node.count_publishers(topic))
+
     def destroy(self) -> None:
         self.node.destroy_node()

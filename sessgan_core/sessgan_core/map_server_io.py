@@ -47,6 +47,7 @@ from sessgan_core.atomic_files import atomic_write_bytes
 from sessgan_core.environment import MAX_CELLS_PER_SIDE, Environment
 from sessgan_core.errors import MapFormatError
 from sessgan_core.grid_search import flat_grid, label_regions, union_roots
+from sessgan_core.route_certificate import required_clearances
 from sessgan_core.scenarios import BLOCKED, FREE
 from sessgan_core.token_map import (
     UNKNOWN,
@@ -59,14 +60,16 @@ from sessgan_core.token_map import (
 )
 from sessgan_core.validation import require_positive
 
-DEFAULT_OCCUPIED_THRESH = 0.65
-DEFAULT_FREE_THRESH = 0.25
+WRITTEN_OCCUPIED_THRESH = 0.65
+WRITTEN_FREE_THRESH = 0.196
+"""The thresholds this project writes into a map's YAML: map_saver's since mid-2025."""
 MAP_MODES = ('trinary', 'scale', 'raw')
 FREE_PIXEL = 254
 OCCUPIED_PIXEL = 0
 UNKNOWN_PIXEL = 127
 """Mid grey: occ 0.502 lies between the thresholds we write, so it reads back as unknown
-(map_saver's 205 would read as free under its own default free_thresh 0.25)."""
+under any thresholds near them (map_saver's 205, occ 0.196, read as free under the
+free_thresh 0.25 it wrote before mid-2025)."""
 MAP_SAVER_UNKNOWN_PIXEL = 205
 """The grey map_saver writes for unknown cells in trinary mode."""
 MAX_IMAGE_SIDE = 1 << 16
@@ -193,11 +196,10 @@ def encode_pgm(pixels: np.ndarray) -> bytes:
 # --- YAML ---------------------------------------------------------------------------------------
 
 
-def _number(document: dict, key: str, source: str, default: float | None = None) -> float:
+def _number(document: dict, key: str, source: str) -> float:
     if key not in document:
-        if default is None:
-            raise MapFormatError(f'{source}: required key {key!r} is missing')
-        return default
+        raise MapFormatError(f'{source}: required key {key!r} is missing (map_server '
+                             'requires it)')
     value = document[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise MapFormatError(f'{source}: {key!r} must be a finite number, got {value!r}')
@@ -258,15 +260,19 @@ def read_map_yaml(yaml_path: str | os.PathLike) -> MapMetadata:
             f'requires; got {len(origin)} elements {origin!r}')
     origin3 = (float(origin[0]), float(origin[1]), float(origin[2]))
 
-    negate_value = document.get('negate', 0)
+    # map_server's loadMapYaml requires negate and both thresholds (only mode has a default).
+    if 'negate' not in document:
+        raise MapFormatError(f"{source}: required key 'negate' is missing (map_server "
+                             'requires it: 0 for the usual black walls)')
+    negate_value = document['negate']
     if isinstance(negate_value, bool) or negate_value in (0, 1):
         negate = bool(negate_value)
     else:
         raise MapFormatError(f"{source}: 'negate' must be 0, 1, true or false, "
                              f'got {negate_value!r}')
 
-    occupied = _number(document, 'occupied_thresh', source, DEFAULT_OCCUPIED_THRESH)
-    free = _number(document, 'free_thresh', source, DEFAULT_FREE_THRESH)
+    occupied = _number(document, 'occupied_thresh', source)
+    free = _number(document, 'free_thresh', source)
     if not (0.0 <= free < occupied <= 1.0):
         raise MapFormatError(
             f'{source}: thresholds must satisfy 0 <= free_thresh < occupied_thresh <= 1, '
@@ -366,8 +372,8 @@ def map_saver_unknown(pixels: np.ndarray, maxval: int, metadata: MapMetadata) ->
 # --- writing -----------------------------------------------------------------------------------
 
 
-def occupancy_to_pixels(occupancy: np.ndarray, occupied_thresh: float = DEFAULT_OCCUPIED_THRESH,
-                        free_thresh: float = DEFAULT_FREE_THRESH) -> tuple[np.ndarray, str]:
+def occupancy_to_pixels(occupancy: np.ndarray, occupied_thresh: float = WRITTEN_OCCUPIED_THRESH,
+                        free_thresh: float = WRITTEN_FREE_THRESH) -> tuple[np.ndarray, str]:
     """8-bit pixels (top row first) and the map mode that reads them back unchanged."""
     grid = np.asarray(occupancy)
     if grid.ndim != 2 or grid.size == 0:
@@ -430,8 +436,8 @@ def write_map_server(yaml_path: str | os.PathLike, occupancy: np.ndarray, resolu
         f'resolution: {_format_float(resolution)}',
         f'origin: [{", ".join(_format_float(v) for v in origin3)}]',
         'negate: 0',
-        f'occupied_thresh: {DEFAULT_OCCUPIED_THRESH}',
-        f'free_thresh: {DEFAULT_FREE_THRESH}',
+        f'occupied_thresh: {WRITTEN_OCCUPIED_THRESH}',
+        f'free_thresh: {WRITTEN_FREE_THRESH}',
     ]) + '\n'
     try:
         atomic_write_bytes(image_path, encode_pgm(pixels))
@@ -536,12 +542,23 @@ LOW_KNOWN_FRACTION = 0.75
 """An imported map whose known region is less than this share of its cells (after cropping)
 gets a warning: the unknown cells inside count as walls."""
 SPECK_CELL_FRACTION = 0.25
-"""An unknown speck inside free floor (:func:`unknown_specks`) smaller than this share of one
+"""An unknown speck inside free floor (:func:`specks`) smaller than this share of one
 cell's area is floor that SLAM did not observe (a gap between laser rays), taken as free:
 resampling would make each such speck a whole wall cell, four or more times its size, that
 the generator learns as a pillar. A region of a quarter cell or more (0.25 m x 0.25 m for
 0.5 m cells, 25 px at 0.05 m/px) is the size of an object the scan may have missed, so it
 stays wall; at a resolution of half a cell or coarser no pixel is small enough."""
+
+
+WALL_SPECK_CELL_FRACTION = 1 / 16
+"""An occupied speck inside free floor (:func:`specks`) smaller than this share of one cell's
+area (under 6.25 px at 0.05 m/px for 0.5 m cells: lidar noise, a table leg) is taken as floor:
+resampling would make it a whole wall cell, 16 or more times its size, that the generator
+learns as a pillar. Anything larger stays wall."""
+SEALED_FLOOR_DROP = 0.1
+"""A learned map whose robot reaches less of its floor from its largest region than the
+original by more than this share (:func:`reachable_floor`) gets a warning: resampling to whole
+cells closed openings the robot passes in the original."""
 
 
 class FacilityImport(NamedTuple):
@@ -569,9 +586,16 @@ class FacilityImport(NamedTuple):
     """Pixels of map_saver's unknown grey taken as unknown where map_server would read them
     as free (:func:`map_saver_unknown`)."""
     floor_specks: int = 0
-    """Specks of unknown inside free floor taken as floor (:func:`unknown_specks`)."""
+    """Specks of unknown inside free floor taken as floor (:func:`specks`)."""
     floor_speck_pixels: int = 0
     """Their pixels, all together."""
+    wall_specks: int = 0
+    """Specks of occupied pixels inside free floor taken as floor (:func:`specks`)."""
+    wall_speck_pixels: int = 0
+    """Their pixels, all together."""
+    reachable: tuple[float, float] = (1.0, 1.0)
+    """:func:`reachable_floor` of the original map (cropped, specks taken as floor) and of the
+    learned one, for the scenario's robot on its route clearance."""
 
     def warnings(self) -> list[str]:
         """What a user should hear about this import (empty when nothing is odd)."""
@@ -588,6 +612,17 @@ class FacilityImport(NamedTuple):
                 f'{LOW_FREE_FRACTION:.0%}): the generator will learn a map that is almost all '
                 'wall, and its samples will rarely hold a route (check negate and the '
                 'thresholds in the YAML: is free space white?)')
+        original, learned = self.reachable
+        if learned < original - SEALED_FLOOR_DROP:
+            spec = resolve_scenario(self.token_map.scenario)
+            need = 2 * required_clearances(spec)[1]
+            found.append(
+                f'resampling to {spec.cell_size} m cells closed openings: the largest open '
+                f'region of the learned map holds {learned:.0%} of the floor the robot can '
+                f'stand on, against {original:.0%} in the original. A door the robot passes '
+                f'that became narrower than the {need:.2f} m its route needs (one cell) '
+                'seals what lies behind it: check the learned map (the .map.pgm beside the '
+                'checkpoint) and widen such doors in the original image if they matter')
         if self.known_fraction < LOW_KNOWN_FRACTION:
             found.append(
                 f'{1 - self.known_fraction:.0%} of the mapped region is unknown and counts as '
@@ -606,6 +641,11 @@ class FacilityImport(NamedTuple):
                   f'; {self.floor_specks} specks of unknown inside free floor '
                   f'({self.floor_speck_pixels} px in all, each under '
                   f'{SPECK_CELL_FRACTION:.0%} of a cell) taken as floor')
+        if self.wall_specks:
+            specks += (f'; {self.wall_specks} specks of occupied pixels inside free floor '
+                       f'({self.wall_speck_pixels} px in all, each under '
+                       f'{WALL_SPECK_CELL_FRACTION:.1%} of a cell: lidar noise or objects '
+                       'too small for a cell) taken as floor')
         return (f'{width}x{height} px at {self.resolution} m/px{cropped} -> '
                 f'{self.token_map.width}x{self.token_map.height} cells of {spec.cell_size} m, '
                 f'{self.free_fraction:.0%} free{specks}')
@@ -639,21 +679,43 @@ def _regions_8(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return merged, np.bincount(root, weights=regions.sizes, minlength=len(root)).astype(np.int64)
 
 
-def unknown_specks(occupancy: np.ndarray, max_pixels: float) -> tuple[np.ndarray, int]:
-    """(mask, count) of the specks of unknown inside free floor: 8-connected regions of
-    unknown of fewer than ``max_pixels`` pixels whose every 8-neighbour is free (0). One
-    touching a wall, a low obstacle or the array's edge, even at a corner, is not one.
-    8-connected, so that a diagonal chain of unknown (a gap between laser rays) is one
-    region, measured as a whole, and a corner contact with a wall keeps it wall."""
+def specks(occupancy: np.ndarray, value: int, max_pixels: float) -> tuple[np.ndarray, int]:
+    """(mask, count) of the specks of ``value`` (unknown or occupied) inside free floor:
+    8-connected regions of that value of fewer than ``max_pixels`` pixels whose every
+    8-neighbour is free (0). One touching anything else (a wall, unknown, a low obstacle) or
+    the array's edge, even at a corner, is not one. 8-connected, so that a diagonal chain (a
+    gap between laser rays) is one region, measured as a whole, and a corner contact with a
+    wall keeps it wall."""
     occupancy = np.asarray(occupancy)
     # Everything not free, in a ring for the array's edge: a speck is a region of it that
-    # holds unknown pixels only.
+    # holds pixels of ``value`` only.
     not_free = np.pad(occupancy != FREE, 1, constant_values=True)
     labels, sizes = _regions_8(not_free)
-    known = np.pad(occupancy != UNKNOWN, 1, constant_values=True) & not_free
-    speck = (sizes < max_pixels) & (np.bincount(labels[known], minlength=len(sizes)) == 0)
+    other = np.pad(occupancy != value, 1, constant_values=True) & not_free
+    speck = (sizes < max_pixels) & (np.bincount(labels[other], minlength=len(sizes)) == 0)
     mask = (labels >= 0) & speck[labels]  # the ring makes one region at least
     return mask[1:-1, 1:-1], int(np.count_nonzero(speck & (sizes > 0)))
+
+
+def reachable_floor(free: np.ndarray, resolution: float, radius: float) -> float:
+    """Share of the floor a robot of ``radius`` m can stand on (every pixel within ``radius``
+    along both axes free: a square, so a diagonal passage reads a little narrower) that lies
+    in the largest 4-connected region of such floor: 1 where every room is open to the
+    others, less where a room is sealed off; 0 without such floor."""
+    free = np.asarray(free, dtype=bool)
+    reach = max(0, int(math.ceil(radius / resolution - 1e-9)))
+    # Blocked pixels in each (2 reach + 1)-square, from a summed-area table (the outside
+    # counts as blocked).
+    blocked = np.pad(~free, reach, constant_values=True)
+    table = np.pad(blocked.cumsum(0, dtype=np.int32).cumsum(1, dtype=np.int32),
+                   ((1, 0), (1, 0)))
+    side = 2 * reach + 1
+    height, width = free.shape
+    window = (table[side:side + height, side:side + width] - table[:height, side:side + width]
+              - table[side:side + height, :width] + table[:height, :width])
+    stand = window == 0
+    sizes = label_regions(flat_grid(stand)).sizes
+    return float(sizes.max() / sizes.sum()) if len(sizes) else 0.0
 
 
 def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) -> FacilityImport:
@@ -665,7 +727,7 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     unknown space outside the mapped area is outside the facility, not part of it. Unknown
     pixels that remain inside the box count as walls (a test map must not invent floor), but
     specks inside free floor smaller than :data:`SPECK_CELL_FRACTION` of a cell
-    (:func:`unknown_specks`) are floor that SLAM missed, taken as free: each would otherwise
+    (:func:`specks`) are floor that SLAM missed, taken as free: each would otherwise
     become a whole wall cell. ``known_fraction`` is measured after that.
     map_saver's unknown grey stays unknown where its old free_thresh would read it as free
     (:func:`map_saver_unknown`). Then :func:`import_map_server`'s conversion with the size
@@ -692,9 +754,12 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
             f'{yaml_path}: {cropped.shape[1]}x{cropped.shape[0]} known pixels at '
             f'{loaded.resolution} m/px make {size[1]}x{size[0]} cells of {spec.cell_size} m, '
             f'more than {MAX_CELLS_PER_SIDE} per side')
-    specks, speck_count = unknown_specks(
-        cropped, SPECK_CELL_FRACTION * (spec.cell_size / loaded.resolution) ** 2)
-    cropped[specks] = FREE
+    cell_pixels = (spec.cell_size / loaded.resolution) ** 2
+    floor_specks, floor_speck_count = specks(cropped, UNKNOWN, SPECK_CELL_FRACTION * cell_pixels)
+    cropped[floor_specks] = FREE
+    wall_specks, wall_speck_count = specks(cropped, BLOCKED,
+                                           WALL_SPECK_CELL_FRACTION * cell_pixels)
+    cropped[wall_specks] = FREE
     # Walls (unknown) fill the last cell row and column, rather than the map being stretched
     # to whole cells: the learned map then overlays the original to the pixel.
     padded = pad_to_cells(cropped, size, loaded.resolution, spec.cell_size)
@@ -705,13 +770,21 @@ def import_facility_map(yaml_path: str | os.PathLike, scenario: ScenarioLike) ->
     # Rounded to a nanometre, so the YAML says -1.6, not -1.5999999999999996.
     origin = (round(x + dx * math.cos(yaw) - dy * math.sin(yaw), 9),
               round(y + dx * math.sin(yaw) + dy * math.cos(yaw), 9), yaw)
-    free = float(np.mean(tokens_to_occupancy(cells, spec) == FREE))
+    learned = tokens_to_occupancy(cells, spec)
+    free = float(np.mean(learned == FREE))
     known = float(np.mean(cropped != UNKNOWN))
+    # Both at about the original's pixel size (each cell split into as many), for one robot.
+    split = max(1, round(spec.cell_size / loaded.resolution))
+    learned_pixels = np.repeat(np.repeat(learned == FREE, split, axis=0), split, axis=1)
+    radius = required_clearances(spec)[1]
+    reachable = (reachable_floor(cropped == FREE, loaded.resolution, radius),
+                 reachable_floor(learned_pixels, spec.cell_size / split, radius))
     return FacilityImport(TokenMap(scenario=spec.name, cells=cells), origin,
                           (int(loaded.occupancy.shape[0]), int(loaded.occupancy.shape[1])),
                           (top, bottom, left, right), loaded.resolution, known, free,
-                          int(np.count_nonzero(saver_unknown)), speck_count,
-                          int(np.count_nonzero(specks)))
+                          int(np.count_nonzero(saver_unknown)), floor_speck_count,
+                          int(np.count_nonzero(floor_specks)), wall_speck_count,
+                          int(np.count_nonzero(wall_specks)), reachable)
 
 
 def import_map_server_for_scenario(yaml_path: str | os.PathLike,

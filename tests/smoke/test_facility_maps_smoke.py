@@ -45,7 +45,8 @@ def test_a_slam_map_trains_on_its_known_region_and_keeps_its_origin(tmp_path, ca
 def test_a_tiny_image_fails_clearly_and_leaves_no_files(tmp_path, capsys):
     Image.fromarray(np.full((3, 3), 254, dtype=np.uint8), mode='L').save(tmp_path / 'tiny.pgm')
     (tmp_path / 'tiny.yaml').write_text(yaml.safe_dump({
-        'image': 'tiny.pgm', 'resolution': 0.05, 'origin': [0, 0, 0]}))
+        'image': 'tiny.pgm', 'resolution': 0.05, 'origin': [0, 0, 0], 'negate': 0,
+        'occupied_thresh': 0.65, 'free_thresh': 0.196}))
     output = tmp_path / 'out' / 'tiny.pt'
     assert train_cli.main(['--map-yaml', str(tmp_path / 'tiny.yaml'), '--output', str(output),
                            *TINY]) == 2  # an unusable map is a usage error
@@ -61,7 +62,8 @@ def test_a_huge_map_warns_about_time_and_memory_before_training(tmp_path, capsys
     pixels[::40, :] = 0
     Image.fromarray(pixels, mode='L').save(tmp_path / 'huge.pgm')
     (tmp_path / 'huge.yaml').write_text(yaml.safe_dump({
-        'image': 'huge.pgm', 'resolution': 0.5, 'origin': [0, 0, 0]}))
+        'image': 'huge.pgm', 'resolution': 0.5, 'origin': [0, 0, 0], 'negate': 0,
+        'occupied_thresh': 0.65, 'free_thresh': 0.196}))
 
     def stop(*args, **kwargs):
         raise KeyboardInterrupt

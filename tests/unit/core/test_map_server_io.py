@@ -15,7 +15,7 @@ from sessgan_core.map_server_io import (
     read_map_server,
     read_pgm,
     resample_tokens,
-    unknown_specks,
+    specks,
     write_map_server,
 )
 from sessgan_core.token_map import TokenMap
@@ -57,14 +57,15 @@ def test_written_pixels_and_yaml_follow_map_server(tmp_path):
     pixels, maxval = read_pgm(tmp_path / 'm.pgm')
     assert maxval == 255
     # Image rows are top first: OccupancyGrid row 1 is the image's first row.
-    assert pixels.tolist() == [[0, 254], [254, 140]]
+    assert pixels.tolist() == [[0, 254], [254, 147]]
     document = yaml.safe_load((tmp_path / 'm.yaml').read_text())
+    # map_saver's thresholds (since mid-2025).
     assert document == {'image': 'm.pgm', 'mode': 'scale', 'resolution': 0.5,
                         'origin': [0.0, 0.0, 0.0], 'negate': 0,
-                        'occupied_thresh': 0.65, 'free_thresh': 0.25}
+                        'occupied_thresh': 0.65, 'free_thresh': 0.196}
     # What Nav2's scale mode computes for the grey of a low obstacle.
-    occ = 1.0 - 140 / 255.0
-    assert round((occ - 0.25) / (0.65 - 0.25) * 100.0) == 50
+    occ = 1.0 - 147 / 255.0
+    assert round((occ - 0.196) / (0.65 - 0.196) * 100.0) == 50
 
 
 def test_maps_without_low_obstacles_are_trinary_and_unknown_is_grey(tmp_path):
@@ -110,13 +111,18 @@ def test_scale_and_raw_modes(tmp_path):
     assert read_map_server(tmp_path / 'map.yaml').occupancy.tolist() == [[-1, 0, -1, 30, -1]]
 
 
-def test_optional_keys_default(tmp_path):
+def test_mode_is_the_only_key_with_a_default(tmp_path):
+    """As map_server's loadMapYaml: mode defaults to trinary; negate and both thresholds are
+    required (a missing free_thresh is not taken as some default)."""
     write_pgm_p5(tmp_path / 'map.pgm', [[254, 0]])
-    write_yaml(tmp_path / 'map.yaml', negate=None, occupied_thresh=None, free_thresh=None,
-               mode=None, origin=[3, 4, 0])
+    write_yaml(tmp_path / 'map.yaml', mode=None, origin=[3, 4, 0])
     loaded = read_map_server(tmp_path / 'map.yaml')
     assert loaded.occupancy.tolist() == [[0, 100]]
     assert loaded.origin == (3.0, 4.0, 0.0)
+    for key in ('negate', 'occupied_thresh', 'free_thresh'):
+        write_yaml(tmp_path / 'map.yaml', **{key: None})
+        with pytest.raises(MapFormatError, match=f"required key '{key}' is missing"):
+            read_map_server(tmp_path / 'map.yaml')
 
 
 @pytest.mark.parametrize('origin', [[3, 4], [3, 4, 0, 0]])
@@ -133,7 +139,7 @@ def test_an_origin_of_other_than_3_elements_is_refused_as_map_server_does(tmp_pa
     assert yaml.safe_load((tmp_path / 'w.yaml').read_text())['origin'] == [3.0, 4.0, 0.0]
 
 
-def test_unknown_specks_are_small_8_connected_unknown_inside_free_floor():
+def test_specks_are_small_8_connected_regions_of_one_value_inside_free_floor():
     grid = np.zeros((10, 14), dtype=np.int8)
     grid[1, 1] = -1                            # a lone pixel: a speck
     grid[5, 1] = grid[6, 2] = grid[7, 1] = -1  # a diagonal chain: one speck of 3 px
@@ -142,16 +148,20 @@ def test_unknown_specks_are_small_8_connected_unknown_inside_free_floor():
     grid[0, 6] = -1                            # on the edge: not a speck
     grid[8, 5], grid[8, 6] = -1, 50            # next to a low obstacle: not a speck
     grid[5, 10], grid[5, 11] = -1, 100         # next to an occupied speck: not a speck
-    mask, count = unknown_specks(grid, 5)
+    mask, count = specks(grid, -1, 5)
     expected = np.zeros(grid.shape, dtype=bool)
     expected[1, 1] = expected[5, 1] = expected[6, 2] = expected[7, 1] = True
     expected[3:5, 5:7] = True
     assert count == 3 and np.array_equal(mask, expected)
     # Fewer pixels than max_pixels only: the chain of 3 and the square of 4 are too big for 3.
-    mask, count = unknown_specks(grid, 3)
+    mask, count = specks(grid, -1, 3)
     assert count == 1 and mask.sum() == 1 and mask[1, 1]
-    assert unknown_specks(np.zeros((3, 3), dtype=np.int8), 5)[1] == 0
-    assert unknown_specks(np.full((3, 3), -1, dtype=np.int8), 50)[1] == 0
+    assert specks(np.zeros((3, 3), dtype=np.int8), -1, 5)[1] == 0
+    assert specks(np.full((3, 3), -1, dtype=np.int8), -1, 50)[1] == 0
+    # Occupied specks by the same rule: the walls above touch unknown, a lone one does not.
+    grid[8, 12] = 100
+    mask, count = specks(grid, 100, 5)
+    assert count == 1 and mask.sum() == 1 and mask[8, 12]
 
 
 def test_p2_and_16_bit_and_absolute_image_path(tmp_path):
@@ -338,10 +348,11 @@ def test_written_images_open_in_pillow_and_a_maxval_100_image_keeps_exact_shades
     write_map_server(tmp_path / 'm.yaml', np.array([[0, 50], [100, 0]], dtype=np.int8), 0.5)
     with Image.open(tmp_path / 'm.pgm') as image:
         assert image.format == 'PPM' and image.mode == 'L'
-        assert np.asarray(image).tolist() == [[0, 254], [254, 140]]
+        assert np.asarray(image).tolist() == [[0, 254], [254, 147]]
     # value 35 of maxval 100 is occ 0.65 exactly: unknown for map_server (occ must exceed
     # occupied_thresh); a reader that rescales to 8 bits would make it occupied.
     (tmp_path / 'h.pgm').write_bytes(b'P5\n3 1\n100\n' + bytes([35, 100, 0]))
-    (tmp_path / 'h.yaml').write_text('image: h.pgm\nresolution: 1.0\norigin: [0, 0, 0]\n')
+    (tmp_path / 'h.yaml').write_text('image: h.pgm\nresolution: 1.0\norigin: [0, 0, 0]\n'
+                                      'negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n')
     assert read_pgm(tmp_path / 'h.pgm')[0].tolist() == [[35, 100, 0]]
     assert read_map_server(tmp_path / 'h.yaml').occupancy.tolist() == [[-1, 0, 100]]

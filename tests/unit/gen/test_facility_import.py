@@ -146,6 +146,52 @@ def test_a_map_with_nothing_known_is_refused(tmp_path):
         import_facility_map(path, 'factory')
 
 
+def test_specks_of_wall_inside_free_floor_are_floor_and_larger_objects_stay(tmp_path):
+    """Lidar noise (single occupied pixels inside free floor) would each become a whole 0.5 m
+    pillar: specks under a 16th of a cell (6.25 px at 0.05 m/px) are taken as floor and
+    counted; a 3 x 3 px object (9 px) and a speck touching a wall stay wall."""
+    clean = import_facility_map(slam_map(tmp_path, 'clean'), 'factory')
+    path = slam_map(tmp_path, 'noise')
+    pixels = np.asarray(Image.open(tmp_path / 'noise.pgm')).copy()
+    for b in range(1, 11):
+        pixels[50 + 10 * 4 + 5, 70 + 10 * b + 5] = WALL  # one pixel in each of cells (4, b)
+    pixels[75, 75:77] = pixels[76, 76] = WALL  # 3 px, 8-connected: one speck
+    pixels[82:85, 192:195] = WALL  # 9 px in cell (3, 12): an object
+    pixels[52, 100] = WALL  # touches the top wall (rows 50-51) at a corner: wall
+    Image.fromarray(pixels, mode='L').save(tmp_path / 'noise.pgm')
+    imported = import_facility_map(path, 'factory')
+    assert (imported.wall_specks, imported.wall_speck_pixels) == (11, 13)
+    expected = clean.token_map.cells.copy()
+    expected[11 - 3, 12] = 1  # token rows count from the bottom
+    assert np.array_equal(imported.token_map.cells, expected)
+    assert '11 specks of occupied pixels inside free floor (13 px in all' in imported.summary()
+
+
+def two_rooms(folder, door_rows, name='rooms'):
+    """Two 4 m x 3.5 m rooms side by side, a 2-pixel wall between them at columns 80-81 with
+    a door at image rows ``door_rows``, 0.05 m/px; returns the YAML path."""
+    pixels = np.full((74, 164), WALL, dtype=np.uint8)
+    pixels[2:72, 2:80] = FREE
+    pixels[2:72, 82:162] = FREE
+    pixels[door_rows[0]:door_rows[1], 80:82] = FREE
+    Image.fromarray(pixels, mode='L').save(folder / f'{name}.pgm')
+    (folder / f'{name}.yaml').write_text(yaml.safe_dump({
+        'image': f'{name}.pgm', 'resolution': 0.05, 'origin': [0.0, 0.0, 0.0], 'negate': 0,
+        'occupied_thresh': 0.65, 'free_thresh': 0.196}))
+    return folder / f'{name}.yaml'
+
+
+def test_a_door_that_resampling_closes_is_warned_about(tmp_path):
+    """A 1.1 m door (22 px) across the 0.5 m cells' edges keeps one whole cell, 0.5 m, too
+    narrow for the 0.2 m robot's 0.6 m route: the second room is sealed off in the learned
+    map, and train says so. A 2 m door stays open: no warning."""
+    narrow = import_facility_map(two_rooms(tmp_path, (25, 47), 'narrow'), 'factory')
+    assert narrow.reachable[0] == 1.0 and narrow.reachable[1] < 0.7, narrow.reachable
+    assert any('closed openings' in warning for warning in narrow.warnings())
+    wide = import_facility_map(two_rooms(tmp_path, (20, 60), 'wide'), 'factory')
+    assert wide.reachable == (1.0, 1.0) and wide.warnings() == []
+
+
 def test_png_images_load_like_their_pgm(tmp_path):
     pgm = read_map_server(slam_map(tmp_path, 'as_pgm'))
     png = read_map_server(slam_map(tmp_path, 'as_png', suffix='.png'))
@@ -155,11 +201,12 @@ def test_png_images_load_like_their_pgm(tmp_path):
                     mode='RGB').save(tmp_path / 'colour.png')
     (tmp_path / 'colour.yaml').write_text(yaml.safe_dump({
         'image': 'colour.png', 'resolution': 0.05, 'origin': [0, 0, 0],
-        'free_thresh': 0.196, 'occupied_thresh': 0.65}))
+        'negate': 0, 'free_thresh': 0.196, 'occupied_thresh': 0.65}))
     assert read_map_server(tmp_path / 'colour.yaml').occupancy.tolist() == [[0, 100, -1]]
     (tmp_path / 'broken.png').write_bytes(b'\x89PNG not really')
     (tmp_path / 'broken.yaml').write_text(yaml.safe_dump({
-        'image': 'broken.png', 'resolution': 0.05, 'origin': [0, 0, 0]}))
+        'image': 'broken.png', 'resolution': 0.05, 'origin': [0, 0, 0], 'negate': 0,
+        'free_thresh': 0.196, 'occupied_thresh': 0.65}))
     with pytest.raises(MapFormatError, match='cannot read map image'):
         read_map_server(tmp_path / 'broken.yaml')
 

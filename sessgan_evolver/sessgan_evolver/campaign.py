@@ -140,7 +140,8 @@ class CampaignConfig:
     maps_per_member: int = 3
     """[3] K: maps each member samples from the generation's shared seeds."""
     workers: int = 2
-    """[2] Simulator workers (/w0, /w1, ...) to start, each with its own controller."""
+    """[2] Simulator workers (/w0, /w1, ...) to start, each with its own controller (none with
+    --external: it uses every worker already running)."""
     seed: int = 0
     """[0] The campaign seed; every random choice derives from it."""
     checkpoint: str = ''

@@ -154,8 +154,9 @@ class CompareConfig:
     """Run every episode (and every confirming re-run) on the evaluate action servers
     already running, e.g. your own stack under /w0, /w1 (as campaign --external), instead of
     in process; --controller then only names it. Their failure bags (in <their
-    bags_root>/external/<output folder name>/<method-seed>) must be readable on this
-    machine. (default: False)"""
+    bags_root>/external/<output folder name>/<method-seed>) are copied over ROS into
+    <output-dir>/worker_bags/<method>-seed<n>/, so the workers may run on other machines.
+    (default: False)"""
     adaptive_rtf: bool = False
     """With --external, clocked simulators: run an episode that ended overloaded (the
     stack could not keep pace with sim time) again at half the real-time factor, halved again

@@ -8,7 +8,8 @@ their metrics and skipped), runs each map once with the built-in controller in t
 (lockstep; with --external: on the simulators and stack already running under /w0, /w1, ...,
 as ``campaign --external``) and writes <output-dir>/summary.md, summary.csv (one row per
 generator) and episodes.csv (one row per map): valid maps, failure rate, collisions, risk,
-TPKL to the example map, uniqueness (n/a for a patch larger than the maps), distinct faults,
+TPKL to the map the generator learned (the scenario's example map for the shipped
+checkpoints), uniqueness (n/a for a patch larger than the maps), distinct faults,
 harness re-runs (episodes the test harness ended and ran again: never results).
 --max-fault-records N keeps the first N confirmed distinct faults of each generator as a bag
 with a picture.
@@ -114,8 +115,9 @@ class EvaluateConfig:
     external: bool = False
     """Run every episode on the evaluate action servers already running (your stack under
     /w0, /w1, ..., as campaign --external) instead of in process; --controller then only
-    names it. Their failure bags (in <their bags_root>/external/<output folder name>/) must
-    be readable on this machine."""
+    names it. Their failure bags (in <their bags_root>/external/<output folder name>/) are
+    copied over ROS into <output-dir>/worker_bags/, so the workers may run on other
+    machines."""
     adaptive_rtf: bool = False
     """--external, clocked simulators: run an episode that ended overloaded (the stack could
     not keep pace with sim time) again at half the real-time factor, halved again on each

@@ -321,8 +321,14 @@ def write_suite_file(path: Path, name: str, bags: Sequence[Path],
     path = Path(path)
     if not bags:
         return path
+    from sessgan_controllers.registry import CONTROLLERS
+
     document = suite_document(name, list(bags), path.parent, metadata)
-    text = ('# Regression suite: ros2 run sessgan_evolver suite ' + path.name + '\n'
+    # Bags of a stack that is not a built-in controller re-run only beside that stack.
+    external = any(entry['controller'] and entry['controller'] not in CONTROLLERS
+                   for entry in document['scenarios'])
+    text = ('# Regression suite: ros2 run sessgan_evolver suite ' + path.name
+            + (' --external' if external else '') + '\n'
             + yaml.safe_dump(document, sort_keys=False))
     atomic_write_bytes(path, text.encode('utf-8'))
     return path

@@ -163,6 +163,24 @@ def test_a_bag_directory_and_a_written_suite_file_list_the_same_scenario(failure
     loaded = load_suite(path)
     assert loaded.name == 'mine' and loaded.entries[0].bag.resolve() == failure_bag.resolve()
     assert loaded.entries[0].environment_id == 'factory-s1000000'
+    assert path.read_text().splitlines()[0] == \
+        '# Regression suite: ros2 run sessgan_evolver suite suite.yaml'
+
+
+def test_a_suite_of_another_stack_s_bags_names_external_in_its_command(failure_bag, tmp_path):
+    """The bags of a stack that is no built-in controller re-run only beside it: the suite
+    file's own command line says --external."""
+    import json
+    import shutil
+
+    bag = tmp_path / 'bags' / failure_bag.name
+    shutil.copytree(failure_bag, bag)
+    episode = json.loads((bag / 'episode.json').read_text())
+    episode['controller'] = 'external'
+    (bag / 'episode.json').write_text(json.dumps(episode))
+    path = write_suite_file(tmp_path / 'suite.yaml', 'mine', [bag])
+    assert path.read_text().splitlines()[0] == \
+        '# Regression suite: ros2 run sessgan_evolver suite suite.yaml --external'
 
 
 def write_yaml(path: Path, document) -> Path:

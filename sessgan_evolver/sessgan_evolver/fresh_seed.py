@@ -245,10 +245,12 @@ def campaign_sources(run_dir: str | Path, member: str = 'best',
     scenario = str(config['scenario'])
     method = str(config.get('method') or 'sessgan')
     if method != 'sessgan':
+        checkpoint = config.get('checkpoint')
+        sampled = f'--checkpoint {checkpoint}' if checkpoint else '--shipped'
         raise FreshSeedError(
             f'run {store.run_dir} is a {method} campaign: it evolves no generator weights to '
-            'evaluate; evaluate the generator it sampled (--shipped or --checkpoint) and pass '
-            'the run as --exclude-run so its seeds are not reused')
+            f'evaluate; evaluate the generator it sampled ({sampled}) and pass the run as '
+            '--exclude-run so its seeds are not reused')
     generation = last_evaluated_generation(store)
     rows = [row for row in store.read_rows('member') if int(row['generation']) == generation]
     state = store.load_checkpoint(generation)['algorithm']

@@ -300,15 +300,14 @@ class SimulatorNode(Node):
         return message
 
     @staticmethod
-    def mistyped_commands(commands) -> str:
-        """Why a stack that publishes cmd_vel is not heard, when its type is the other one or
-        it publishes under another namespace."""
+    def why_unheard(commands) -> str:
+        """Why a stack that publishes cmd_vel may not be heard: nothing publishes ours but
+        another namespace's has a writer, or the writer's type is the other one."""
         elsewhere = commands.writers_elsewhere()
         if elsewhere and not commands.writers_in_graph():
-            return (f'; {", ".join(elsewhere)} {"has" if len(elsewhere) == 1 else "have"} a '
-                    f'writer, this worker reads {commands.topic}: start the controller in '
-                    "the worker's namespace (-r __ns:=...) or the worker in the "
-                    "controller's")
+            return (f'; nothing publishes {commands.topic}, but {", ".join(elsewhere)} '
+                    f'{"has" if len(elsewhere) == 1 else "have"} a writer: is the controller '
+                    "under another namespace? Start it in the worker's (-r __ns:=...)")
         others = commands.mistyped_writers()
         if not others:
             return ''
@@ -334,7 +333,7 @@ class SimulatorNode(Node):
                 episode.abort(Outcome.CONTROLLER_UNRESPONSIVE,
                               f'{stepper.who(missing)}no controller subscribed to {scan} and '
                               f'published cmd_vel within {startup_timeout:.1f} s wall time'
-                              + self.mistyped_commands(stepper.channels[missing].commands))
+                              + self.why_unheard(stepper.channels[missing].commands))
             else:
                 episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
             return episode.metrics()

@@ -32,7 +32,7 @@ import numpy as np
 
 from sessgan_core.environment import MAX_ROBOTS, FleetRobot, Pose2D
 from sessgan_core.errors import InvalidFleetError
-from sessgan_core.grid_search import bfs, flat_grid, to_cell, to_flat
+from sessgan_core.grid_search import bfs, flat_grid, steps_of, to_cell, to_flat, unvisited
 from sessgan_core.route_certificate import (
     HEADING_LOOKAHEAD_M,
     START_TRIES,
@@ -135,7 +135,7 @@ def _joined(free: np.ndarray, start: Cell, goal: Cell) -> bool:
     if not (free[start] and free[goal]):
         return False
     flat = flat_grid(free)
-    dist = [-1] * len(flat.open_cells)
+    dist = unvisited(flat)
     target = to_flat(flat, goal)
     bfs(flat, to_flat(flat, start), dist, target)
     return dist[target] >= 0
@@ -193,9 +193,9 @@ def place_fleet(placement: Placement, spec: Scenario, seed: int,
         chosen = None
         for _ in range(START_TRIES):
             start = int(candidates[rng.integers(len(candidates))])
-            dist = [-1] * len(flat.open_cells)
+            dist = unvisited(flat)
             bfs(flat, start, dist)
-            steps = np.asarray(dist)[candidates]
+            steps = steps_of(dist)[candidates]
             goals = candidates[steps >= max(min_steps, 0.5 * int(steps.max()))]
             if not len(goals):
                 continue

@@ -8,6 +8,8 @@ visits every cell, is vectorised over row runs instead. Moves are 4-connected.
 
 from __future__ import annotations
 
+from array import array
+from collections.abc import MutableSequence
 from typing import NamedTuple
 
 import numpy as np
@@ -35,6 +37,17 @@ def flat_grid(free: np.ndarray) -> FlatGrid:
                     mask.shape[0], mask.shape[1])
 
 
+def unvisited(grid: FlatGrid) -> array:
+    """Step counts for :func:`bfs` to fill, all -1: a typed array, which indexes as fast as a
+    list and which :func:`steps_of` reads without a copy."""
+    return array('i', [-1]) * len(grid.open_cells)
+
+
+def steps_of(dist: array) -> np.ndarray:
+    """The step counts of :func:`unvisited`'s array as a numpy view (no copy)."""
+    return np.frombuffer(dist, dtype=np.int32)
+
+
 def to_flat(grid: FlatGrid, cell: Cell) -> int:
     return (cell[0] + 1) * grid.stride + cell[1] + 1
 
@@ -44,8 +57,10 @@ def to_cell(grid: FlatGrid, index: int) -> Cell:
     return (row - 1, col - 1)
 
 
-def bfs(grid: FlatGrid, start: int, dist: list[int], target: int | None = None) -> list[int]:
-    """Fill ``dist`` (pre-set to -1) with step counts from ``start``; return the visit order.
+def bfs(grid: FlatGrid, start: int, dist: MutableSequence[int],
+        target: int | None = None) -> list[int]:
+    """Fill ``dist`` (:func:`unvisited`: all -1) with step counts from ``start``; return the
+    visit order.
 
     With ``target``, stop once it is reached (after the cell that reached it): every cell
     nearer than it then has its final count, so walk_back from it gives the path a full
@@ -56,7 +71,7 @@ def bfs(grid: FlatGrid, start: int, dist: list[int], target: int | None = None) 
     return queue
 
 
-def bfs_continue(grid: FlatGrid, dist: list[int], queue: list[int], head: int,
+def bfs_continue(grid: FlatGrid, dist: MutableSequence[int], queue: list[int], head: int,
                  target: int | None = None) -> int:
     """Go on with a search that :func:`bfs` (or this) left with ``queue[head:]`` still to
     expand, until ``target`` is reached or, without one, every reachable cell is; the new
@@ -77,7 +92,7 @@ def bfs_continue(grid: FlatGrid, dist: list[int], queue: list[int], head: int,
     return head
 
 
-def farthest(order: list[int], dist: list[int]) -> int:
+def farthest(order: list[int], dist: MutableSequence[int]) -> int:
     """The visited cell at the largest distance; ties go to the smallest flat index."""
     best = order[-1]
     far = dist[best]
@@ -88,7 +103,7 @@ def farthest(order: list[int], dist: list[int]) -> int:
     return best
 
 
-def walk_back(grid: FlatGrid, dist: list[int], goal: int) -> list[int]:
+def walk_back(grid: FlatGrid, dist: MutableSequence[int], goal: int) -> list[int]:
     """Path from the BFS source to ``goal`` following decreasing distances."""
     stride = grid.stride
     path = [goal]
@@ -171,9 +186,9 @@ def distance_field(free: np.ndarray, source: Cell, diagonal: bool = False) -> np
         return distance
     if not diagonal:
         grid = flat_grid(mask)
-        dist = [-1] * len(grid.open_cells)
+        dist = unvisited(grid)
         bfs(grid, to_flat(grid, source), dist)
-        flat = np.asarray(dist, dtype=np.float64).reshape(-1, grid.stride)[1:-1, 1:-1]
+        flat = steps_of(dist).astype(np.float64).reshape(-1, grid.stride)[1:-1, 1:-1]
         distance[flat >= 0] = flat[flat >= 0]
         return distance
     # Frontier growth over flat indices of a grid padded with a blocked ring (no neighbour

@@ -29,7 +29,7 @@ import numpy as np
 
 from sessgan_core.environment import MAX_STATIONS
 from sessgan_core.errors import InvalidMissionError
-from sessgan_core.grid_search import bfs, flat_grid, to_cell, to_flat
+from sessgan_core.grid_search import bfs, flat_grid, steps_of, to_cell, to_flat, unvisited
 from sessgan_core.route_certificate import (
     HEADING_LOOKAHEAD_M,
     CertificateGrid,
@@ -140,11 +140,11 @@ def _draw_station(grid: CertificateGrid, previous: tuple[int, int], shape: tuple
     """A clear certificate cell far along the route from ``previous``, or None."""
     routable = grid.clearance >= route_need - 1e-9
     flat = flat_grid(routable)
-    dist = [-1] * len(flat.open_cells)
+    dist = unvisited(flat)
     bfs(flat, to_flat(flat, previous), dist)
     rows, cols = np.nonzero(grid.clearance >= place_need - 1e-9)
     candidates = (rows + 1) * flat.stride + cols + 1
-    steps = np.asarray(dist)[candidates]
+    steps = steps_of(dist)[candidates]
     farthest = int(steps.max()) if len(steps) else -1
     far = candidates[steps >= max(min_route_steps(shape, grid.subdivision), 0.5 * farthest)]
     if not len(far) or farthest <= 0:

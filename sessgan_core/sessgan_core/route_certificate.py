@@ -38,8 +38,10 @@ from sessgan_core.grid_search import (
     bfs,
     flat_grid,
     label_regions,
+    steps_of,
     to_cell,
     to_flat,
+    unvisited,
     walk_back,
 )
 from sessgan_core.scenarios import Scenario
@@ -197,12 +199,12 @@ def track_length_steps(flat: FlatGrid, region: np.ndarray | list[int],
     inside = candidates[np.isin(candidates, np.asarray(region))]
     if not len(inside):
         return 0
-    dist = [-1] * len(flat.open_cells)
+    dist = unvisited(flat)
     bfs(flat, int(region[0]), dist)
-    end = int(inside[int(np.argmax(np.asarray(dist)[inside]))])
-    dist = [-1] * len(flat.open_cells)
+    end = int(inside[int(np.argmax(steps_of(dist)[inside]))])
+    dist = unvisited(flat)
     bfs(flat, end, dist)
-    return int(np.asarray(dist)[inside].max())
+    return int(steps_of(dist)[inside].max())
 
 
 def _yaw_along(points: list[tuple[float, float]]) -> float:
@@ -276,7 +278,7 @@ def certify(grid: CertificateGrid, start: Cell, goal: Cell,
     for row, col in (start, goal):
         if not (0 <= row < height and 0 <= col < width) or not free[row, col]:
             return None
-    dist = [-1] * len(flat.open_cells)
+    dist = unvisited(flat)
     target = to_flat(flat, goal)
     bfs(flat, to_flat(flat, start), dist, target)
     if dist[target] < 0:
@@ -316,9 +318,9 @@ def place_start_goal(occupancy: np.ndarray, resolution: float, origin: tuple[flo
     track_lengths: dict[int, int] = {}
     for _ in range(START_TRIES if len(starts) else 0):
         start = int(starts[rng.integers(len(starts))])
-        dist = [-1] * len(flat.open_cells)
+        dist = unvisited(flat)
         bfs(flat, start, dist)
-        steps = np.asarray(dist)[candidates]
+        steps = steps_of(dist)[candidates]
         farthest_steps = int(steps.max())
         need = max(min_steps, 0.5 * farthest_steps)
         if spec.goal_track_fraction > 0:

@@ -34,6 +34,7 @@ from sessgan_core.grid_search import (
     label_regions,
     to_cell,
     to_flat,
+    unvisited,
     walk_back,
 )
 from sessgan_core.missions import MissionSpec, certify_legs, place_mission
@@ -165,7 +166,7 @@ def shortest_paths_from(free: np.ndarray, start: Cell, grid: FlatGrid | None = N
     mask = np.asarray(free, dtype=bool)
     _check_cell(mask, start, 'start')
     grid = flat_grid(mask) if grid is None else grid
-    dist = [-1] * len(grid.open_cells)
+    dist = unvisited(grid)
     queue = [to_flat(grid, start)] if mask[start] else []
     head = 0  # queue[head:] is still to expand
     if queue:

@@ -337,13 +337,7 @@ class SimulatorNode(Node):
             else:
                 episode.abort(Outcome.CANCELLED, 'the simulator was shut down')
             return episode.metrics()
-        for index, channel in enumerate(stepper.channels):
-            writers = channel.commands.writers_in_graph()
-            if writers > 1:  # a stack left running beside the one under test, say
-                self.get_logger().warning(
-                    f'{stepper.who(index)}{writers} nodes publish on '
-                    f'{channel.commands.topic}: more than one controller drives the robot, '
-                    'and this episode mixes their commands')
+        mixed = self.warn_of_extra_controllers(stepper, set())
         start_ns = clock.stamp_ns(0.0)
         for channel, robot in zip(stepper.channels, episode.robots, strict=True):
             channel.topics.publish_world(environment, robot.ride_height, robot.sensor_height,
@@ -392,6 +386,8 @@ class SimulatorNode(Node):
                               # the NavigateToPose stack serves a single robot
                               command_override=None if fleet else stop_after_navigation,
                               new_goal=send_goal)
+        # Discovery may show a second stack only once the episode ran (on a busy host).
+        self.warn_of_extra_controllers(stepper, mixed)
         note = self.stack.finish(settings.stack_timeout)
         if note:
             metrics = dataclasses.replace(
@@ -403,6 +399,20 @@ class SimulatorNode(Node):
         # long-running stack never sees sim time go back (its tf buffer stays valid).
         self.clock_origin_ns = clock.stamp_ns(episode.time + episode.config.control_period)
         return metrics
+
+    def warn_of_extra_controllers(self, stepper: EpisodeStepper, warned: set[int]) -> set[int]:
+        """Warn of each robot whose cmd_vel more than one node publishes (a stack left
+        running beside the one under test, say), unless its index is in ``warned``; returns
+        the indices warned of so far."""
+        for index, channel in enumerate(stepper.channels):
+            writers = channel.commands.writers_in_graph()
+            if writers > 1 and index not in warned:
+                warned.add(index)
+                self.get_logger().warning(
+                    f'{stepper.who(index)}{writers} nodes publish on '
+                    f'{channel.commands.topic}: more than one controller drives the robot, '
+                    'and this episode mixes their commands')
+        return warned
 
     def fleet_channels_for(self, robots: int) -> list[RobotChannel]:
         """The topics and command readers of ``robots`` fleet robots, each on a node of its

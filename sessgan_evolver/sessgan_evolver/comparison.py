@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import time
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
@@ -431,6 +432,58 @@ def fault_situations(faults: Sequence[FaultEntry], records: Sequence[EpisodeReco
     return len(situations)
 
 
+def origin_family(origin: str) -> str:
+    """An episode's origin without the parent or generation it names ('child of collision
+    r3c4 by local_0.8' -> 'child by local_0.8', 'generation 2 mutant' -> 'mutant')."""
+    origin = re.sub(r'^generation \d+ ', '', origin)
+    child = re.fullmatch(r'child of .* by (\S+)', origin)
+    return f'child by {child.group(1)}' if child else origin or 'unlabelled'
+
+
+@dataclass
+class OriginFigures:
+    """What the episodes of one origin family gave: the confirmed distinct faults each was
+    the first to show, and how many of those were new fault situations (fault_situations's
+    rule, in the order found)."""
+
+    episodes: int = 0
+    confirmed: int = 0
+    situations: int = 0
+
+
+def figures_by_origin(runs: Sequence[MethodRun]) -> dict[str, OriginFigures]:
+    """Every origin family of ``runs``' episodes (pooled over the runs), with what it gave."""
+    table: dict[str, OriginFigures] = {}
+    for run in runs:
+        for record in run.records:
+            table.setdefault(origin_family(record.origin), OriginFigures()).episodes += 1
+        situations = SituationArchive(SITUATION_CELLS)
+        for entry in run.faults:
+            if entry.confirmation is None or not entry.confirmation.confirmed:
+                continue
+            record = run.records[entry.first]
+            row = table[origin_family(record.origin)]
+            row.confirmed += 1
+            row.situations += situations.add(entry.key, record.environment.occupancy)
+    return table
+
+
+def origin_table(config: CompareConfig, runs: Sequence[MethodRun]) -> str:
+    """Markdown: per method and origin of its episodes (fresh samples, children by each
+    operator, ...), pooled over the search seeds, the share of episodes that showed a new
+    confirmed distinct fault and a new fault situation: where a method's faults come from."""
+    lines = ['| method | episodes from | episodes | new confirmed distinct fault | new fault '
+             'situation |', '|---|---|---:|---:|---:|']
+    for method in config.methods:
+        mine = [run for run in runs if run.figures.method == method]
+        for origin, row in sorted(figures_by_origin(mine).items(),
+                                  key=lambda item: -item[1].episodes):
+            lines.append(f'| {method} | {origin} | {row.episodes} | '
+                         f'{row.confirmed / row.episodes:.1%} ({row.confirmed}) | '
+                         f'{row.situations / row.episodes:.1%} ({row.situations}) |')
+    return '\n'.join(lines)
+
+
 def _final_source(config: CompareConfig, method: str) -> tuple[MapSource | None, str]:
     label = 'shipped generator' if not config.checkpoint else config.checkpoint
     base = PyramidSource(label, config.scenario, config.checkpoint or None, config.map_size())
@@ -731,6 +784,11 @@ def write_report(config: CompareConfig, runs: Sequence[MethodRun],
         '![comparison](compare.png)', '',
         '## Example failing maps (confirmed distinct faults)', '',
         '![failing maps](failing_maps.png)', '',
+        '## Where the faults come from', '',
+        'Per origin of the episodes, pooled over the search seeds: the share of episodes '
+        'that were the first to show a confirmed distinct fault, and a new fault situation '
+        f'(< {SITUATION_CELLS:.0%} of cells apart: one).', '',
+        origin_table(config, runs), '',
         '## Fresh-seed evaluation of the final generators', '',
         summary_table(list(fresh.values())) if fresh else 'No method left a generator.', '',
         '## How it is counted', '',

@@ -44,6 +44,7 @@ for package in ('sessgan_core', 'sessgan_gen', 'sessgan_sim', 'sessgan_evolver',
 from sessgan_evolver.comparison import (  # noqa: E402
     CompareConfig,
     method_table,
+    origin_table,
     run_comparison,
 )
 from sessgan_evolver.faults import SITUATION_CELLS, STRICT_SITUATION_CELLS  # noqa: E402
@@ -178,6 +179,9 @@ def run_one(args: argparse.Namespace, controller: str, budget: int, command: str
         for method in config.methods:
             if method != 'random':
                 print(situation_ratios(result.runs, method))
+    print('\nWhere the faults come from (episodes of each origin that first showed a confirmed '
+          'distinct fault / a new fault situation):\n')
+    print(origin_table(config, result.runs))
     shipped = result.fresh.get('pyramid:base')
     if shipped is not None:
         print(f'fresh seeds, shipped generator: failure rate {shipped.failure_rate}, TPKL '

@@ -14,10 +14,17 @@ from sessgan_evolver.comparison import (
     CompareConfig,
     CompareError,
     fault_situations,
+    figures_by_origin,
+    origin_family,
     run_comparison,
     spread,
 )
-from sessgan_evolver.faults import STRICT_SITUATION_CELLS, FaultEntry, FaultKey
+from sessgan_evolver.faults import (
+    STRICT_SITUATION_CELLS,
+    Confirmation,
+    FaultEntry,
+    FaultKey,
+)
 from sessgan_evolver.search_methods import METHODS
 
 pytestmark = pytest.mark.unit
@@ -68,6 +75,13 @@ def test_every_method_runs_at_equal_budget_and_is_reported(tmp_path):
         assert cheap < float(row['search_wall'])
     report = (output / 'report.md').read_text()
     assert 'compare --tiny' in report and all(method in report for method in METHODS)
+    # Where the faults come from: every episode of a method in one origin row or another.
+    for method in METHODS:
+        rows = figures_by_origin([run for run in result.runs if run.figures.method == method])
+        assert sum(row.episodes for row in rows.values()) == 8
+        assert sum(row.confirmed for row in rows.values()) == sum(
+            run.figures.confirmed_faults for run in result.runs if run.figures.method == method)
+    assert '## Where the faults come from' in report and '| screened | fresh sample |' in report
     with pytest.raises(CompareError, match='holds a comparison'):
         run_comparison(config, output, log=lambda _: None)
 
@@ -86,6 +100,36 @@ def test_a_local_variant_of_a_failing_map_is_a_new_fault_but_the_same_situation(
     assert fault_situations(faults, records) == 3  # the variant 5 % apart is one
     assert fault_situations(faults, records, STRICT_SITUATION_CELLS) == 2  # 20 % too
     assert fault_situations([], records) == 0
+
+
+def test_faults_are_credited_to_the_origin_of_the_episode_that_first_showed_them():
+    """Two runs alike: a fresh sample fails; of its children, one fails at the same place on a
+    variant 5 % apart (a new distinct fault, the same situation), one shows nothing and one
+    fails on a map 20 % apart (a new situation); an unconfirmed fault counts nowhere."""
+    assert origin_family('child of collision_static r1c2 by local_0.8') == 'child by local_0.8'
+    assert origin_family('generation 3 crossover') == 'crossover'
+    assert origin_family('fresh sample') == 'fresh sample' and origin_family('') == 'unlabelled'
+    base = np.zeros((10, 10), dtype=np.int8)
+    near, far = base.copy(), base.copy()
+    near.flat[:5] = 100
+    far.flat[:20] = 100
+    origins = ['fresh sample', 'child of collision_static r1c2 by local_0.8',
+               'child of collision_static r1c2 by local_0.8',
+               'child of collision_static r1c2 by two_finest_0.9', 'fresh sample']
+    maps = [base, near, near, far, base]
+    records = [SimpleNamespace(origin=origin, environment=SimpleNamespace(occupancy=grid))
+               for origin, grid in zip(origins, maps)]
+
+    def entry(index, confirmed=True):
+        return FaultEntry(FaultKey('collision_static', 1, 2, str(index)), [index],
+                          Confirmation(3, 3 if confirmed else 1, 0, 1.0))
+
+    run = SimpleNamespace(records=records, faults=[entry(0), entry(1), entry(3), entry(4, False)])
+    table = figures_by_origin([run, run])  # pooled: each run's situations counted on its own
+    assert {origin: (row.episodes, row.confirmed, row.situations)
+            for origin, row in table.items()} == {
+        'fresh sample': (4, 2, 2), 'child by local_0.8': (4, 2, 0),
+        'child by two_finest_0.9': (2, 2, 2)}
 
 
 def test_bad_settings_and_the_spread():

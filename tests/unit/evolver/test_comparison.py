@@ -107,7 +107,11 @@ def test_faults_are_credited_to_the_origin_of_the_episode_that_first_showed_them
     variant 5 % apart (a new distinct fault, the same situation), one shows nothing and one
     fails on a map 20 % apart (a new situation); an unconfirmed fault counts nowhere."""
     assert origin_family('child of collision_static r1c2 by local_0.8') == 'child by local_0.8'
-    assert origin_family('generation 3 crossover') == 'crossover'
+    assert origin_family('generation 3 crossover 0x2 + paint') == 'crossover + paint'
+    assert origin_family('generation 3 from 4 + move') == 'one parent + move'
+    assert origin_family('generation 0 generation 0') == 'generation 0'
+    assert origin_family('generation 0 member 3') == 'generation 0'
+    assert origin_family('generation 7 member 3') == 'evolved generations'
     assert origin_family('fresh sample') == 'fresh sample' and origin_family('') == 'unlabelled'
     base = np.zeros((10, 10), dtype=np.int8)
     near, far = base.copy(), base.copy()

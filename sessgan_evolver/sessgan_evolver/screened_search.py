@@ -514,7 +514,7 @@ class ScreenedSearch:
             if scores and max(scores.values()) > bounds[index] * (1 + 1e-9):
                 break
             test, certified = candidates[index]
-            self._pick_sim_seed(test, certified)
+            self.pick_sim_seed(test, certified)
             scores[index] = self._score(test, novelty[index])
         return candidates[max(scores, key=lambda index: (scores[index], -index))][0]
 
@@ -553,7 +553,7 @@ class ScreenedSearch:
             tries = self.config.agent_seeds * self.config.effort
             test.seed_options = [test.sim_seed] + [self._seed() for _ in range(tries - 1)]
 
-    def _pick_sim_seed(self, test: Test, certified: CertifiedCandidate) -> None:
+    def pick_sim_seed(self, test: Test, certified: CertifiedCandidate) -> None:
         """Run ``test`` with the simulator seed, of its ``seed_options``, whose agents come
         closest to the robot on its way; remember that encounter."""
         if not test.seed_options:

@@ -103,7 +103,7 @@ def test_the_search_runs_the_seed_whose_agents_come_closest():
     search._seed = iter(seeds[1:]).__next__
     search._draw_sim_seeds(test)
     assert test.seed_options == seeds
-    search._pick_sim_seed(test, certified)
+    search.pick_sim_seed(test, certified)
     assert test.sim_seed == seeds[int(np.argmin(forecasts))]
     assert test.encounter == min(forecasts)
 
@@ -159,7 +159,7 @@ def test_picking_only_candidates_that_could_win_chooses_as_picking_all_would():
         twins = [(dataclasses.replace(test, seed_options=list(test.seed_options)), certified)
                  for test, certified in candidates]
         for test, certified in twins:
-            search._pick_sim_seed(test, certified)
+            search.pick_sim_seed(test, certified)
         scores = [search._score(test, search._novelty(certified))
                   for test, certified in twins]
         chosen = lazy(candidates)

@@ -46,8 +46,10 @@ and where the map changed around the fault place the failure is a new distinct f
   spawn (sessgan_sim.episode.PatrolPlanner, exactly), the robot on the shortest way its
   body fits at the average speed it drove in this run's episodes
   (screening.closest_encounter; a forecast, not a simulation). The closest encounter is a
-  surrogate feature too. On 600 fresh factory maps a seed of 8 so picked failed 18-22 % of
-  them where the drawn seed failed 10 %. (A mission or fleet campaign draws each test's
+  surrogate feature too. On 600 fresh factory maps (tests/benchmarks/bench_agent_seed_pick.py,
+  2026-12-07) the pick of 16 made Nearness-Diagram fail 14.0 % of them where the drawn seed
+  failed 9.2 %, the tricycle 13.7 % against 12.2 %; it also makes agents drive into the robot
+  (no fault) on 11-12 % of maps against 2 %. (A mission or fleet campaign draws each test's
   stations or robots itself, so there the picked seed is as good as a drawn one.)
 
 Proposals carry the Environment the screen certified, so the robot under test runs exactly

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import time
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
@@ -56,6 +55,7 @@ from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig, check_contr
 from sessgan_evolver.errors import CompareError, SearchMethodError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
 from sessgan_evolver.fault_records import confirm_faults
+from sessgan_evolver.fault_tally import origin_family
 from sessgan_evolver.faults import (
     SITUATION_CELLS,
     STRICT_SITUATION_CELLS,
@@ -430,23 +430,6 @@ def fault_situations(faults: Sequence[FaultEntry], records: Sequence[EpisodeReco
     for entry in faults:
         situations.add(entry.key, records[entry.first].environment.occupancy)
     return len(situations)
-
-
-def origin_family(origin: str) -> str:
-    """An episode's origin without the parents, members or generation it names: 'child of
-    collision_static r3c4 by local_0.8' -> 'child by local_0.8', 'generation 2 crossover 0x3
-    + paint' -> 'crossover + paint', 'generation 2 from 1 + move' -> 'one parent + move';
-    SESS-GAN's 'generation 2 member 5' -> 'evolved generations' ('generation 0' for the
-    first)."""
-    member = re.fullmatch(r'generation (\d+) member \d+', origin)
-    if member:
-        return 'generation 0' if member.group(1) == '0' else 'evolved generations'
-    origin = re.sub(r'^generation \d+ ', '', origin)
-    child = re.fullmatch(r'child of .* by (\S+)', origin)
-    if child:
-        return f'child by {child.group(1)}'
-    origin = re.sub(r'^from \d+', 'one parent', origin)
-    return re.sub(r'^crossover \d+x\d+', 'crossover', origin) or 'unlabelled'
 
 
 @dataclass

@@ -160,6 +160,23 @@ def key_from_label(label: str, occupancy: np.ndarray, rule: FaultRule) -> FaultK
     return FaultKey(kind, int(row), int(col), context)
 
 
+def origin_family(origin: str) -> str:
+    """An episode's origin without the parents, members or generation it names: 'child of
+    collision_static r3c4 by local_0.8' -> 'child by local_0.8', 'generation 2 crossover 0x3
+    + paint' -> 'crossover + paint', 'generation 2 from 1 + move' -> 'one parent + move';
+    SESS-GAN's 'generation 2 member 5' -> 'evolved generations' ('generation 0' for the
+    first)."""
+    member = re.fullmatch(r'generation (\d+) member \d+', origin)
+    if member:
+        return 'generation 0' if member.group(1) == '0' else 'evolved generations'
+    origin = re.sub(r'^generation \d+ ', '', origin)
+    child = re.fullmatch(r'child of .* by (\S+)', origin)
+    if child:
+        return f'child by {child.group(1)}'
+    origin = re.sub(r'^from \d+', 'one parent', origin)
+    return re.sub(r'^crossover \d+x\d+', 'crossover', origin) or 'unlabelled'
+
+
 @dataclass
 class FaultTally:
     """Cumulative counts over a campaign's episodes, in the order they were recorded."""

@@ -34,7 +34,7 @@ from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from sessgan_evolver.errors import ReportError, RunStoreError  # noqa: E402
-from sessgan_evolver.fault_tally import UNPLACED, FaultTally  # noqa: E402
+from sessgan_evolver.fault_tally import UNPLACED, FaultTally, origin_family  # noqa: E402
 from sessgan_evolver.run_store import RunStore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -299,7 +299,33 @@ def faults_found_lines(episode_rows: Sequence[Mapping[str, Any]],
                       'bag to read their contacts from) and are not among the distinct '
                       'faults.')
     return lines + ['', *failure_kind_lines(episode_rows), '![faults found](faults_found.png)',
-                    '']
+                    '', *origin_lines(episode_rows)]
+
+
+def origin_lines(episode_rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Where a search method's faults come from: per origin of its episodes (fresh samples,
+    children by each operator, ...; sessgan_evolver.fault_tally.origin_family), the episodes
+    and the share that were the first to show a distinct fault and a new fault situation
+    (nothing for a run whose episodes have no origin: the paper's weight evolution)."""
+    if not episode_rows or 'origin' not in episode_rows[0]:
+        return []
+    tally = FaultTally()
+    table: dict[str, list[int]] = {}
+    for row in episode_rows:
+        known = len(tally.faults)
+        tally.add(str(row.get('fault') or ''))
+        counts = table.setdefault(origin_family(str(row.get('origin') or '')), [0, 0, 0])
+        counts[0] += 1
+        counts[1] += len(tally.faults) > known
+        counts[2] += row.get('situation') is True
+    lines = ['Where they come from, per origin of the episodes:', '',
+             '| episodes from | episodes | new distinct fault | new fault situation |',
+             '|---|---:|---:|---:|']
+    for origin, (episodes, faults, situations) in sorted(table.items(),
+                                                         key=lambda item: -item[1][0]):
+        lines.append(f'| {origin} | {episodes} | {faults / episodes:.1%} ({faults}) | '
+                     f'{situations / episodes:.1%} ({situations}) |')
+    return lines + ['']
 
 
 FAULT_KIND_MEANINGS = {

@@ -15,10 +15,10 @@ from sessgan_evolver.comparison import (
     CompareError,
     fault_situations,
     figures_by_origin,
-    origin_family,
     run_comparison,
     spread,
 )
+from sessgan_evolver.fault_tally import origin_family
 from sessgan_evolver.faults import (
     STRICT_SITUATION_CELLS,
     Confirmation,

@@ -34,6 +34,7 @@ from sessgan_evolver.fault_tally import (
     fault_label,
     key_from_bag,
     key_from_label,
+    origin_family,
 )
 from sessgan_evolver.faults import FaultKey, FaultRule, key_of_failure, place_context
 from sessgan_evolver.fresh_seed import campaign_sources, used_seeds
@@ -131,6 +132,15 @@ def test_a_method_campaign_spends_its_budget_and_counts_the_faults(tmp_path):
         count = sum(row['fault'].startswith(kind + '-r') for row in failing)
         assert f'| `{kind}` | {FAULT_KIND_MEANINGS[kind]} | {count} | {len(labels)} |' \
             in report, report
+    # Where they come from: a row per origin of the episodes, the distinct faults all in one.
+    origins = [origin_family(row['origin']) for row in rows]
+    assert 'Where they come from' in report
+    found = 0
+    for origin in set(origins):
+        line = next(line for line in report.splitlines()
+                    if line.startswith(f'| {origin} | {origins.count(origin)} | '))
+        found += int(line.split('(')[1].split(')')[0])
+    assert found == last['distinct_faults_so_far']
 
 
 def test_an_interrupted_method_campaign_resumes_with_identical_rows(tmp_path):

@@ -55,7 +55,7 @@ from sessgan_evolver.campaign import SEED_SCHEDULES, CampaignConfig, check_contr
 from sessgan_evolver.errors import CompareError, SearchMethodError
 from sessgan_evolver.fault_picture import FaultScene, scene_from_run, write_scene_grid
 from sessgan_evolver.fault_records import confirm_faults
-from sessgan_evolver.fault_tally import origin_family
+from sessgan_evolver.fault_tally import OriginFigures, origin_family, origin_rows
 from sessgan_evolver.faults import (
     SITUATION_CELLS,
     STRICT_SITUATION_CELLS,
@@ -432,19 +432,9 @@ def fault_situations(faults: Sequence[FaultEntry], records: Sequence[EpisodeReco
     return len(situations)
 
 
-@dataclass
-class OriginFigures:
-    """What the episodes of one origin family gave: the confirmed distinct faults each was
-    the first to show, and how many of those were new fault situations (fault_situations's
-    rule, in the order found)."""
-
-    episodes: int = 0
-    confirmed: int = 0
-    situations: int = 0
-
-
 def figures_by_origin(runs: Sequence[MethodRun]) -> dict[str, OriginFigures]:
-    """Every origin family of ``runs``' episodes (pooled over the runs), with what it gave."""
+    """Every origin family of ``runs``' episodes (pooled over the runs), with what it gave:
+    confirmed faults only, situations by fault_situations's rule in the order found."""
     table: dict[str, OriginFigures] = {}
     for run in runs:
         for record in run.records:
@@ -455,7 +445,7 @@ def figures_by_origin(runs: Sequence[MethodRun]) -> dict[str, OriginFigures]:
                 continue
             record = run.records[entry.first]
             row = table[origin_family(record.origin)]
-            row.confirmed += 1
+            row.faults += 1
             row.situations += situations.add(entry.key, record.environment.occupancy)
     return table
 
@@ -468,11 +458,7 @@ def origin_table(config: CompareConfig, runs: Sequence[MethodRun]) -> str:
              'situation |', '|---|---|---:|---:|---:|']
     for method in config.methods:
         mine = [run for run in runs if run.figures.method == method]
-        for origin, row in sorted(figures_by_origin(mine).items(),
-                                  key=lambda item: -item[1].episodes):
-            lines.append(f'| {method} | {origin} | {row.episodes} | '
-                         f'{row.confirmed / row.episodes:.1%} ({row.confirmed}) | '
-                         f'{row.situations / row.episodes:.1%} ({row.situations}) |')
+        lines += origin_rows(figures_by_origin(mine), f'{method} | ')
     return '\n'.join(lines)
 
 

@@ -178,6 +178,25 @@ def origin_family(origin: str) -> str:
 
 
 @dataclass
+class OriginFigures:
+    """What the episodes of one origin family gave: the distinct faults each was the first to
+    show, and how many of those were new fault situations."""
+
+    episodes: int = 0
+    faults: int = 0
+    situations: int = 0
+
+
+def origin_rows(table: Mapping[str, OriginFigures], prefix: str = '') -> list[str]:
+    """Markdown rows of ``table``, the origin with the most episodes first, each after
+    ``prefix`` (columns before the origin's): origin, episodes, new distinct faults and new
+    situations (share of the origin's episodes and count)."""
+    return [f'| {prefix}{origin} | {row.episodes} | {row.faults / row.episodes:.1%} '
+            f'({row.faults}) | {row.situations / row.episodes:.1%} ({row.situations}) |'
+            for origin, row in sorted(table.items(), key=lambda item: -item[1].episodes)]
+
+
+@dataclass
 class FaultTally:
     """Cumulative counts over a campaign's episodes, in the order they were recorded."""
 

@@ -34,7 +34,13 @@ from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from sessgan_evolver.errors import ReportError, RunStoreError  # noqa: E402
-from sessgan_evolver.fault_tally import UNPLACED, FaultTally, origin_family  # noqa: E402
+from sessgan_evolver.fault_tally import (  # noqa: E402
+    UNPLACED,
+    FaultTally,
+    OriginFigures,
+    origin_family,
+    origin_rows,
+)
 from sessgan_evolver.run_store import RunStore  # noqa: E402
 
 FIGURE_DPI = 120
@@ -310,21 +316,17 @@ def origin_lines(episode_rows: Sequence[Mapping[str, Any]]) -> list[str]:
     if not episode_rows or 'origin' not in episode_rows[0]:
         return []
     tally = FaultTally()
-    table: dict[str, list[int]] = {}
+    table: dict[str, OriginFigures] = {}
     for row in episode_rows:
         known = len(tally.faults)
         tally.add(str(row.get('fault') or ''))
-        counts = table.setdefault(origin_family(str(row.get('origin') or '')), [0, 0, 0])
-        counts[0] += 1
-        counts[1] += len(tally.faults) > known
-        counts[2] += row.get('situation') is True
+        figures = table.setdefault(origin_family(str(row.get('origin') or '')), OriginFigures())
+        figures.episodes += 1
+        figures.faults += len(tally.faults) > known
+        figures.situations += row.get('situation') is True
     lines = ['Where they come from, per origin of the episodes:', '',
              '| episodes from | episodes | new distinct fault | new fault situation |',
-             '|---|---:|---:|---:|']
-    for origin, (episodes, faults, situations) in sorted(table.items(),
-                                                         key=lambda item: -item[1][0]):
-        lines.append(f'| {origin} | {episodes} | {faults / episodes:.1%} ({faults}) | '
-                     f'{situations / episodes:.1%} ({situations}) |')
+             '|---|---:|---:|---:|', *origin_rows(table)]
     return lines + ['']
 
 

@@ -79,7 +79,7 @@ def test_every_method_runs_at_equal_budget_and_is_reported(tmp_path):
     for method in METHODS:
         rows = figures_by_origin([run for run in result.runs if run.figures.method == method])
         assert sum(row.episodes for row in rows.values()) == 8
-        assert sum(row.confirmed for row in rows.values()) == sum(
+        assert sum(row.faults for row in rows.values()) == sum(
             run.figures.confirmed_faults for run in result.runs if run.figures.method == method)
     assert '## Where the faults come from' in report and '| screened | fresh sample |' in report
     with pytest.raises(CompareError, match='holds a comparison'):
@@ -130,7 +130,7 @@ def test_faults_are_credited_to_the_origin_of_the_episode_that_first_showed_them
 
     run = SimpleNamespace(records=records, faults=[entry(0), entry(1), entry(3), entry(4, False)])
     table = figures_by_origin([run, run])  # pooled: each run's situations counted on its own
-    assert {origin: (row.episodes, row.confirmed, row.situations)
+    assert {origin: (row.episodes, row.faults, row.situations)
             for origin, row in table.items()} == {
         'fresh sample': (4, 2, 2), 'child by local_0.8': (4, 2, 0),
         'child by two_finest_0.9': (2, 2, 2)}

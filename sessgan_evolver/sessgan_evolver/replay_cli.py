@@ -16,7 +16,9 @@ under a namespace and pass ``--external`` (``--namespace /w0``; default: the rec
 the simulator is started there. ``--worker /w0`` uses a simulator that already runs, with its
 own settings. Exit codes: 0 as expected (``--expect same``: same outcome and collision count;
 ``--expect pass``: no failure any more), 1 not as expected, 2 on an error (unreadable bag, no
-worker, settings that cannot be rebuilt).
+worker, settings that cannot be rebuilt, or every one of 3 tries ended by the harness rather
+than the controller: a silent or slow-starting controller, a cancelled episode; such a try is
+never compared, but run again).
 
 Both modes first check the bag: every file against the size and SHA-256 digest episode.json
 recorded, every message readable (MCAP chunk CRCs) and as many as recorded; a corrupt bag is
@@ -214,10 +216,11 @@ def resimulate(args: ReplayConfig, episode: dict) -> int:
     from sessgan_controllers.registry import CONTROLLERS
     from sessgan_core.ros_conversion import environment_to_msg
     from sessgan_core.scenarios import get_scenario
+    from sessgan_evolver.harness import DEFAULT_HARNESS_TRIES
     from sessgan_evolver.process_supervisor import ProcessSupervisor, worker_cores
     from sessgan_interfaces.action import EvaluateEnvironment
     from sessgan_sim.errors import InvalidConfigError
-    from sessgan_sim.metrics import is_controller_failure
+    from sessgan_sim.metrics import is_controller_failure, is_harness_outcome
     from sessgan_sim.simulator_settings import resimulation_settings
 
     environment = bag_environment(args.bag, episode)
@@ -278,20 +281,32 @@ def resimulate(args: ReplayConfig, episode: dict) -> int:
             goal.time_limit = float(episode.get('time_limit', 0.0))
             goal.robot = episode.get('robot', '')
             goal.controller = controller
-            send = client.send_goal_async(goal)
-            spin_interruptibly(lambda: rclpy.spin_until_future_complete(node, send,
-                                                                        timeout_sec=30.0))
-            handle = send.result()
-            if handle is None or not handle.accepted:
-                print('error: the simulator refused the goal', file=sys.stderr)
+            for attempt in range(DEFAULT_HARNESS_TRIES):
+                send = client.send_goal_async(goal)
+                spin_interruptibly(lambda: rclpy.spin_until_future_complete(node, send,
+                                                                            timeout_sec=30.0))
+                handle = send.result()
+                if handle is None or not handle.accepted:
+                    print('error: the simulator refused the goal', file=sys.stderr)
+                    return EXIT_ERROR
+                result_future = handle.get_result_async()
+                spin_interruptibly(lambda: rclpy.spin_until_future_complete(
+                    node, result_future, timeout_sec=args.timeout))
+                if not result_future.done():
+                    print(f'error: no result within {args.timeout} s', file=sys.stderr)
+                    return EXIT_ERROR
+                new = result_future.result().result.metrics
+                if not is_harness_outcome(new.outcome):
+                    break
+                # The harness, not the controller, ended it (a controller slow to start on a
+                # busy host, say): no result to compare, so run it again.
+                print(f'note: try {attempt + 1} ended {new.outcome} ({new.detail}): the '
+                      'harness, not the controller; running it again', file=sys.stderr)
+            else:
+                print(f'error: every one of {DEFAULT_HARNESS_TRIES} tries ended as the harness, '
+                      f'not the controller, ended it (last: {new.outcome}: {new.detail})',
+                      file=sys.stderr)
                 return EXIT_ERROR
-            result_future = handle.get_result_async()
-            spin_interruptibly(lambda: rclpy.spin_until_future_complete(
-                node, result_future, timeout_sec=args.timeout))
-            if not result_future.done():
-                print(f'error: no result within {args.timeout} s', file=sys.stderr)
-                return EXIT_ERROR
-            new = result_future.result().result.metrics
         finally:
             node.destroy_node()
             rclpy.try_shutdown()

@@ -300,12 +300,13 @@ def resimulate(args: ReplayConfig, episode: dict) -> int:
                     break
                 # The harness, not the controller, ended it (a controller slow to start on a
                 # busy host, say): no result to compare, so run it again.
-                print(f'note: try {attempt + 1} ended {new.outcome} ({new.detail}): the '
-                      'harness, not the controller; running it again', file=sys.stderr)
+                if attempt + 1 < DEFAULT_HARNESS_TRIES:
+                    print(f'note: try {attempt + 1} ended {new.outcome} ({new.detail}): the '
+                          'harness, not the controller; running it again', file=sys.stderr)
             else:
-                print(f'error: every one of {DEFAULT_HARNESS_TRIES} tries ended as the harness, '
-                      f'not the controller, ended it (last: {new.outcome}: {new.detail})',
-                      file=sys.stderr)
+                print(f'error: the harness, not the controller, ended every one of '
+                      f'{DEFAULT_HARNESS_TRIES} tries (last: {new.outcome}: {new.detail}); '
+                      'nothing to compare', file=sys.stderr)
                 return EXIT_ERROR
         finally:
             node.destroy_node()

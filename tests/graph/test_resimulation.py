@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 
 import pytest
@@ -104,7 +105,7 @@ def test_failure_with_an_external_controller_resimulates_with_one_flag(node_proc
     # An external controller under /ext_rs: it drives blind into the wall.
     simulator = start_simulator(node_processes, '/ext_rs', *NON_DEFAULT,
                                 f'bags_root:={tmp_path}')
-    start_external(node_processes, '/ext_rs', '--blind')
+    controller = start_external(node_processes, '/ext_rs', '--blind')
     metrics, _ = evaluate(ros_node, '/ext_rs', environment_msg(room(), 'factory', 'wall'),
                           time_limit=20.0, record_directory='bags')
     assert metrics.fault_collisions > 0 and metrics.bag_path, metrics.detail
@@ -124,3 +125,21 @@ def test_failure_with_an_external_controller_resimulates_with_one_flag(node_proc
     for row in ('outcome', 'collisions', 'fault collisions', 'sim time', 'travelled m', 'ticks'):
         recorded, again = rows[row]
         assert recorded == again, (row, run.stdout)
+
+    from sessgan_evolver.bag_reading import bag_directory
+
+    # With the controller gone every try ends controller_unresponsive, an outcome of the
+    # harness: run again, never compared, and after the last an error. (A copy of the bag
+    # whose simulator waits 1 s for a controller, not the recorded 15 s.)
+    controller.process.terminate()
+    controller.wait(timeout=10)
+    silent = tmp_path / 'silent'
+    shutil.copytree(bag_directory(metrics.bag_path), silent)
+    episode = json.loads((silent / 'episode.json').read_text())
+    episode['simulator']['controller_startup_timeout'] = 1.0
+    (silent / 'episode.json').write_text(json.dumps(episode))
+    run = resimulate(str(silent), '--external')
+    assert run.returncode == 2, run.stdout + run.stderr
+    assert run.stderr.count('the harness, not the controller; running it again') == 2, run.stderr
+    assert 'ended every one of 3 tries' in run.stderr and 'controller_unresponsive' in run.stderr
+    assert 'outcome' not in table(run.stdout), run.stdout  # nothing compared
